@@ -1,0 +1,347 @@
+"""A small, safe expression language for user text (Hamiltonians, n(x,y,z), g^ij).
+
+Text is parsed with :mod:`ast` and checked against a whitelist: numbers, declared
+names (variables, parameters, earlier definitions), the constants ``pi`` and ``e``,
+``+ - * / **``, unary minus/plus, parentheses and the functions of
+:data:`core.dual.FUNCTIONS`. Nothing is ever passed to ``eval``/``exec``: the checked
+tree is turned into nested Python closures that call :mod:`core.dual`, so one compiled
+expression evaluates floats, arrays or dual numbers.
+
+Everything else (attribute access, subscripts, lambdas, comprehensions, calls of
+anything not whitelisted, unknown names, absurd sizes) raises :class:`ExpressionError`,
+whose message names the problem and its column.
+"""
+
+from __future__ import annotations
+
+import ast
+import math
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import dual
+
+MAX_LENGTH = 20_000
+"""Longest accepted text, in characters."""
+MAX_NODES = 4_000
+"""Most syntax-tree nodes in one expression."""
+MAX_EXPONENT = 1_000.0
+"""Largest accepted |constant exponent| (x**c)."""
+CONSTANTS = {"pi": math.pi, "e": math.e}
+
+_BINARY = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Pow: "**"}
+_REFUSED = {
+    ast.Attribute: "attribute access", ast.Subscript: "subscripts", ast.Lambda: "lambdas",
+    ast.ListComp: "comprehensions", ast.SetComp: "comprehensions",
+    ast.DictComp: "comprehensions", ast.GeneratorExp: "comprehensions",
+    ast.Compare: "comparisons", ast.BoolOp: "boolean operators", ast.IfExp: "conditionals",
+    ast.List: "lists", ast.Tuple: "tuples", ast.Dict: "dicts", ast.Set: "sets",
+    ast.JoinedStr: "strings", ast.Starred: "starred arguments", ast.NamedExpr: "assignments",
+    ast.Await: "await", ast.Yield: "yield", ast.YieldFrom: "yield", ast.Slice: "slices",
+}
+
+
+class ExpressionError(ValueError):
+    """User text that is not a valid expression; ``column`` is 1-based (or None)."""
+
+    def __init__(self, problem: str, column: int | None = None, text: str | None = None):
+        self.problem = problem
+        self.column = column
+        self.text = text
+        where = f" at column {column}" if column is not None else ""
+        super().__init__(f"{problem}{where}")
+
+
+Evaluator = Callable[[Mapping[str, object]], object]
+
+
+@dataclass(frozen=True)
+class Expression:
+    """A checked, compiled expression: ``evaluate(env)`` and the names it reads."""
+
+    text: str
+    names: frozenset[str]
+    evaluate: Evaluator
+    constant: float | None = None
+
+    def __call__(self, env: Mapping[str, object]):
+        """Evaluate with ``env`` mapping every name in :attr:`names` to a value."""
+        return self.evaluate(env)
+
+
+def compile_expression(text: str, names: Iterable[str],
+                       parameters: Mapping[str, float] | None = None) -> Expression:
+    """Check ``text`` against the whitelist and compile it.
+
+    ``names`` are the variables it may read (values come at evaluation time);
+    ``parameters`` are named constants folded in at compile time.
+    """
+    if not isinstance(text, str):
+        raise ExpressionError(f"expected text, got {type(text).__name__}")
+    if len(text) > MAX_LENGTH:
+        raise ExpressionError(f"expression is too long ({len(text)} > {MAX_LENGTH} characters)")
+    if not text.strip():
+        raise ExpressionError("expression is empty")
+    tree = _parse(text)
+    count = sum(1 for _ in ast.walk(tree))
+    if count > MAX_NODES:
+        raise ExpressionError(f"expression is too large ({count} > {MAX_NODES} syntax nodes)")
+    consts = dict(CONSTANTS)
+    consts.update({k: float(v) for k, v in (parameters or {}).items()})
+    builder = _Builder(frozenset(names), consts)
+    node = builder.build(tree.body)
+    const = node.value if node.is_constant else None
+    return Expression(text, frozenset(builder.used), node.evaluator(), const)
+
+
+def check(text: str, names: Iterable[str], parameters: Mapping[str, float] | None = None) -> None:
+    """Raise :class:`ExpressionError` if ``text`` is not a valid expression over ``names``."""
+    compile_expression(text, names, parameters)
+
+
+def _parse(text: str) -> ast.Expression:
+    """ast.parse in eval mode, turning every parser failure into ExpressionError."""
+    try:
+        return ast.parse(text, mode="eval")
+    except SyntaxError as err:
+        column = err.offset if err.offset else None
+        raise ExpressionError(f"syntax error: {err.msg}", column, text) from None
+    except (ValueError, RecursionError, MemoryError, OverflowError) as err:
+        raise ExpressionError(f"cannot parse expression: {err}") from None
+
+
+@dataclass
+class _Node:
+    """A compiled subtree: either a folded constant or an evaluator closure."""
+
+    value: float | None = None
+    fn: Evaluator | None = None
+
+    @property
+    def is_constant(self) -> bool:
+        return self.fn is None
+
+    def evaluator(self) -> Evaluator:
+        if self.fn is not None:
+            return self.fn
+        value = self.value
+        return lambda env: value
+
+
+class _Builder:
+    """Walks a parsed tree, refusing anything off the whitelist, folding constants."""
+
+    def __init__(self, names: frozenset[str], constants: Mapping[str, float]):
+        self.names = names
+        self.constants = constants
+        self.used: set[str] = set()
+
+    def fail(self, node: ast.AST, problem: str):
+        column = getattr(node, "col_offset", -1) + 1
+        if isinstance(node, ast.Attribute) and node.end_col_offset is not None:
+            column = node.end_col_offset - len(node.attr)  # the '.' before the name
+        raise ExpressionError(problem, column)
+
+    def build(self, node: ast.AST) -> _Node:
+        if isinstance(node, ast.Constant):
+            return self.constant(node)
+        if isinstance(node, ast.Name):
+            return self.name(node)
+        if isinstance(node, ast.BinOp):
+            return self.binary(node)
+        if isinstance(node, ast.UnaryOp):
+            return self.unary(node)
+        if isinstance(node, ast.Call):
+            return self.call(node)
+        kind = _REFUSED.get(type(node), type(node).__name__)
+        self.fail(node, f"{kind} not allowed")
+
+    def constant(self, node: ast.Constant) -> _Node:
+        value = node.value
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            self.fail(node, f"constant {value!r} not allowed (only real numbers)")
+        try:
+            number = float(value)
+        except OverflowError:
+            self.fail(node, "number too large")
+        if not math.isfinite(number):
+            self.fail(node, "number too large")
+        return _Node(value=number)
+
+    def name(self, node: ast.Name) -> _Node:
+        ident = node.id
+        if ident in self.names:
+            self.used.add(ident)
+            return _Node(fn=lambda env: env[ident])
+        if ident in self.constants:
+            return _Node(value=self.constants[ident])
+        allowed = ", ".join(sorted(self.names | set(self.constants)))
+        self.fail(node, f"unknown name '{ident}' (allowed: {allowed})")
+
+    def unary(self, node: ast.UnaryOp) -> _Node:
+        operand = self.build(node.operand)
+        if isinstance(node.op, ast.UAdd):
+            return operand
+        if not isinstance(node.op, ast.USub):
+            self.fail(node, f"operator {type(node.op).__name__} not allowed")
+        if operand.is_constant:
+            return _Node(value=-operand.value)
+        fn = operand.fn
+        return _Node(fn=lambda env: -fn(env))
+
+    def binary(self, node: ast.BinOp) -> _Node:
+        symbol = _BINARY.get(type(node.op))
+        if symbol is None:
+            self.fail(node, f"operator {type(node.op).__name__} not allowed")
+        left, right = self.build(node.left), self.build(node.right)
+        if symbol == "**" and right.is_constant and abs(right.value) > MAX_EXPONENT:
+            self.fail(node, f"exponent {right.value:g} too large (limit {MAX_EXPONENT:g})")
+        if left.is_constant and right.is_constant:
+            return _Node(value=self.fold(node, symbol, left.value, right.value))
+        return _Node(fn=_binary_closure(symbol, left, right))
+
+    def fold(self, node: ast.AST, symbol: str, a: float, b: float) -> float:
+        try:
+            with np.errstate(all="raise"):
+                value = float(_apply(symbol, np.float64(a), np.float64(b)))
+        except (FloatingPointError, ZeroDivisionError, OverflowError):
+            self.fail(node, f"constant '{a:g} {symbol} {b:g}' is not a finite real number")
+        if not math.isfinite(value):
+            self.fail(node, f"constant '{a:g} {symbol} {b:g}' is not a finite real number")
+        return value
+
+    def call(self, node: ast.Call) -> _Node:
+        if not isinstance(node.func, ast.Name):
+            kind = _REFUSED.get(type(node.func), "calling an expression")
+            self.fail(node.func, f"{kind} not allowed")
+        fname = node.func.id
+        if fname not in dual.FUNCTIONS:
+            allowed = ", ".join(sorted(dual.FUNCTIONS))
+            self.fail(node, f"unknown function '{fname}' (allowed: {allowed})")
+        if node.keywords:
+            self.fail(node, f"keyword arguments not allowed in {fname}()")
+        arity = dual.FUNCTION_ARITY[fname]
+        if len(node.args) != arity:
+            self.fail(node, f"{fname}() takes {arity} argument(s), got {len(node.args)}")
+        args = [self.build(a) for a in node.args]
+        func = dual.FUNCTIONS[fname]
+        if all(a.is_constant for a in args):
+            try:
+                with np.errstate(all="raise"):
+                    value = float(func(*[np.float64(a.value) for a in args]))
+            except (FloatingPointError, OverflowError):
+                value = math.nan
+            if not math.isfinite(value):
+                self.fail(node, f"constant {fname}(...) is not a finite real number")
+            return _Node(value=value)
+        fns = [a.evaluator() for a in args]
+        if arity == 1:
+            (f0,) = fns
+            return _Node(fn=lambda env: func(f0(env)))
+        f0, f1 = fns
+        return _Node(fn=lambda env: func(f0(env), f1(env)))
+
+
+def _apply(symbol: str, a, b):
+    """One binary operation on values, floats, arrays or Duals."""
+    if symbol == "+":
+        return a + b
+    if symbol == "-":
+        return a - b
+    if symbol == "*":
+        return a * b
+    if symbol == "/":
+        return a / b
+    return dual.power(a, b) if not isinstance(b, dual.Dual) else a ** b
+
+
+def _binary_closure(symbol: str, left: _Node, right: _Node) -> Evaluator:
+    """A closure for ``left (symbol) right`` with constant operands baked in."""
+    lf, rf = left.evaluator(), right.evaluator()
+    if symbol == "**" and right.is_constant:
+        c = right.value
+        return lambda env: dual.power(lf(env), c)
+    if symbol == "**":
+        return lambda env: _pow_general(lf(env), rf(env))
+    op = {"+": _add, "-": _sub, "*": _mul, "/": _div}[symbol]
+    if right.is_constant:
+        c = right.value
+        return lambda env: op(lf(env), c)
+    if left.is_constant:
+        c = left.value
+        return lambda env: op(c, rf(env))
+    return lambda env: op(lf(env), rf(env))
+
+
+def _add(a, b):
+    return a + b
+
+
+def _sub(a, b):
+    return a - b
+
+
+def _mul(a, b):
+    return a * b
+
+
+def _div(a, b):
+    return a / b
+
+
+def _pow_general(base, exponent):
+    """base ** exponent where the exponent is not a compile-time constant."""
+    if isinstance(exponent, dual.Dual):
+        return dual.exp(exponent * dual.log(base))
+    if isinstance(base, dual.Dual):
+        return dual.Dual(np.power(base.v, exponent),
+                         dual._scale(base.d, exponent * np.power(base.v, exponent - 1.0)))
+    return np.power(base, exponent)
+
+
+@dataclass(frozen=True)
+class Program:
+    """Named definitions evaluated in order, then outputs: shared subexpressions once."""
+
+    definitions: tuple[tuple[str, Expression], ...]
+    outputs: tuple[Expression, ...]
+    dependencies: tuple[frozenset[str], ...]
+    """For each output, the input variables it depends on (through definitions)."""
+
+    def evaluate(self, env: dict[str, object]) -> list:
+        """Evaluate every output; ``env`` holds the inputs and receives the definitions."""
+        for name, expr in self.definitions:
+            env[name] = expr.evaluate(env)
+        return [out.evaluate(env) for out in self.outputs]
+
+
+def compile_program(outputs: Sequence[str], variables: Sequence[str],
+                    parameters: Mapping[str, float] | None = None,
+                    definitions: Sequence[tuple[str, str]] | Mapping[str, str] = ()) -> Program:
+    """Compile outputs over ``variables`` that may use named ``definitions`` (in order)."""
+    items = list(definitions.items()) if isinstance(definitions, Mapping) else list(definitions)
+    reserved = set(variables) | set(CONSTANTS) | set(parameters or {}) | set(dual.FUNCTIONS)
+    known = list(variables)
+    compiled_defs = []
+    depends: dict[str, frozenset[str]] = {v: frozenset([v]) for v in variables}
+    for name, text in items:
+        if not name.isidentifier() or name in reserved or name in known:
+            raise ExpressionError(f"definition name '{name}' is not a new identifier")
+        expr = _compile_labelled(text, known, parameters, f"definition '{name}'")
+        compiled_defs.append((name, expr))
+        depends[name] = frozenset().union(*(depends[n] for n in expr.names))
+        known.append(name)
+    outs = tuple(_compile_labelled(t, known, parameters, f"output {i + 1}")
+                 for i, t in enumerate(outputs))
+    deps = tuple(frozenset().union(*(depends[n] for n in o.names)) for o in outs)
+    return Program(tuple(compiled_defs), outs, deps)
+
+
+def _compile_labelled(text, names, parameters, label) -> Expression:
+    """compile_expression whose error message says which piece of text failed."""
+    try:
+        return compile_expression(text, names, parameters)
+    except ExpressionError as err:
+        raise ExpressionError(f"{label}: {err.problem}", err.column, text) from None

@@ -1,0 +1,499 @@
+"""Hamiltonian models: user expressions, metrics (seed Eq. 10), black holes and media.
+
+Every model is a :class:`Hamiltonian`. Internally arrays are structure-of-arrays with
+rays on the last axis (``Q``, ``P`` of shape ``(n, N)``); the public ``value`` and
+``gradient`` take the contract's ``(N, n)`` or ``(n,)`` arrays. Partial derivatives
+come from :mod:`core.dual`, carrying only the partials each quantity depends on.
+
+Signature (-, +, +, +) throughout; photons have H = 1/2 g^ij p_i p_j = 0.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from . import expressions as ex
+from .dual import Dual
+
+# ----------------------------------------------------------------------------------
+# base class
+
+
+class Hamiltonian:
+    """H(q, p) with value and gradient on ray batches; see docs/architecture.md."""
+
+    kind = "custom"
+    """"spacetime" (coordinate 0 is time), "medium" (x, y, z optics) or "custom"."""
+
+    def __init__(self, coords: Sequence[str], momenta: Sequence[str], separable: bool = False,
+                 parameters: Mapping[str, float] | None = None, time_scale: str | None = None):
+        _check_names(coords, momenta)
+        self.coords = tuple(coords)
+        self.momenta = tuple(momenta)
+        self.dim = len(self.coords)
+        self.separable = bool(separable)
+        self.parameters = dict(parameters or {})
+        self._time_scale = None
+        if time_scale is not None:
+            self._time_scale = ex.compile_program([time_scale], self.coords, self.parameters)
+
+    # --- to be provided by each model (SoA) ---
+    def value_soa(self, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
+        """H at each ray, (N,)."""
+        raise NotImplementedError
+
+    def gradient_soa(self, Q, P, wrt: str = "qp"):
+        """(dH/dq, dH/dp), each (n, N); the half not in ``wrt`` is None."""
+        _, dq, dp = self._value_gradient(Q, P, wrt)
+        return dq, dp
+
+    def value_gradient_soa(self, Q, P):
+        """(H, dH/dq, dH/dp) in one evaluation."""
+        return self._value_gradient(Q, P, "qp")
+
+    def _value_gradient(self, Q, P, wrt):
+        raise NotImplementedError
+
+    def time_scale_soa(self, Q: np.ndarray):
+        """Poincaré time-transformation g(q) and dg/dq (DESIGN.md); default g = 1."""
+        n_rays = Q.shape[-1]
+        if self._time_scale is None:
+            return np.ones(n_rays), np.zeros_like(Q)
+        env = {name: Dual.variable(Q[i], i) for i, name in enumerate(self.coords)}
+        (g,) = self._time_scale.evaluate(env)
+        return _value_and_partials(g, self.dim, n_rays, offset=0)
+
+    def invariants_soa(self, Q, P) -> dict[str, np.ndarray]:
+        """Known constants of motion besides H (name -> (N,)); none by default."""
+        return {}
+
+    # --- public (N, n) interface ---
+    def value(self, q, p) -> np.ndarray:
+        """H(q, p) for (N, n) or (n,) arrays: (N,) or a scalar."""
+        Q, P, single = self._soa(q, p)
+        h = self.value_soa(Q, P)
+        return h[0] if single else h
+
+    def gradient(self, q, p):
+        """(dH/dq, dH/dp) in the shape of q."""
+        Q, P, single = self._soa(q, p)
+        dq, dp = self.gradient_soa(Q, P)
+        if single:
+            return dq[:, 0].copy(), dp[:, 0].copy()
+        return dq.T.copy(), dp.T.copy()
+
+    def invariants(self, q, p) -> dict[str, np.ndarray]:
+        """Known constants of motion (besides H) for (N, n) or (n,) arrays."""
+        Q, P, single = self._soa(q, p)
+        inv = self.invariants_soa(Q, P)
+        return {k: (v[0] if single else v) for k, v in inv.items()}
+
+    def _soa(self, q, p):
+        q = np.asarray(q, dtype=np.float64)
+        p = np.asarray(p, dtype=np.float64)
+        if q.shape != p.shape or q.shape[-1] != self.dim or q.ndim not in (1, 2):
+            raise ValueError(f"q and p must both have shape (N, {self.dim}) or ({self.dim},); "
+                             f"got {q.shape} and {p.shape}")
+        single = q.ndim == 1
+        Q = np.ascontiguousarray(np.atleast_2d(q).T)
+        P = np.ascontiguousarray(np.atleast_2d(p).T)
+        return Q, P, single
+
+    def __repr__(self) -> str:
+        params = ", ".join(f"{k}={v:g}" for k, v in self.parameters.items())
+        return f"{type(self).__name__}({', '.join(self.coords)}; {params})"
+
+
+def _check_names(coords, momenta) -> None:
+    names = list(coords) + list(momenta)
+    if len(coords) != len(momenta) or not coords:
+        raise ValueError("need as many momenta as coordinates, at least one of each")
+    bad = [n for n in names if not isinstance(n, str) or not n.isidentifier()]
+    if bad:
+        raise ValueError(f"variable names must be identifiers: {bad}")
+    if len(set(names)) != len(names):
+        raise ValueError(f"variable names must be distinct: {names}")
+    clash = set(names) & (set(ex.CONSTANTS) | set(ex.dual.FUNCTIONS))
+    if clash:
+        raise ValueError(f"variable names clash with built-in names: {sorted(clash)}")
+
+
+def _value_and_partials(result, n: int, n_rays: int, offset: int):
+    """Split a Dual (or constant) into its value (N,) and partials rows offset..offset+n."""
+    if isinstance(result, Dual):
+        value, partials = result.v, result.d
+    else:
+        value, partials = result, {}
+    value = np.broadcast_to(np.asarray(value, dtype=np.float64), (n_rays,))
+    grad = np.zeros((n, n_rays))
+    for k, g in partials.items():
+        if offset <= k < offset + n:
+            grad[k - offset] = g
+    return value, grad
+
+
+# ----------------------------------------------------------------------------------
+# H given as one expression of (q, p)
+
+
+class ExpressionHamiltonian(Hamiltonian):
+    """H given as text over any coordinate and momentum names (any dimension)."""
+
+    def __init__(self, text: str, coords, momenta, parameters=None, definitions=(),
+                 time_scale=None, positive: Sequence[str] = ()):
+        Hamiltonian.__init__(self, coords, momenta, parameters=parameters, time_scale=time_scale)
+        names = self.coords + self.momenta
+        self.text = text
+        self.program = ex.compile_program([text], names, self.parameters, definitions)
+        self.positive = tuple(positive)
+        self.separable = _is_separable(text, self.coords, self.momenta, self.parameters,
+                                       definitions)
+        self.depends_on = self.program.dependencies[0]
+
+    def _env(self, Q, P, wrt: str):
+        env = {}
+        for i, name in enumerate(self.coords):
+            env[name] = Dual.variable(Q[i], i) if "q" in wrt else Q[i]
+        for j, name in enumerate(self.momenta):
+            env[name] = Dual.variable(P[j], self.dim + j) if "p" in wrt else P[j]
+        return env
+
+    def _evaluate(self, Q, P, wrt: str):
+        env = self._env(Q, P, wrt)
+        (h,) = self.program.evaluate(env)
+        bad = self._invalid(env, Q.shape[-1])
+        return h, bad
+
+    def _invalid(self, env, n_rays):
+        """Rays where a quantity that must be positive (e.g. n) is not: they get NaN."""
+        bad = None
+        for name in self.positive:
+            v = env[name]
+            v = v.v if isinstance(v, Dual) else v
+            mask = ~(np.asarray(v) > 0)
+            bad = mask if bad is None else (bad | mask)
+        return None if bad is None else np.broadcast_to(bad, (n_rays,))
+
+    def value_soa(self, Q, P):
+        h, bad = self._evaluate(Q, P, "")
+        h = np.array(np.broadcast_to(h, (Q.shape[-1],)), dtype=np.float64)
+        if bad is not None:
+            h[bad] = np.nan
+        return h
+
+    def _value_gradient(self, Q, P, wrt):
+        h, bad = self._evaluate(Q, P, wrt)
+        n_rays = Q.shape[-1]
+        value, dq = _value_and_partials(h, self.dim, n_rays, 0)
+        _, dp = _value_and_partials(h, self.dim, n_rays, self.dim)
+        if bad is not None and bad.any():
+            value = value.copy()
+            value[bad] = np.nan
+            dq[:, bad] = np.nan
+            dp[:, bad] = np.nan
+        return value, (dq if "q" in wrt else None), (dp if "p" in wrt else None)
+
+    def partials_allocated(self, q, p) -> set[str]:
+        """Names of the variables whose partial derivative H's evaluation carries."""
+        Q, P, _ = self._soa(q, p)
+        h, _ = self._evaluate(Q, P, "qp")
+        names = self.coords + self.momenta
+        return {names[k] for k in (h.d if isinstance(h, Dual) else {})}
+
+
+def _is_separable(text, coords, momenta, parameters, definitions) -> bool:
+    """True if H is a sum of terms each depending on q alone or on p alone."""
+    terms = _additive_terms(text)
+    prog = ex.compile_program(terms, tuple(coords) + tuple(momenta), parameters, definitions)
+    qs, ps = set(coords), set(momenta)
+    return all(dep <= qs or dep <= ps for dep in prog.dependencies)
+
+
+def _additive_terms(text: str) -> list[str]:
+    """Split text at its top-level + and - into terms (signs dropped: they don't matter)."""
+    import ast
+
+    tree = ex._parse(text).body
+    terms: list[ast.AST] = []
+
+    def walk(node):
+        if isinstance(node, ast.BinOp) and isinstance(node.op, (ast.Add, ast.Sub)):
+            walk(node.left)
+            walk(node.right)
+        elif isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+            walk(node.operand)
+        else:
+            terms.append(node)
+
+    walk(tree)
+    return [ast.unparse(t) for t in terms]
+
+
+def from_expression(text: str, q: Sequence[str], p: Sequence[str],
+                    parameters: Mapping[str, float] | None = None,
+                    definitions: Mapping[str, str] | Sequence[tuple[str, str]] = (),
+                    time_scale: str | None = None) -> ExpressionHamiltonian:
+    """H from text over coordinates ``q`` and momenta ``p`` (any names, any dimension)."""
+    return ExpressionHamiltonian(text, q, p, parameters, definitions, time_scale)
+
+
+# ----------------------------------------------------------------------------------
+# metric Hamiltonians H = 1/2 g^ij(q) p_i p_j  (seed Eq. 10)
+
+
+class MetricHamiltonian(Hamiltonian):
+    """H = 1/2 g^ij(q) p_i p_j for an inverse metric given entry by entry."""
+
+    kind = "spacetime"
+
+    def __init__(self, inverse: Sequence[Sequence[str]], coords: Sequence[str],
+                 momenta: Sequence[str] | None = None, parameters=None, definitions=(),
+                 time_scale: str | None = None, symmetric_check: bool = True):
+        momenta = tuple(momenta) if momenta is not None else tuple(f"p_{c}" for c in coords)
+        Hamiltonian.__init__(self, coords, momenta, parameters=parameters, time_scale=time_scale)
+        n = self.dim
+        entries = [[str(e).strip() for e in row] for row in inverse]
+        if len(entries) != n or any(len(row) != n for row in entries):
+            raise ValueError(f"inverse metric must be {n}x{n} for coordinates {self.coords}")
+        if symmetric_check:
+            for i in range(n):
+                for j in range(i):
+                    if entries[i][j] != entries[j][i] and entries[j][i] not in ("", "0"):
+                        raise ValueError(f"inverse metric must be symmetric: g^{i}{j} "
+                                         f"'{entries[i][j]}' != g^{j}{i} '{entries[j][i]}'")
+        pairs, texts = [], []
+        for i in range(n):
+            for j in range(i, n):
+                text = entries[i][j] or entries[j][i] or "0"
+                pairs.append((i, j))
+                texts.append(text)
+        self.program = ex.compile_program(texts, self.coords, self.parameters, definitions)
+        keep = [k for k, o in enumerate(self.program.outputs) if o.constant != 0.0]
+        self.pairs = [pairs[k] for k in keep]
+        self._outputs = keep
+        self.separable = all(not self.program.dependencies[k] for k in keep)
+
+    def inverse_metric_soa(self, Q, seed: bool):
+        """Entries g^ij (i <= j) that are not identically zero, as values or Duals over q."""
+        env = {name: (Dual.variable(Q[i], i) if seed else Q[i])
+               for i, name in enumerate(self.coords)}
+        values = self.program.evaluate(env)
+        return [values[k] for k in self._outputs]
+
+    def value_soa(self, Q, P):
+        n_rays = Q.shape[-1]
+        h = np.zeros(n_rays)
+        for (i, j), g in zip(self.pairs, self.inverse_metric_soa(Q, seed=False), strict=True):
+            w = 0.5 if i == j else 1.0
+            h += w * g * P[i] * P[j]
+        return h
+
+    def _value_gradient(self, Q, P, wrt):
+        n, n_rays = self.dim, Q.shape[-1]
+        need_q = "q" in wrt
+        entries = self.inverse_metric_soa(Q, seed=need_q)
+        h = np.zeros(n_rays)
+        dq = np.zeros((n, n_rays)) if need_q else None
+        dp = np.zeros((n, n_rays)) if "p" in wrt else None
+        for (i, j), g in zip(self.pairs, entries, strict=True):
+            w = 0.5 if i == j else 1.0
+            gv = g.v if isinstance(g, Dual) else g
+            pipj = P[i] * P[j]
+            h += w * gv * pipj
+            if dp is not None:
+                dp[i] += gv * P[j]
+                if i != j:
+                    dp[j] += gv * P[i]
+            if need_q and isinstance(g, Dual):
+                wp = w * pipj
+                for k, dg in g.d.items():
+                    dq[k] += dg * wp
+        return h, dq, dp
+
+    def partials_allocated(self, q, p) -> set[str]:
+        """Coordinates whose partial derivative the metric's evaluation carries."""
+        Q, _, _ = self._soa(q, p)
+        keys = set()
+        for g in self.inverse_metric_soa(Q, seed=True):
+            if isinstance(g, Dual):
+                keys |= set(g.d)
+        return {self.coords[k] for k in keys}
+
+
+def metric(inverse: Sequence[Sequence[str]], coords: Sequence[str] = ("t", "x", "y", "z"),
+           momenta: Sequence[str] | None = None, parameters: Mapping[str, float] | None = None,
+           definitions: Mapping[str, str] | Sequence[tuple[str, str]] = (),
+           time_scale: str | None = None) -> MetricHamiltonian:
+    """Photon Hamiltonian H = 1/2 g^ij p_i p_j of any inverse metric (seed Eq. 10)."""
+    return MetricHamiltonian(inverse, coords, momenta, parameters, definitions, time_scale)
+
+
+# ----------------------------------------------------------------------------------
+# named models
+
+
+def _check_rg(rg: float) -> float:
+    rg = float(rg)
+    if not (math.isfinite(rg) and rg > 0):
+        raise ValueError(f"rg (Schwarzschild radius) must be a positive number, got {rg}")
+    return rg
+
+
+def _check_spin(rg: float, a: float) -> float:
+    a = float(a)
+    if not math.isfinite(a) or abs(a) > rg / 2:
+        raise ValueError(f"Kerr spin a = {a} is beyond extremal: need |a| <= rg/2 = M = {rg / 2}"
+                         f" (a/M = {2 * a / rg:.4g})")
+    return a
+
+
+class SphericalSpacetime(MetricHamiltonian):
+    """A metric in (t, r, theta, phi) Boyer–Lindquist-like coordinates around a mass."""
+
+    chart = "spherical"
+
+    def __init__(self, inverse, rg, a, time_scale, definitions=(), horizon=0.0):
+        coords = ("t", "r", "theta", "phi")
+        super().__init__(inverse, coords, ("p_t", "p_r", "p_theta", "p_phi"),
+                         parameters={"rg": rg, "a": a}, definitions=definitions,
+                         time_scale=time_scale)
+        self.rg, self.a = rg, a
+        self.horizon = horizon
+
+    def invariants_soa(self, Q, P):
+        """E = -p_t, L = p_phi and the Carter constant (photons, mu = 0)."""
+        if self.rg == 0.0:
+            return {"p_t": P[0].copy(), "p_phi": P[3].copy()}
+        cos2 = np.cos(Q[2]) ** 2
+        sin2 = 1.0 - cos2
+        carter = P[2] ** 2 + cos2 * (-(self.a ** 2) * P[0] ** 2 + P[3] ** 2 / sin2)
+        return {"p_t": P[0].copy(), "p_phi": P[3].copy(), "carter": carter}
+
+
+def minkowski(chart: str = "cartesian") -> MetricHamiltonian:
+    """Flat spacetime: Cartesian (seed Eq. 13) or spherical (seed Eq. 14) coordinates."""
+    if chart == "cartesian":
+        h = MetricHamiltonian([["-1", "0", "0", "0"], ["0", "1", "0", "0"],
+                               ["0", "0", "1", "0"], ["0", "0", "0", "1"]],
+                              ("t", "x", "y", "z"), ("p_t", "p_x", "p_y", "p_z"))
+        h.chart = "cartesian"
+        h.rg, h.a, h.horizon = 0.0, 0.0, 0.0
+        return h
+    if chart == "spherical":
+        inv = [["-1", "0", "0", "0"], ["0", "1", "0", "0"],
+               ["0", "0", "1/r**2", "0"], ["0", "0", "0", "1/(r**2*sin(theta)**2)"]]
+        return SphericalSpacetime(inv, 0.0, 0.0, time_scale=None)
+    raise ValueError(f"unknown chart '{chart}' for minkowski (use 'cartesian' or 'spherical')")
+
+
+def schwarzschild(rg: float = 1.0) -> SphericalSpacetime:
+    """Schwarzschild black hole in (t, r, theta, phi) (seed Eq. 9/15, with the p_phi term)."""
+    rg = _check_rg(rg)
+    inv = [["-1/(1 - rg/r)", "0", "0", "0"], ["0", "1 - rg/r", "0", "0"],
+           ["0", "0", "1/r**2", "0"], ["0", "0", "0", "1/(r**2*sin(theta)**2)"]]
+    return SphericalSpacetime(inv, rg, 0.0, time_scale="r - rg", horizon=rg)
+
+
+def kerr(rg: float = 1.0, a: float = 0.0, chart: str = "boyer_lindquist") -> MetricHamiltonian:
+    """Kerr black hole, spin length a = J/M with |a| <= M = rg/2 (seed Eq. 12).
+
+    ``chart="boyer_lindquist"``: (t, r, theta, phi). ``chart="kerr_schild"``: Cartesian
+    (t, x, y, z), horizon-penetrating, no coordinate pole (DESIGN.md formula).
+    """
+    rg = _check_rg(rg)
+    a = _check_spin(rg, a)
+    m = rg / 2
+    horizon = m + math.sqrt(max(m * m - a * a, 0.0))
+    if chart == "boyer_lindquist":
+        defs = [("s2", "sin(theta)**2"), ("sigma", "r**2 + a**2*(1 - s2)"),
+                ("delta", "r**2 - rg*r + a**2"), ("sd", "sigma*delta")]
+        inv = [["-((r**2 + a**2)**2 - a**2*delta*s2)/sd", "0", "0", "-rg*a*r/sd"],
+               ["0", "delta/sigma", "0", "0"],
+               ["0", "0", "1/sigma", "0"],
+               ["-rg*a*r/sd", "0", "0", "(delta - a**2*s2)/(sd*s2)"]]
+        h = SphericalSpacetime(inv, rg, a, time_scale="(r**2 - rg*r + a**2)/r",
+                               definitions=defs, horizon=horizon)
+        return h
+    if chart == "kerr_schild":
+        return KerrSchild(rg, a, horizon)
+    raise ValueError(f"unknown chart '{chart}' for kerr (use 'boyer_lindquist' or 'kerr_schild')")
+
+
+class KerrSchild(ExpressionHamiltonian):
+    """Kerr in Cartesian Kerr–Schild coordinates: g^uv = eta^uv - f l^u l^v (DESIGN.md)."""
+
+    kind = "spacetime"
+    chart = "kerr_schild"
+
+    def __init__(self, rg: float, a: float, horizon: float):
+        defs = [("rho2", "x**2 + y**2 + z**2 - a**2"),
+                ("r2", "0.5*(rho2 + sqrt(rho2**2 + 4*a**2*z**2))"), ("r", "sqrt(r2)"),
+                ("f", "rg*r*r2/(r2**2 + a**2*z**2)"), ("ra2", "r2 + a**2"),
+                ("lp", "-p_t + ((r*x + a*y)*p_x + (r*y - a*x)*p_y)/ra2 + z*p_z/r")]
+        text = "0.5*(-p_t**2 + p_x**2 + p_y**2 + p_z**2 - f*lp**2)"
+        super().__init__(text, ("t", "x", "y", "z"), ("p_t", "p_x", "p_y", "p_z"),
+                         parameters={"rg": rg, "a": a}, definitions=defs,
+                         time_scale="sqrt(0.5*(x**2 + y**2 + z**2 - a**2 + "
+                                    "sqrt((x**2 + y**2 + z**2 - a**2)**2 + 4*a**2*z**2)))")
+        self.rg, self.a, self.horizon = rg, a, horizon
+
+    def radius_soa(self, Q):
+        """Kerr–Schild r > 0 from r^4 - (x^2+y^2+z^2-a^2) r^2 - a^2 z^2 = 0."""
+        x, y, z = Q[1], Q[2], Q[3]
+        rho2 = x * x + y * y + z * z - self.a ** 2
+        return np.sqrt(0.5 * (rho2 + np.sqrt(rho2 * rho2 + 4 * self.a ** 2 * z * z)))
+
+    def invariants_soa(self, Q, P):
+        """E = -p_t and L_z = x p_y - y p_x."""
+        return {"p_t": P[0].copy(), "L_z": Q[1] * P[2] - Q[2] * P[1]}
+
+
+class Medium(ExpressionHamiltonian):
+    """Light in a medium of refractive index n(x, y, z) (optical Hamiltonian)."""
+
+    kind = "medium"
+
+    def __init__(self, index: str, literal: bool, parameters=None, bounds=None):
+        coords, momenta = ("x", "y", "z"), ("p_x", "p_y", "p_z")
+        text = "0.5*n*(p_x**2 + p_y**2 + p_z**2)" if literal else \
+            "0.5*(p_x**2 + p_y**2 + p_z**2)/n**2"
+        super().__init__(text, coords, momenta, parameters, definitions=[("n", index)],
+                         positive=("n",))
+        self.index_text = index
+        self.literal = literal
+        self.bounds = None if bounds is None else (np.asarray(bounds[0], float),
+                                                   np.asarray(bounds[1], float))
+        self._index = ex.compile_expression(index, coords, parameters)
+
+    def index_soa(self, Q) -> np.ndarray:
+        """The refractive index (the user's n, or the seed's literal n) at positions (3, N)."""
+        n = self._index({"x": Q[0], "y": Q[1], "z": Q[2]})
+        return np.broadcast_to(np.asarray(n, dtype=np.float64), (Q.shape[-1],))
+
+    def check_index(self, points) -> None:
+        """Raise ValueError if n is not a positive finite number at the given (N, 3) points."""
+        pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        with np.errstate(all="ignore"):
+            n = self.index_soa(pts.T)
+        bad = ~(np.isfinite(n) & (n > 0))
+        if bad.any():
+            where = pts[np.argmax(bad)]
+            raise ValueError(f"refractive index '{self.index_text}' is {n[np.argmax(bad)]:g} at "
+                             f"(x, y, z) = ({where[0]:g}, {where[1]:g}, {where[2]:g}); "
+                             "it must be positive")
+
+
+def medium(index: str, literal: bool = False, parameters: Mapping[str, float] | None = None,
+           bounds=None) -> Medium:
+    """Optical medium of refractive index n(x, y, z) given as text.
+
+    Default: the physical optical Hamiltonian H = |p|^2 / (2 n^2), whose rays obey
+    Eq. 4 (rays are geodesics of n^2 delta_ij). ``literal=True``: the seed's Eq. 8/16,
+    H = n |p|^2 / 2, which gives the same rays if its n is read as 1/n^2; use it to
+    reproduce the seed's Eq. 17/18 figures as printed. ``bounds`` = (lo, hi) corners of
+    the box outside which the medium is uniform (rays travel straight there).
+    """
+    return Medium(index, literal, parameters, bounds)

@@ -1,0 +1,81 @@
+"""The expression language: correct values, and refusal of everything off the whitelist."""
+
+import time
+
+import numpy as np
+import pytest
+
+from core import expressions as ex
+from core.dual import Dual
+
+
+def test_values_and_gradients_match_python_math():
+    e = ex.compile_expression("p*q*(p + q - 1) + sin(pi*q)**2 - e**-q + arctan2(p, 2)",
+                              ["q", "p"])
+    q, p = np.array([0.2, 0.5]), np.array([0.3, -0.7])
+    expected = p * q * (p + q - 1) + np.sin(np.pi * q) ** 2 - np.e ** -q + np.arctan2(p, 2)
+    np.testing.assert_allclose(e({"q": q, "p": p}), expected, rtol=1e-15)
+    got = e({"q": Dual.variable(q, 0), "p": p})
+    dq = p * (p + q - 1) + p * q + 2 * np.pi * np.sin(np.pi * q) * np.cos(np.pi * q) + np.e ** -q
+    np.testing.assert_allclose(got.d[0], dq, rtol=1e-14)
+    assert e.names == {"q", "p"}
+
+
+def test_parameters_and_definitions_fold_and_share():
+    prog = ex.compile_program(["f * p_x"], ["x", "p_x"], {"rg": 2.0},
+                              definitions=[("r", "sqrt(x**2 + 1)"), ("f", "rg / r")])
+    out = prog.evaluate({"x": np.array([0.0, 1.0]), "p_x": np.array([1.0, 2.0])})[0]
+    np.testing.assert_allclose(out, [2.0, 2 * 2 / np.sqrt(2)])
+    assert prog.dependencies == (frozenset({"x", "p_x"}),)
+
+
+@pytest.mark.parametrize("text, problem, column", [
+    ("__import__('os').system('echo hacked')", "attribute access", 17),
+    ("x.real", "attribute access", 2),
+    ("x[0]", "subscripts", 1),
+    ("(lambda: 1)()", "lambdas", 2),
+    ("lambda: 1", "lambdas", 1),
+    ("[x for x in y]", "comprehensions", 1),
+    ("x + foo", "unknown name 'foo'", 5),
+    ("open('f')", "unknown function 'open'", 1),
+    ("x +* 2", "syntax error", None),
+    ("9**9**9", "too large", 1),
+    ("10**400", "not a finite real number", 1),
+    ("x if x else 1", "conditionals", 1),
+    ("'text'", "only real numbers", 1),
+    ("sin(x, x)", "takes 1 argument", 1),
+    ("1/0 + x", "not a finite real number", 1),
+    ("", "empty", None),
+])
+def test_refused_with_problem_and_column(text, problem, column):
+    start = time.perf_counter()
+    with pytest.raises(ex.ExpressionError) as info:
+        ex.compile_expression(text, ["x", "y"])
+    assert time.perf_counter() - start < 0.5, "refusal must be fast"
+    assert problem in str(info.value)
+    if column is not None:
+        assert info.value.column == column
+        assert f"column {column}" in str(info.value)
+
+
+def test_nothing_runs_while_refusing(tmp_path, monkeypatch):
+    """The classic payload must not execute: no file appears, no import happens."""
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ex.ExpressionError):
+        ex.compile_expression("__import__('os').system('touch pwned')", ["x"])
+    assert not (tmp_path / "pwned").exists()
+
+
+def test_absurd_sizes_refused_quickly():
+    start = time.perf_counter()
+    for text in ["x" + "+x" * 30_000, "(" * 500 + "x" + ")" * 500, "1" * 5000]:
+        with pytest.raises(ex.ExpressionError):
+            ex.compile_expression(text, ["x"])
+    assert time.perf_counter() - start < 1.0
+
+
+def test_definition_names_must_be_new():
+    with pytest.raises(ex.ExpressionError, match="not a new identifier"):
+        ex.compile_program(["x"], ["x"], definitions=[("x", "1")])
+    with pytest.raises(ex.ExpressionError, match="definition 'r': unknown name 'q'"):
+        ex.compile_program(["r"], ["x"], definitions=[("r", "q + 1")])
