@@ -11,7 +11,7 @@ PYOLD := $(VENV311)/bin/python
 export BLENDER_USER_RESOURCES ?= $(CURDIR)/.blender-user
 PYTEST_FLAGS ?= -n 2 -q
 
-.PHONY: test test-main test-oldest lint venv venv311 clean
+.PHONY: test test-main test-oldest lint venv venv311 clean extension render
 
 test: lint test-main test-oldest
 
@@ -39,3 +39,19 @@ test-oldest: venv311
 
 clean:
 	rm -rf $(VENV) $(VENV311) .blender-user dist out .pytest_cache
+
+# The Blender extension: dist/symray-<version>.zip, built and validated by Blender's own
+# extension tool (blender_ext.py build/validate from the bpy wheel).
+EXT_VERSION := $(shell sed -n 's/^version = "\(.*\)"/\1/p' blender_manifest.toml)
+EXT_ZIP := dist/symray-$(EXT_VERSION).zip
+RENDER_ARGS ?=
+
+extension: venv
+	$(PY) tools/build_extension.py --output-dir dist
+
+# Install the zip into the isolated user folder $(BLENDER_USER_RESOURCES), enable it and
+# render the default scene (examples/render_scene.py) to out/default.png and .exr.
+render: extension
+	$(PY) tools/install_extension.py $(EXT_ZIP)
+	mkdir -p out
+	$(PY) examples/render_scene.py --out out/default.png --exr out/default.exr $(RENDER_ARGS)

@@ -1,9 +1,25 @@
 """SymRay core: symplectic ray tracing in pure numpy (no Blender needed).
 
-See DESIGN.md for the contract; ``import core; core.integrate(...)``.
+The contract (DESIGN.md): ``core.integrate``, ``core.hamiltonians``, ``core.Camera``,
+``core.Scene``, ``core.render``, ``core.ENDING`` and the intersectors.
 """
 
-from . import dual, expressions, hamiltonians
+from . import dual, expressions, hamiltonians, imageio, integrators, sky
+from .camera import Camera
 from .expressions import ExpressionError
+from .imageio import FAILED_COLOR, write_exr, write_png
+from .integrators import METHODS, PoincareTransformed, get_method, integrate
+from .intersect import Disk, Group, Hits, Plane, Sphere, TriangleMesh, Volume, checker, colormap
+from .observer import InsideHorizonError
+from .render import MAX_STEPS_COLOR, RenderResult, render
+from .sky import Background, procedural_sky
+from .trace import ENDING, Scene
 
-__all__ = ["dual", "expressions", "hamiltonians", "ExpressionError"]
+__all__ = [
+    "dual", "expressions", "hamiltonians", "imageio", "integrators", "sky",
+    "Camera", "ExpressionError", "FAILED_COLOR", "MAX_STEPS_COLOR", "write_exr", "write_png",
+    "METHODS", "PoincareTransformed", "get_method", "integrate",
+    "Disk", "Group", "Hits", "Plane", "Sphere", "TriangleMesh", "Volume", "checker", "colormap",
+    "InsideHorizonError", "RenderResult", "render", "Background", "procedural_sky",
+    "ENDING", "Scene",
+]

@@ -397,11 +397,13 @@ def schwarzschild(rg: float = 1.0) -> SphericalSpacetime:
     return SphericalSpacetime(inv, rg, 0.0, time_scale="r - rg", horizon=rg)
 
 
-def kerr(rg: float = 1.0, a: float = 0.0, chart: str = "boyer_lindquist") -> MetricHamiltonian:
+def kerr(rg: float = 1.0, a: float = 0.0, chart: str = "boyer_lindquist",
+         outgoing: bool = False) -> MetricHamiltonian:
     """Kerr black hole, spin length a = J/M with |a| <= M = rg/2 (seed Eq. 12).
 
     ``chart="boyer_lindquist"``: (t, r, theta, phi). ``chart="kerr_schild"``: Cartesian
-    (t, x, y, z), horizon-penetrating, no coordinate pole (DESIGN.md formula).
+    (t, x, y, z), horizon-penetrating, no coordinate pole (DESIGN.md formula); ingoing
+    (regular on the future horizon) unless ``outgoing=True`` (regular on the past one).
     """
     rg = _check_rg(rg)
     a = _check_spin(rg, a)
@@ -418,7 +420,7 @@ def kerr(rg: float = 1.0, a: float = 0.0, chart: str = "boyer_lindquist") -> Met
                                definitions=defs, horizon=horizon)
         return h
     if chart == "kerr_schild":
-        return KerrSchild(rg, a, horizon)
+        return KerrSchild(rg, a, horizon, outgoing)
     raise ValueError(f"unknown chart '{chart}' for kerr (use 'boyer_lindquist' or 'kerr_schild')")
 
 
@@ -428,17 +430,26 @@ class KerrSchild(ExpressionHamiltonian):
     kind = "spacetime"
     chart = "kerr_schild"
 
-    def __init__(self, rg: float, a: float, horizon: float):
+    def __init__(self, rg: float, a: float, horizon: float, outgoing: bool = False):
+        # ingoing: l_mu = (1, l_i(a)), regular on the future horizon; outgoing: the time
+        # reverse of ingoing with spin -a, l_mu = (-1, l_i(-a)), regular on the past horizon
+        # (the one rays traced backwards from a camera cross).
+        lp = ("p_t + ((r*x - a*y)*p_x + (r*y + a*x)*p_y)/ra2 + z*p_z/r" if outgoing else
+              "-p_t + ((r*x + a*y)*p_x + (r*y - a*x)*p_y)/ra2 + z*p_z/r")
         defs = [("rho2", "x**2 + y**2 + z**2 - a**2"),
                 ("r2", "0.5*(rho2 + sqrt(rho2**2 + 4*a**2*z**2))"), ("r", "sqrt(r2)"),
-                ("f", "rg*r*r2/(r2**2 + a**2*z**2)"), ("ra2", "r2 + a**2"),
-                ("lp", "-p_t + ((r*x + a*y)*p_x + (r*y - a*x)*p_y)/ra2 + z*p_z/r")]
+                ("f", "rg*r*r2/(r2**2 + a**2*z**2)"), ("ra2", "r2 + a**2"), ("lp", lp)]
         text = "0.5*(-p_t**2 + p_x**2 + p_y**2 + p_z**2 - f*lp**2)"
         super().__init__(text, ("t", "x", "y", "z"), ("p_t", "p_x", "p_y", "p_z"),
                          parameters={"rg": rg, "a": a}, definitions=defs,
                          time_scale="sqrt(0.5*(x**2 + y**2 + z**2 - a**2 + "
                                     "sqrt((x**2 + y**2 + z**2 - a**2)**2 + 4*a**2*z**2)))")
         self.rg, self.a, self.horizon = rg, a, horizon
+        self.outgoing = outgoing
+
+    def for_backward_tracing(self) -> KerrSchild:
+        """The outgoing chart: rays followed into the past cross the past horizon smoothly."""
+        return self if self.outgoing else KerrSchild(self.rg, self.a, self.horizon, True)
 
     def radius_soa(self, Q):
         """Kerr–Schild r > 0 from r^4 - (x^2+y^2+z^2-a^2) r^2 - a^2 z^2 = 0."""

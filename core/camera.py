@@ -1,0 +1,327 @@
+"""Cameras: pixel index -> world-space ray (origin, unit direction), in Blender's conventions.
+
+A camera is a frame (position + orthonormal right/up/back axes, Blender's camera-local X, Y,
+Z: it looks down -Z) and a *window*: a linear map from Blender's raster coordinates
+(x to the right, y upwards, in pixels of the full frame) to
+
+- perspective: (x, y) on the image plane at distance 1 in front of the camera,
+- orthographic: (x, y) offsets in world units on the camera plane,
+- panorama (equirectangular): (longitude, latitude) in radians, longitude positive to the
+  right of the view direction, latitude positive upwards.
+
+The window follows Blender's ``BKE_camera_params_compute_viewplane`` (sensor fit with pixel
+aspect, shift in units of the fitted image dimension) and Cycles' equirectangular camera.
+Images are row-major with row 0 at the TOP; rays go through pixel centres.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Camera", "Frame"]
+
+_KINDS = ("persp", "ortho", "pano")
+
+
+@dataclass(frozen=True)
+class Frame:
+    """Observer frame in world space: position and orthonormal forward/right/up axes."""
+
+    position: np.ndarray
+    forward: np.ndarray
+    right: np.ndarray
+    up: np.ndarray
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """3x3 matrix whose columns are right, up, forward (local -> world)."""
+        return np.stack([self.right, self.up, self.forward], axis=1)
+
+    def to_local(self, v: np.ndarray) -> np.ndarray:
+        """World vectors (..., 3) -> components along (right, up, forward)."""
+        return np.asarray(v, dtype=np.float64) @ self.matrix
+
+    def to_world(self, c: np.ndarray) -> np.ndarray:
+        """Components along (right, up, forward) (..., 3) -> world vectors."""
+        return np.asarray(c, dtype=np.float64) @ self.matrix.T
+
+
+def _unit(v: Any, name: str) -> np.ndarray:
+    v = np.asarray(v, dtype=np.float64).reshape(3)
+    n = float(np.linalg.norm(v))
+    if not np.isfinite(n) or n == 0.0:
+        raise ValueError(f"{name} must be a finite non-zero 3-vector, got {v.tolist()}")
+    return v / n
+
+
+def _look_at_basis(position: Any, look_at: Any, up: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Position and 3x3 basis (columns right, up, back) of a camera looking at a point."""
+    pos = np.asarray(position, dtype=np.float64).reshape(3)
+    fwd = _unit(np.asarray(look_at, dtype=np.float64).reshape(3) - pos, "look_at - position")
+    right = np.cross(fwd, _unit(up, "up"))
+    if np.linalg.norm(right) < 1e-12:
+        raise ValueError("up must not be parallel to the viewing direction")
+    right /= np.linalg.norm(right)
+    return pos, np.stack([right, np.cross(right, fwd), -fwd], axis=1)
+
+
+def _matrix_basis(matrix_world: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Position and orthonormal basis (columns X, Y, Z) of a 4x4 world matrix, scale removed."""
+    m = np.asarray(matrix_world, dtype=np.float64)
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise ValueError(f"matrix_world must be a finite 4x4 matrix, got shape {m.shape}")
+    z = _unit(m[:3, 2], "matrix_world Z axis")
+    y = m[:3, 1] - (m[:3, 1] @ z) * z
+    y = _unit(y, "matrix_world Y axis")
+    x = np.cross(y, z)
+    if m[:3, 0] @ x < 0.0:  # mirrored matrix: keep Blender's X axis
+        x = -x
+    return m[:3, 3].copy(), np.stack([x, y, z], axis=1)
+
+
+def _viewplane(
+    ortho: bool,
+    lens: float,
+    sensor_x: float,
+    sensor_y: float,
+    sensor_fit: str,
+    shift: tuple[float, float],
+    ortho_scale: float,
+    winx: int,
+    winy: int,
+    aspx: float,
+    aspy: float,
+) -> tuple[float, float, float, float]:
+    """Blender's view plane (xmin, xmax, ymin, ymax) at distance 1 (persp) or in world units."""
+    ycor = aspy / aspx
+    if ortho:
+        pixsize = ortho_scale
+    else:
+        pixsize = (sensor_y if sensor_fit == "VERTICAL" else sensor_x) / lens
+    fit = sensor_fit
+    if fit == "AUTO":
+        fit = "HORIZONTAL" if aspx * winx >= aspy * winy else "VERTICAL"
+    viewfac = winx if fit == "HORIZONTAL" else ycor * winy
+    pixsize /= viewfac
+    dx, dy = shift[0] * viewfac, shift[1] * viewfac
+    return (
+        (-0.5 * winx + dx) * pixsize,
+        (0.5 * winx + dx) * pixsize,
+        (-0.5 * ycor * winy + dy) * pixsize,
+        (0.5 * ycor * winy + dy) * pixsize,
+    )
+
+
+def _border_region(border: Any, winx: int, winy: int) -> tuple[int, int, int, int]:
+    """Pixel rectangle (x0, x1, y0, y1), y from the bottom, as Blender truncates border * size."""
+    if border is None:
+        return 0, winx, 0, winy
+    b = np.asarray(border, dtype=np.float32).reshape(4)  # Blender stores and multiplies floats
+    if not np.all((b >= 0) & (b <= 1)) or b[0] >= b[1] or b[2] >= b[3]:
+        raise ValueError(f"border must be (min_x, max_x, min_y, max_y) in [0, 1], got {border}")
+    x0, x1 = (int(v) for v in b[:2] * np.float32(winx))
+    y0, y1 = (int(v) for v in b[2:] * np.float32(winy))
+    if x1 <= x0 or y1 <= y0:
+        raise ValueError(f"border {tuple(border)} selects no pixel of a {winx}x{winy} image")
+    return x0, x1, y0, y1
+
+
+def _check_size(width: Any, height: Any) -> tuple[int, int]:
+    w, h = int(width), int(height)
+    if w < 1 or h < 1 or w != width or h != height:
+        raise ValueError(f"image size must be positive integers, got {width}x{height}")
+    return w, h
+
+
+class Camera:
+    """A pinhole, orthographic or equirectangular camera producing one ray per pixel."""
+
+    def __init__(
+        self,
+        kind: str,
+        position: Any,
+        basis: Any,
+        window: tuple[float, float, float, float],
+        full_size: tuple[int, int],
+        region: tuple[int, int, int, int] | None = None,
+    ) -> None:
+        """Low-level constructor; prefer the classmethods (see the module docstring)."""
+        if kind not in _KINDS:
+            raise ValueError(f"camera kind must be one of {_KINDS}, got {kind!r}")
+        self.kind = kind
+        self._position = np.asarray(position, dtype=np.float64).reshape(3).copy()
+        self._basis = np.asarray(basis, dtype=np.float64).reshape(3, 3).copy()
+        self.window = tuple(float(v) for v in window)
+        self.full_size = _check_size(*full_size)
+        self.region = region if region is not None else (0, full_size[0], 0, full_size[1])
+
+    # -- constructors -------------------------------------------------------------------
+    @classmethod
+    def perspective(
+        cls,
+        position: Any,
+        look_at: Any,
+        up: Any,
+        fov_deg: float,
+        width: int,
+        height: int,
+    ) -> Camera:
+        """Pinhole camera; fov_deg spans the larger image dimension (Blender AUTO fit)."""
+        if not 0.0 < fov_deg < 180.0:
+            raise ValueError(f"fov_deg must be in (0, 180), got {fov_deg}")
+        w, h = _check_size(width, height)
+        pos, basis = _look_at_basis(position, look_at, up)
+        lens = 0.5 / math.tan(math.radians(fov_deg) / 2)  # sensor width 1 spans the fov
+        window = _viewplane(False, lens, 1.0, 1.0, "AUTO", (0.0, 0.0), 1.0, w, h, 1.0, 1.0)
+        return cls("persp", pos, basis, window, (w, h))
+
+    @classmethod
+    def orthographic(
+        cls,
+        position: Any,
+        look_at: Any,
+        up: Any,
+        ortho_scale: float,
+        width: int,
+        height: int,
+    ) -> Camera:
+        """Parallel projection; ortho_scale (world units) spans the larger image dimension."""
+        if not ortho_scale > 0.0:
+            raise ValueError(f"ortho_scale must be positive, got {ortho_scale}")
+        w, h = _check_size(width, height)
+        pos, basis = _look_at_basis(position, look_at, up)
+        window = _viewplane(True, 1.0, 1.0, 1.0, "AUTO", (0.0, 0.0), ortho_scale, w, h, 1, 1)
+        return cls("ortho", pos, basis, window, (w, h))
+
+    @classmethod
+    def panorama(cls, position: Any, look_at: Any, up: Any, width: int, height: int) -> Camera:
+        """Full-sphere equirectangular camera (Cycles): image centre = view direction."""
+        w, h = _check_size(width, height)
+        pos, basis = _look_at_basis(position, look_at, up)
+        return cls("pano", pos, basis, (-math.pi, math.pi, -math.pi / 2, math.pi / 2), (w, h))
+
+    @classmethod
+    def blender(
+        cls,
+        *,
+        type: str = "PERSP",
+        lens: float = 50.0,
+        sensor_width: float = 36.0,
+        sensor_height: float = 24.0,
+        sensor_fit: str = "AUTO",
+        shift_x: float = 0.0,
+        shift_y: float = 0.0,
+        ortho_scale: float = 6.0,
+        resolution_x: int = 1920,
+        resolution_y: int = 1080,
+        resolution_percentage: int = 100,
+        pixel_aspect_x: float = 1.0,
+        pixel_aspect_y: float = 1.0,
+        matrix_world: Any = None,
+        border: Any = None,
+        panorama_type: str = "EQUIRECTANGULAR",
+        latitude_min: float = -math.pi / 2,
+        latitude_max: float = math.pi / 2,
+        longitude_min: float = -math.pi,
+        longitude_max: float = math.pi,
+    ) -> Camera:
+        """Camera from Blender's camera/render data (defaults are Blender's own defaults)."""
+        if type not in ("PERSP", "ORTHO", "PANO"):
+            raise ValueError(f"camera type must be 'PERSP', 'ORTHO' or 'PANO', got {type!r}")
+        if sensor_fit not in ("AUTO", "HORIZONTAL", "VERTICAL"):
+            raise ValueError(f"sensor_fit must be AUTO, HORIZONTAL or VERTICAL: {sensor_fit!r}")
+        winx = int(resolution_x) * int(resolution_percentage) // 100
+        winy = int(resolution_y) * int(resolution_percentage) // 100
+        winx, winy = _check_size(winx, winy)
+        pos, basis = _matrix_basis(np.eye(4) if matrix_world is None else matrix_world)
+        region = _border_region(border, winx, winy)
+        if type == "PANO":
+            if panorama_type != "EQUIRECTANGULAR":
+                raise ValueError(f"only EQUIRECTANGULAR panoramas are supported: {panorama_type}")
+            dlon, dlat = longitude_max - longitude_min, latitude_max - latitude_min
+            window = (
+                longitude_min + shift_x * dlon,
+                longitude_max + shift_x * dlon,
+                latitude_min + shift_y * dlat,
+                latitude_max + shift_y * dlat,
+            )
+            return cls("pano", pos, basis, window, (winx, winy), region)
+        if not (lens > 0 and sensor_width > 0 and sensor_height > 0 and ortho_scale > 0):
+            raise ValueError("lens, sensor size and ortho_scale must be positive")
+        if not (pixel_aspect_x > 0 and pixel_aspect_y > 0):
+            raise ValueError("pixel aspect must be positive")
+        window = _viewplane(
+            type == "ORTHO", lens, sensor_width, sensor_height, sensor_fit, (shift_x, shift_y),
+            ortho_scale, winx, winy, pixel_aspect_x, pixel_aspect_y,
+        )  # fmt: skip
+        kind = "ortho" if type == "ORTHO" else "persp"
+        return cls(kind, pos, basis, window, (winx, winy), region)
+
+    # -- image geometry -----------------------------------------------------------------
+    @property
+    def width(self) -> int:
+        """Width in pixels of the rendered image (the border region, if any)."""
+        return self.region[1] - self.region[0]
+
+    @property
+    def height(self) -> int:
+        """Height in pixels of the rendered image (the border region, if any)."""
+        return self.region[3] - self.region[2]
+
+    @property
+    def n_pixels(self) -> int:
+        """Number of pixels (rays) of the rendered image."""
+        return self.width * self.height
+
+    @property
+    def offset(self) -> tuple[int, int]:
+        """(column, row) of this image's top-left pixel in the full frame (row 0 at the top)."""
+        return self.region[0], self.full_size[1] - self.region[3]
+
+    @property
+    def frame(self) -> Frame:
+        """Observer frame: camera position, forward (view direction), right and up, unit."""
+        b = self._basis
+        return Frame(self._position.copy(), -b[:, 2].copy(), b[:, 0].copy(), b[:, 1].copy())
+
+    # -- rays ---------------------------------------------------------------------------
+    def window_coords(self, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """Window coordinates (M, 2) of the pixel centres with flat indices [start, stop)."""
+        stop = self.n_pixels if stop is None else stop
+        if not 0 <= start <= stop <= self.n_pixels:
+            raise IndexError(f"pixel range [{start}, {stop}) outside [0, {self.n_pixels})")
+        row, col = np.divmod(np.arange(start, stop, dtype=np.int64), self.width)
+        x0, _, _, y1 = self.region
+        xb = x0 + col + 0.5  # Blender raster: x right, y up, full frame
+        yb = y1 - row - 0.5
+        xmin, xmax, ymin, ymax = self.window
+        winx, winy = self.full_size
+        sx = xmin + (xmax - xmin) * (xb / winx)
+        sy = ymin + (ymax - ymin) * (yb / winy)
+        return np.stack([sx, sy], axis=1)
+
+    def rays(self, start: int = 0, stop: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Origins (M, 3) and unit directions (M, 3) for flat pixel indices [start, stop)."""
+        s = self.window_coords(start, stop)
+        m = s.shape[0]
+        right, up, back = self._basis.T
+        if self.kind == "persp":
+            d = s[:, :1] * right + s[:, 1:] * up - back
+            d /= np.linalg.norm(d, axis=1, keepdims=True)
+            return np.broadcast_to(self._position, (m, 3)).copy(), d
+        if self.kind == "ortho":
+            o = self._position + s[:, :1] * right + s[:, 1:] * up
+            return o, np.broadcast_to(-back, (m, 3)).copy()
+        lon, lat = s[:, :1], s[:, 1:]
+        d = np.cos(lat) * (np.cos(lon) * -back + np.sin(lon) * right) + np.sin(lat) * up
+        return np.broadcast_to(self._position, (m, 3)).copy(), d
+
+    def __repr__(self) -> str:
+        return (
+            f"Camera({self.kind!r}, {self.width}x{self.height}, "
+            f"position={self._position.tolist()}, window={self.window})"
+        )

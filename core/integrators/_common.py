@@ -1,0 +1,90 @@
+"""Shared helpers of the integrators: per-ray subsets, finiteness checks, the method base class."""
+
+from __future__ import annotations
+
+import functools
+from typing import Any
+
+import numpy as np
+
+State = tuple[np.ndarray, ...]
+
+
+def take(a: Any, idx: np.ndarray | None) -> Any:
+    """Per-ray subset of a scalar or of an array with rays on its last axis (idx None: all rays)."""
+    if idx is None or np.ndim(a) == 0:
+        return a
+    return a[..., idx]
+
+
+def restrict(H: Any, idx: np.ndarray | None) -> Any:
+    """H for the rays idx: H.subset(idx) where H carries per-ray data, otherwise H itself."""
+    if idx is None:
+        return H
+    subset = getattr(H, "subset", None)
+    return H if subset is None else subset(idx)
+
+
+def finite_rays(*arrays: np.ndarray) -> np.ndarray:
+    """(N,) bool: True for the rays (last axis) whose entries are all finite in every array."""
+    ok = np.isfinite(arrays[0]).all(axis=0)
+    for a in arrays[1:]:
+        ok &= np.isfinite(a).all(axis=0)
+    return ok
+
+
+def as_soa(a: Any) -> np.ndarray:
+    """A float64 copy of a state block (n, N)."""
+    return np.array(a, dtype=np.float64)
+
+
+def flow(H: Any, Z: np.ndarray) -> np.ndarray:
+    """Hamilton's vector field (dH/dp, -dH/dq) of the stacked state Z = (q; p), shape (2n, N)."""
+    n = Z.shape[0] // 2
+    dq, dp = H.gradient_soa(Z[:n], Z[n:])
+    out = np.empty_like(Z)
+    out[:n] = dp
+    np.negative(dq, out=out[n:])
+    return out
+
+
+def quiet(fn):
+    """Run fn with floating-point warnings off: failing rays are reported through `ok`."""
+
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        with np.errstate(all="ignore"):
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
+class Method:
+    """Base of the one-step rules: name, order, symplectic, init/step/qp, with_options."""
+
+    name: str = ""
+    order: int = 0
+    symplectic: bool = False
+
+    def __init__(self, **options: Any) -> None:
+        self.options = dict(options)
+
+    def init(self, H: Any, Q: np.ndarray, P: np.ndarray) -> State:
+        """Initial state (Q, P) (copies, float64) for the rays in the columns of Q and P."""
+        return as_soa(Q), as_soa(P)
+
+    def qp(self, state: State) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and momenta (each (n, N)) of a state."""
+        return state[0], state[1]
+
+    def with_options(self, **options: Any) -> Method:
+        """A copy of this method with some constructor options replaced."""
+        unknown = set(options) - set(self.options)
+        if unknown:
+            raise TypeError(f"{self.name}: unknown option(s) {sorted(unknown)}; "
+                            f"it takes {sorted(self.options)}")
+        return type(self)(**{**self.options, **options})
+
+    def __repr__(self) -> str:
+        opts = ", ".join(f"{k}={v!r}" for k, v in self.options.items())
+        return f"{type(self).__name__}({opts})"

@@ -1,0 +1,152 @@
+"""Per-ray solver of the implicit stage equations W = phi(W): fixed point, then Newton.
+
+W is (k, N): k unknowns per ray, rays on the last axis. `phi(W, idx)` evaluates the map for
+the rays idx (an integer index array into the batch, possibly with repeats) or, with
+idx None, for the whole batch. Only rays that have not converged keep iterating.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._common import take
+
+Phi = Callable[[np.ndarray, "np.ndarray | None"], np.ndarray]
+
+_EPS = np.finfo(np.float64).eps
+_FD_STEP = _EPS ** (1.0 / 3.0)  # central differences: truncation ~ round-off
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """Tolerances of the implicit solves.
+
+    tol: per-ray convergence test max_i |ΔW_i| / scale_i <= tol, with scale = 1 + |state|
+    (relative for large coordinates, absolute below 1). max_iter: fixed-point iterations;
+    rays whose increments stop shrinking by at least `rho` per iteration go to Newton early.
+    max_newton: Newton iterations (finite-difference Jacobian) for the rays left over.
+    """
+
+    tol: float = 1e-14
+    max_iter: int = 50
+    max_newton: int = 12
+    rho: float = 0.9
+
+
+def _increment(new: np.ndarray, old: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """(M,) scaled max-norm of new - old per ray."""
+    d = np.abs(new - old)
+    d /= scale
+    return d.max(axis=0)
+
+
+def solve(phi: Phi, W0: np.ndarray, scale: np.ndarray,
+          opts: SolverOptions) -> tuple[np.ndarray, np.ndarray]:
+    """Solve W = phi(W) per ray from the predictor W0; -> (W (k, N), converged (N,) bool)."""
+    N = W0.shape[1]
+    ok = np.zeros(N, dtype=bool)
+    ids = np.arange(N)
+    full, W, prev, pending = True, W0, None, []
+    for it in range(opts.max_iter):
+        sub = None if full else ids
+        Wa = W if full else W[:, ids]
+        Wn = phi(Wa, sub)
+        err = _increment(Wn, Wa, take(scale, sub))
+        if full:
+            W = Wn
+        else:
+            W[:, ids] = Wn
+        done = err <= opts.tol
+        if done.all():
+            ok[ids] = True
+            break
+        ok[ids[done]] = True
+        if it >= 2:
+            stuck = ~done & ~(err <= opts.rho * prev)  # slow, diverging or NaN
+        else:
+            stuck = ~done & ~np.isfinite(err)
+        if stuck.any():
+            pending.append(ids[stuck])
+        keep = ~(done | stuck)
+        if not keep.all():
+            ids, err, full = ids[keep], err[keep], False
+        prev = err
+        if ids.size == 0:
+            break
+    else:
+        pending.append(ids)
+    if pending:
+        idx = np.concatenate(pending)
+        if idx.size:
+            W = np.array(W) if W is W0 else W
+            Wp = W[:, idx]
+            bad = ~np.isfinite(Wp).all(axis=0)
+            Wp[:, bad] = W0[:, idx[bad]]  # restart diverged rays from the predictor
+            Wp, ok[idx] = newton(phi, Wp, idx, scale[:, idx], opts)
+            W[:, idx] = Wp
+    return W, ok
+
+
+def newton(phi: Phi, W: np.ndarray, idx: np.ndarray, scale: np.ndarray,
+           opts: SolverOptions) -> tuple[np.ndarray, np.ndarray]:
+    """Newton's method on W - phi(W) = 0 for the rays idx; -> (W (k, M), converged (M,))."""
+    M = idx.size
+    ok = np.zeros(M, dtype=bool)
+    loc = np.arange(M)
+    prev = np.full(M, np.inf)
+    for _ in range(opts.max_newton):
+        Wa, rays, sc = W[:, loc], idx[loc], scale[:, loc]
+        F = Wa - phi(Wa, rays)
+        J = fd_jacobian(phi, Wa, rays, sc)
+        dW, solved = batched_solve(J, F)
+        Wa -= dW
+        W[:, loc] = Wa
+        err = np.max(np.abs(dW) / sc, axis=0)
+        # converged, or stagnating at the round-off level just above tol
+        conv = solved & ((err <= opts.tol) | ((err <= 100 * opts.tol) & (err > 0.5 * prev[loc])))
+        ok[loc[conv]] = True
+        prev[loc] = err
+        loc = loc[solved & ~conv & np.isfinite(err)]
+        if loc.size == 0:
+            break
+    return W, ok
+
+
+def fd_jacobian(phi: Phi, W: np.ndarray, idx: np.ndarray, scale: np.ndarray) -> np.ndarray:
+    """(M, k, k) Jacobian of W - phi(W) by central differences, all 2k perturbations in one call."""
+    k, M = W.shape
+    d = _FD_STEP * scale
+    E = np.eye(k)[:, :, None] * d[None]                     # E[j, r] = delta_jr d_r
+    pert = np.concatenate((W[None] + E, W[None] - E))        # (2k, k, M)
+    pert = pert.transpose(1, 0, 2).reshape(k, 2 * k * M)
+    out = phi(pert, np.tile(idx, 2 * k)).reshape(k, 2 * k, M)
+    dphi = (out[:, :k] - out[:, k:]) / (2.0 * d[None])       # dphi[r, j] = d phi_r / d W_j
+    J = -dphi.transpose(2, 0, 1)
+    J[:, np.arange(k), np.arange(k)] += 1.0
+    return J
+
+
+def batched_solve(J: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Solve J x = rhs per ray (J (M, k, k), rhs (k, M)); -> (x (k, M), solved (M,) bool)."""
+    good = np.isfinite(J).all(axis=(1, 2)) & np.isfinite(rhs).all(axis=0)
+    x = np.full(rhs.shape, np.nan)
+    if not good.any():
+        return x, good
+    Jg, bg = J[good], rhs[:, good].T[..., None]
+    try:
+        xg = np.linalg.solve(Jg, bg)[..., 0]
+    except np.linalg.LinAlgError:  # a singular matrix in the stack: drop those rays
+        fine = np.linalg.cond(Jg) < 1.0 / _EPS
+        good[np.flatnonzero(good)[~fine]] = False
+        if not fine.any():
+            return x, good
+        try:
+            xg = np.linalg.solve(Jg[fine], bg[fine])[..., 0]
+        except np.linalg.LinAlgError:
+            good[:] = False
+            return x, good
+    x[:, good] = xg.T
+    return x, good

@@ -1,0 +1,239 @@
+"""`integrate`: the public driver (fixed steps, Poincaré-adaptive steps, or dopri5)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ._common import Method, restrict
+from .poincare import Clocked, PoincareTransformed
+from .registry import get_method
+
+
+@dataclass
+class Trajectory:
+    """States recorded every `record_every` steps (the first is the initial state).
+
+    s: (M, N) parameter reached, q and p: (M, N, n); for a single ray (M,), (M, n).
+    Rays that ended keep their last state.
+    """
+
+    s: np.ndarray
+    q: np.ndarray
+    p: np.ndarray
+
+
+@dataclass
+class IntegrationResult:
+    """Result of `integrate`; per-ray arrays are (N,), or scalars for a single ray."""
+
+    q: np.ndarray                 # final positions, shape of q0
+    p: np.ndarray                 # final momenta, shape of p0
+    s: Any                        # parameter reached (failed rays: where they stopped)
+    energy_error: Any             # max |H - H(q0, p0)| seen
+    failed: Any                   # NaN/Inf, implicit solve not converged, step too small
+    steps: Any                    # steps taken (accepted steps for dopri5)
+    trajectory: Trajectory | None = None
+
+
+class _Run:
+    """Book-keeping of a batch: the active rays' state, and frozen outputs of ended rays."""
+
+    def __init__(self, method: Method, H: Any, Henergy: Any, Q: np.ndarray, P: np.ndarray,
+                 n: int, E0: np.ndarray, clock: bool) -> None:
+        N = Q.shape[1]
+        self.method, self.H, self.Henergy, self.n, self.clock = method, H, Henergy, n, clock
+        self.state = method.init(H, Q, P)
+        self.act = np.arange(N)
+        self.out = {"q": Q[:n].copy(), "p": P[:n].copy(), "s": np.zeros(N),
+                    "err": np.zeros(N), "steps": np.zeros(N, dtype=np.int64),
+                    "failed": np.zeros(N, dtype=bool)}
+        self.live = {"s": np.zeros(N), "err": np.zeros(N), "E0": E0,
+                     "steps": np.zeros(N, dtype=np.int64)}
+        self.record_list: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+
+    def s_now(self) -> np.ndarray:
+        """(M,) parameter of the active rays."""
+        return self.method.qp(self.state)[0][-1] if self.clock else self.live["s"]
+
+    def retire(self, mask: np.ndarray, failed: bool) -> None:
+        """Freeze the active rays `mask` (bool, (M,)) at their current state."""
+        ids = self.act[mask]
+        Q, P = self.method.qp(self.state)
+        out = self.out
+        out["q"][:, ids] = Q[:self.n, mask]
+        out["p"][:, ids] = P[:self.n, mask]
+        out["s"][ids] = self.s_now()[mask]
+        out["err"][ids] = self.live["err"][mask]
+        out["steps"][ids] = self.live["steps"][mask]
+        out["failed"][ids] = failed
+        keep = ~mask
+        self.state = tuple(a[..., keep] for a in self.state)
+        self.live = {k: v[keep] for k, v in self.live.items()}
+        self.act = self.act[keep]
+        self.H = restrict(self.H, keep)
+        self.Henergy = restrict(self.Henergy, keep)
+
+    def check_energy(self) -> None:
+        """Update max |H - H0|; rays whose H is no longer finite are failed."""
+        if self.act.size == 0:
+            return
+        Q, P = self.method.qp(self.state)
+        with np.errstate(all="ignore"):
+            e = np.abs(self.Henergy.value_soa(Q[:self.n], P[:self.n]) - self.live["E0"])
+        np.fmax(self.live["err"], e, out=self.live["err"])
+        bad = ~np.isfinite(e)
+        if bad.any():
+            self.retire(bad, failed=True)
+
+    def record(self) -> None:
+        """Append the current state of all rays to the trajectory."""
+        Q, P = self.method.qp(self.state)
+        q, p, s = self.out["q"].copy(), self.out["p"].copy(), self.out["s"].copy()
+        q[:, self.act] = Q[:self.n]
+        p[:, self.act] = P[:self.n]
+        s[self.act] = self.s_now()
+        self.record_list.append((s, q, p))
+
+    def finish(self) -> None:
+        """Freeze the rays still active (not failed)."""
+        if self.act.size:
+            self.retire(np.ones(self.act.size, dtype=bool), failed=False)
+
+
+def _run_fixed(run: _Run, h: Any, steps: int, energy_every: int, record_every: int) -> None:
+    """Fixed steps h (float or per-ray (N,) in run.live['h'])."""
+    checked = True
+    for k in range(1, steps + 1):
+        new, ok = run.method.step(run.H, run.state, run.live.get("h", h))
+        if not ok.all():
+            run.retire(~ok, failed=True)
+            new = tuple(a[..., ok] for a in new)
+        run.state = new
+        if not run.clock:
+            run.live["s"] += run.live.get("h", h)
+        run.live["steps"] += 1
+        checked = bool(energy_every) and k % energy_every == 0
+        if checked:
+            run.check_energy()
+        if record_every and k % record_every == 0:
+            run.record()
+        if run.act.size == 0:
+            break
+    if not checked:
+        run.check_energy()
+
+
+def _run_dopri(run: _Run, s_end: np.ndarray, max_steps: int, energy_every: int,
+               record_every: int) -> None:
+    """Adaptive per-ray steps up to s_end with the method's attempt()/factor()."""
+    method = run.method
+    run.live["s_end"] = s_end
+    run.live["h_min"] = 1e-13 * np.abs(s_end)
+    for k in range(1, max_steps + 1):
+        live = run.live
+        s = live["s"]
+        rest = live["s_end"] - s
+        hh = np.minimum(live["h"], rest)
+        new, err, ok = method.attempt(run.H, run.state, hh)
+        acc = ok & (err <= 1.0)
+        last = acc & (hh >= rest)
+        run.state = tuple(np.where(acc, a1, a0) for a1, a0 in zip(new, run.state, strict=True))
+        live["s"] = np.where(last, live["s_end"], np.where(acc, s + hh, s))
+        live["steps"] += acc
+        live["h"] = hh * method.factor(err)
+        if energy_every and k % energy_every == 0:
+            run.check_energy()
+        if record_every and k % record_every == 0:
+            run.record()
+        if (run.live["s"] >= run.live["s_end"]).any():
+            run.check_energy()  # the final state of the rays that arrive
+            run.retire(run.live["s"] >= run.live["s_end"], failed=False)
+        tiny = run.live["h"] < run.live["h_min"]
+        if tiny.any():
+            run.retire(tiny, failed=True)
+        if run.act.size == 0:
+            return
+    run.check_energy()
+    run.retire(np.ones(run.act.size, dtype=bool), failed=True)  # out of steps
+
+
+def _to_soa(q0: Any, p0: Any, dim: int | None) -> tuple[np.ndarray, np.ndarray, bool]:
+    """(N, n) or (n,) public arrays -> (n, N) float64, and whether it was a single ray."""
+    q0 = np.asarray(q0, dtype=np.float64)
+    p0 = np.asarray(p0, dtype=np.float64)
+    if q0.shape != p0.shape or q0.ndim not in (1, 2):
+        raise ValueError(f"q0 and p0 must both be (N, n) or (n,); got {q0.shape}, {p0.shape}")
+    single = q0.ndim == 1
+    if dim is not None and q0.shape[-1] != dim:
+        raise ValueError(f"the Hamiltonian has {dim} coordinates, the rays {q0.shape[-1]}")
+    Q = np.ascontiguousarray(np.atleast_2d(q0).T)
+    P = np.ascontiguousarray(np.atleast_2d(p0).T)
+    return Q, P, single
+
+
+def integrate(H: Any, q0: Any, p0: Any, step: float | np.ndarray = 0.01, steps: int = 10_000,
+              method: str | Method = "yoshida4", *, adaptive: bool = False,
+              tol: float | None = None, record_every: int | None = None,
+              energy_every: int = 1, max_steps: int | None = None,
+              **options: Any) -> IntegrationResult:
+    """Integrate Hamilton's equations for a batch of rays; see IntegrationResult.
+
+    step: float or per-ray (N,). Fixed-step methods take `steps` steps of size `step`; with
+    adaptive=True they integrate the Poincaré-transformed K = g(q) (H − H0) instead, `step`
+    being the fictitious-time step dτ (the s reached is in res.s). dopri5 integrates to
+    s = step * steps adaptively (rtol = atol = tol unless given as options; at most
+    `max_steps` attempts per ray, default 10 * steps + 100). `tol` is also the implicit
+    solver tolerance of implicit methods. energy_every: check |H − H0| every that many steps
+    (0: only at the end). Further keyword options go to the method (get_method).
+    """
+    meth = get_method(method, **options)
+    is_rk_adaptive = hasattr(meth, "attempt")
+    if tol is not None and "tol" in meth.options:
+        meth = meth.with_options(tol=tol)
+    elif tol is not None and is_rk_adaptive:
+        meth = meth.with_options(rtol=tol, **({} if "atol" in options else {"atol": tol}))
+    Q, P, single = _to_soa(q0, p0, getattr(H, "dim", None))
+    n, N = Q.shape
+    with np.errstate(all="ignore"):
+        E0 = H.value_soa(Q, P)
+    clock = adaptive and not is_rk_adaptive
+    Hk = H
+    if clock:
+        Hk = PoincareTransformed(Clocked(H), 0.0)
+        Q = np.concatenate((Q, np.zeros((1, N))))
+        P = np.concatenate((P, -E0[None]))
+    run = _Run(meth, Hk, H, Q, P, n, E0.copy(), clock)
+    if np.ndim(step):
+        run.live["h"] = np.broadcast_to(np.asarray(step, dtype=np.float64), (N,)).copy()
+    if not np.isfinite(E0).all():
+        run.retire(~np.isfinite(E0), failed=True)
+    if record_every:
+        run.record()
+    if is_rk_adaptive:
+        run.live["h"] = np.broadcast_to(np.asarray(step, dtype=np.float64), (N,)).copy()
+        s_end = run.live["h"] * steps
+        _run_dopri(run, s_end, 10 * steps + 100 if max_steps is None else max_steps,
+                   energy_every, record_every or 0)
+    else:
+        _run_fixed(run, step, steps, energy_every, record_every or 0)
+    run.finish()
+    return _result(run, single)
+
+
+def _result(run: _Run, single: bool) -> IntegrationResult:
+    """Public shapes: (N, n) / (N,), or (n,) / scalars for a single ray."""
+    out = run.out
+    traj = None
+    if run.record_list:
+        s, q, p = (np.stack(x) for x in zip(*run.record_list, strict=True))
+        traj = Trajectory(s=s, q=q.transpose(0, 2, 1), p=p.transpose(0, 2, 1))
+        if single:
+            traj = Trajectory(s=traj.s[:, 0], q=traj.q[:, 0], p=traj.p[:, 0])
+    q, p = out["q"].T.copy(), out["p"].T.copy()
+    if single:
+        return IntegrationResult(q[0], p[0], float(out["s"][0]), float(out["err"][0]),
+                                 bool(out["failed"][0]), int(out["steps"][0]), traj)
+    return IntegrationResult(q, p, out["s"], out["err"], out["failed"], out["steps"], traj)

@@ -1,0 +1,197 @@
+"""core.render: a whole image in chunks (bounded memory), with passes and a summary.
+
+Passes: ``error`` (estimated final-direction error in radians, from step doubling:
+every traced ray is traced again at half the step; the image shows the finer run and
+the error is |d_h - d_h/2| / (2^p - 1), +inf where a ray failed), ``steps`` and
+``ending`` (``core.ENDING`` codes). Failed rays are drawn in ``FAILED_COLOR`` and rays
+that ran out of steps in ``MAX_STEPS_COLOR``, never as a plausible colour.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .imageio import FAILED_COLOR
+from .sky import Background
+from .trace import ENDING, RayResults, Scene, TraceOptions, Tracer
+
+MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
+"""Debug colour of rays that reached max_steps without ending (cyan)."""
+ALL_PASSES = ("error", "steps", "ending")
+
+
+@dataclass
+class RenderResult:
+    """An image (row 0 at the top), its passes and a summary of the run."""
+
+    rgba: np.ndarray
+    passes: dict = field(default_factory=dict)
+    summary: dict = field(default_factory=dict)
+    cancelled: bool = False
+
+
+def render(scene: Scene, camera, *, method: str = "yoshida4", tolerance: float = 1e-8,
+           step: float | None = None, max_steps: int = 20_000,
+           passes: Sequence[str] = ALL_PASSES, chunk_size: int = 16_384,
+           threads: int | None = None,
+           progress: Callable[[int, int], None] | None = None,
+           should_cancel: Callable[[], bool] | None = None) -> RenderResult:
+    """Render ``scene`` seen by ``camera`` (DESIGN.md "Rendering in the core")."""
+    passes = tuple(passes)
+    unknown = set(passes) - set(ALL_PASSES)
+    if unknown:
+        raise ValueError(f"unknown passes {sorted(unknown)}; choose from {ALL_PASSES}")
+    start_time = time.perf_counter()
+    extent = _scene_extent(scene, camera)
+    options = TraceOptions(method=method, tolerance=tolerance, step=step, max_steps=max_steps)
+    tracer = Tracer(scene, options, extent)
+    background = scene.background if isinstance(scene.background, Background) else \
+        Background(scene.background)
+    n = camera.n_pixels
+    with_error = "error" in passes and tracer.curved
+    image = _Buffers(n, with_error)
+    chunks = [(s, min(s + chunk_size, n)) for s in range(0, n, chunk_size)]
+    cancel_event = threading.Event()
+
+    def cancelled() -> bool:
+        if not cancel_event.is_set() and should_cancel is not None and should_cancel():
+            cancel_event.set()
+        return cancel_event.is_set()
+
+    def work(span):
+        if cancel_event.is_set():
+            return span, None
+        a, b = span
+        origins, directions = camera.rays(a, b)
+        return span, _trace_chunk(tracer, origins, directions, with_error, cancel_event.is_set)
+
+    workers = threads or min(2, os.cpu_count() or 1)
+    done = 0
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        for span, chunk in pool.map(work, chunks):
+            if chunk is None:
+                continue
+            image.store(span, chunk, background)
+            done += span[1] - span[0]
+            if progress is not None:
+                progress(done, n)
+            if cancelled():
+                break
+    was_cancelled = done < n
+    return image.result(camera, passes, time.perf_counter() - start_time, was_cancelled,
+                        tracer)
+
+
+def _trace_chunk(tracer: Tracer, origins, directions, with_error: bool, cancel):
+    """Trace one chunk; with the error pass, again at half the step (step doubling)."""
+    coarse = tracer.trace(origins, directions, cancel=cancel)
+    if not with_error:
+        return coarse, None
+    fine = tracer.trace(origins, directions, step=0.5 * tracer.step, cancel=cancel)
+    return fine, _doubling_error(coarse, fine, origins, tracer.method.order)
+
+
+def _doubling_error(coarse: RayResults, fine: RayResults, origins, order: int) -> np.ndarray:
+    """Richardson estimate of the fine run's final-direction error, radians (N,)."""
+    escaped = fine.ending == ENDING["escaped"]
+    vec_c = np.where(escaped[:, None], coarse.direction, coarse.position - origins)
+    vec_f = np.where(escaped[:, None], fine.direction, fine.position - origins)
+    with np.errstate(all="ignore"):
+        err = _angle(vec_c, vec_f) / (2.0 ** order - 1.0)
+    err = np.where(coarse.ending == fine.ending, err, np.pi)
+    err = np.where(fine.ending == ENDING["captured"], 0.0, err)
+    bad = (fine.ending == ENDING["failed"]) | (fine.ending == ENDING["max_steps"])
+    return np.where(bad | ~np.isfinite(err), np.inf, err)
+
+
+def _angle(u, v) -> np.ndarray:
+    """Angle between vectors, accurate for tiny angles (atan2 of |u x v| and u.v)."""
+    cross = np.linalg.norm(np.cross(u, v), axis=1)
+    return np.arctan2(cross, np.einsum("ij,ij->i", u, v))
+
+
+class _Buffers:
+    """Flat per-pixel buffers filled chunk by chunk."""
+
+    def __init__(self, n: int, with_error: bool):
+        self.rgba = np.zeros((n, 4), dtype=np.float32)
+        self.error = np.zeros(n, dtype=np.float32)
+        self.steps = np.zeros(n, dtype=np.int32)
+        self.ending = np.full(n, -1, dtype=np.int8)
+        self.energy = np.zeros(n)
+        self.with_error = with_error
+
+    def store(self, span, chunk, background: Background):
+        a, b = span
+        rays, error = chunk
+        self.rgba[a:b] = shade(rays, background)
+        self.steps[a:b] = rays.steps
+        self.ending[a:b] = rays.ending
+        self.energy[a:b] = rays.energy_error
+        if error is not None:
+            self.error[a:b] = error
+        failed = rays.ending == ENDING["failed"]
+        self.error[a:b][failed] = np.inf
+
+    def result(self, camera, passes, seconds, cancelled, tracer) -> RenderResult:
+        h, w = camera.height, camera.width
+        out = RenderResult(self.rgba.reshape(h, w, 4), cancelled=cancelled)
+        if "error" in passes:
+            out.passes["error"] = self.error.reshape(h, w)
+        if "steps" in passes:
+            out.passes["steps"] = self.steps.reshape(h, w)
+        if "ending" in passes:
+            out.passes["ending"] = self.ending.reshape(h, w)
+        out.summary = self.summary(seconds, tracer)
+        return out
+
+    def summary(self, seconds, tracer) -> dict:
+        traced = self.ending >= 0
+        finite = traced & np.isfinite(self.error) & (self.ending != ENDING["captured"])
+        errs = self.error[finite]
+        counts = {name: int(np.count_nonzero(self.ending == code)) for name, code in ENDING.items()}
+        return {
+            "time_s": seconds, "rays": int(np.count_nonzero(traced)),
+            "steps": int(self.steps.sum()), "failed": counts["failed"],
+            "error_median": float(np.median(errs)) if errs.size and self.with_error else 0.0,
+            "error_max": float(errs.max()) if errs.size and self.with_error else 0.0,
+            "energy_error_max": float(np.max(self.energy[traced], initial=0.0)),
+            "endings": counts, "step": getattr(tracer, "step", None),
+            "method": tracer.options.method if tracer.curved else "straight",
+        }
+
+
+def shade(rays: RayResults, background: Background) -> np.ndarray:
+    """RGBA (N, 4) of traced rays: surfaces, sky, black horizon, volumes; debug colours."""
+    n = rays.ending.shape[0]
+    color = np.zeros((n, 4))
+    color[:, 3] = 1.0
+    hit = rays.ending == ENDING["hit"]
+    color[hit] = rays.surface[hit]
+    escaped = rays.ending == ENDING["escaped"]
+    if escaped.any():
+        color[escaped] = background(rays.direction[escaped])
+    color[:, :3] = rays.radiance + rays.transmittance[:, None] * color[:, :3]
+    color[rays.ending == ENDING["failed"]] = FAILED_COLOR
+    color[rays.ending == ENDING["max_steps"]] = MAX_STEPS_COLOR
+    return color.astype(np.float32)
+
+
+def _scene_extent(scene: Scene, camera) -> float:
+    """Largest distance from the model's centre to the camera or to any object's bounds."""
+    far = np.linalg.norm(camera.frame.position - scene.center)
+    objects = scene.objects
+    bounds = [objects.bounds] if hasattr(objects, "bounds") else [o.bounds for o in objects]
+    bounds += [(v.lo, v.hi) for v in scene.volumes]
+    for lo, hi in bounds:
+        corners = np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T
+        if np.all(np.isfinite(corners)):
+            far = max(far, float(np.max(np.linalg.norm(corners - scene.center, axis=1))))
+    return float(max(far, 1e-9))

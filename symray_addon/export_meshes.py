@@ -1,0 +1,203 @@
+"""Evaluated meshes -> a BVH intersector implementing the core's Intersector seam.
+
+``build_intersector(depsgraph)`` reads every visible object's evaluated mesh (modifiers,
+geometry nodes and instances applied) on the main thread, in world space, triangulated,
+into one ``mathutils.bvhtree.BVHTree``. The ``BVHIntersector`` it returns holds no bpy
+data (only numpy arrays, material samplers and the tree), so the core may call
+``intersect`` from a worker thread.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import bpy
+import numpy as np
+from mathutils.bvhtree import BVHTree
+
+from ..core.intersect import Hits
+from .materials import MaterialSampler, material_sampler
+
+GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
+
+
+class BVHIntersector:
+    """Straight-segment queries against triangles in a BVH (core Intersector protocol)."""
+
+    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, tri_object: np.ndarray,
+                 tri_material: np.ndarray, tri_uv: np.ndarray,
+                 materials: Sequence[MaterialSampler], names: Sequence[str] = ()) -> None:
+        """Build from world-space ``vertices`` (V, 3) and ``triangles`` (T, 3) indices.
+
+        ``tri_object`` (T,) object ids, ``tri_material`` (T,) indices into ``materials``,
+        ``tri_uv`` (T, 3, 2) UVs of each triangle's corners, ``names`` object names by id.
+        """
+        self.vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
+        self.triangles = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
+        if len(self.triangles) == 0:
+            raise ValueError("BVHIntersector needs at least one triangle")
+        self.tri_object = np.asarray(tri_object, dtype=np.int32)
+        self.tri_material = np.asarray(tri_material, dtype=np.int64)
+        self.tri_uv = np.asarray(tri_uv, dtype=np.float64).reshape(-1, 3, 2)
+        self.materials = list(materials)
+        self.names = list(names)
+        self.bounds = (self.vertices.min(axis=0), self.vertices.max(axis=0))
+        self._tree = BVHTree.FromPolygons(self.vertices.tolist(), self.triangles.tolist(),
+                                          all_triangles=True, epsilon=0.0)
+
+    def __len__(self) -> int:
+        """Number of triangles."""
+        return len(self.triangles)
+
+    def ray_cast(self, origin: Sequence[float], direction: Sequence[float],
+                 distance: float) -> tuple:
+        """``BVHTree.ray_cast`` on the underlying tree (location, normal, index, distance)."""
+        return self._tree.ray_cast(origin, direction, distance)
+
+    def intersect(self, a: np.ndarray, b: np.ndarray) -> Hits:
+        """First hit along each straight segment a -> b ((N, 3) world space), as Hits."""
+        a = np.asarray(a, dtype=np.float64).reshape(-1, 3)
+        b = np.asarray(b, dtype=np.float64).reshape(-1, 3)
+        n = a.shape[0]
+        d = b - a
+        length = np.sqrt(np.einsum("ij,ij->i", d, d))
+        lo, hi = self.bounds
+        candidate = (np.all(np.maximum(a, b) >= lo, axis=1)
+                     & np.all(np.minimum(a, b) <= hi, axis=1) & (length > 0.0))
+        rows = np.flatnonzero(candidate)
+        found_rows: list[int] = []
+        found: list[tuple] = []
+        cast = self._tree.ray_cast
+        for row, origin, direction, dist in zip(rows.tolist(), a[rows].tolist(),
+                                                d[rows].tolist(), length[rows].tolist(),
+                                                strict=True):
+            hit = cast(origin, direction, dist)
+            if hit[2] is not None:
+                found_rows.append(row)
+                found.append(hit)
+        return self._hits(n, length, np.asarray(found_rows, dtype=np.int64), found)
+
+    def _hits(self, n: int, length: np.ndarray, rows: np.ndarray, found: list[tuple]) -> Hits:
+        """Hits for ``n`` segments from the raw ray_cast results of ``rows`` (misses: t = inf)."""
+        hits = Hits.miss(n)
+        if len(rows):
+            loc = np.array([f[0] for f in found], dtype=np.float64)
+            nor = np.array([f[1] for f in found], dtype=np.float64)
+            face = np.array([f[2] for f in found], dtype=np.int64)
+            dist = np.array([f[3] for f in found], dtype=np.float64)
+            uv = self._uv_at(face, loc)
+            hits.hit[rows] = True
+            hits.t[rows] = np.clip(dist / length[rows], 0.0, 1.0)
+            hits.object_id[rows] = self.tri_object[face]
+            hits.position[rows] = loc
+            hits.normal[rows] = nor
+            hits.uv[rows] = uv
+            hits.color[rows] = self._color(face, uv)
+        return hits
+
+    def _uv_at(self, face: np.ndarray, point: np.ndarray) -> np.ndarray:
+        """UVs at points on triangles ``face``, by barycentric interpolation."""
+        tri = self.vertices[self.triangles[face]]  # (M, 3, 3)
+        e1, e2, r = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], point - tri[:, 0]
+        d11 = np.einsum("ij,ij->i", e1, e1)
+        d12 = np.einsum("ij,ij->i", e1, e2)
+        d22 = np.einsum("ij,ij->i", e2, e2)
+        r1 = np.einsum("ij,ij->i", r, e1)
+        r2 = np.einsum("ij,ij->i", r, e2)
+        den = d11 * d22 - d12 * d12
+        den = np.where(den == 0.0, 1.0, den)
+        w1 = (d22 * r1 - d12 * r2) / den
+        w2 = (d11 * r2 - d12 * r1) / den
+        w0 = 1.0 - w1 - w2
+        corners = self.tri_uv[face]  # (M, 3, 2)
+        return w0[:, None] * corners[:, 0] + w1[:, None] * corners[:, 1] + \
+            w2[:, None] * corners[:, 2]
+
+    def _color(self, face: np.ndarray, uv: np.ndarray) -> np.ndarray:
+        """Material colours (M, 4) at the given hits."""
+        mat = self.tri_material[face]
+        out = np.empty((len(face), 4))
+        for index in np.unique(mat).tolist():
+            mask = mat == index
+            out[mask] = self.materials[index].sample(uv[mask])
+        return out
+
+
+def _mesh_arrays(mesh: bpy.types.Mesh) -> tuple[np.ndarray, ...]:
+    """Vertices (V, 3), triangles (T, 3), loop indices (T, 3), material slots (T,), UVs."""
+    mesh.calc_loop_triangles()
+    nv, nt = len(mesh.vertices), len(mesh.loop_triangles)
+    co = np.empty(nv * 3, dtype=np.float64)
+    mesh.vertices.foreach_get("co", co)
+    tris = np.empty(nt * 3, dtype=np.int32)
+    mesh.loop_triangles.foreach_get("vertices", tris)
+    loops = np.empty(nt * 3, dtype=np.int32)
+    mesh.loop_triangles.foreach_get("loops", loops)
+    slots = np.empty(nt, dtype=np.int32)
+    mesh.loop_triangles.foreach_get("material_index", slots)
+    layer = mesh.uv_layers.active
+    if layer is not None and len(mesh.loops):
+        loop_uv = np.empty(len(mesh.loops) * 2, dtype=np.float64)
+        layer.data.foreach_get("uv", loop_uv)
+        uv = loop_uv.reshape(-1, 2)[loops].reshape(nt, 3, 2)
+    else:
+        uv = np.zeros((nt, 3, 2))
+    return co.reshape(nv, 3), tris.reshape(nt, 3), slots, uv
+
+
+def _is_rendered(instance: bpy.types.DepsgraphObjectInstance) -> bool:
+    """Whether an instance's own geometry shows in a render."""
+    obj = instance.object
+    if obj.type not in GEOMETRY_TYPES or not instance.show_self:
+        return False
+    return instance.is_instance or not obj.original.hide_render
+
+
+def build_intersector(depsgraph: bpy.types.Depsgraph) -> BVHIntersector | None:
+    """A BVHIntersector over every rendered object of ``depsgraph``, or None if there is none."""
+    verts, tris, objects, mats, uvs = [], [], [], [], []
+    samplers: list[MaterialSampler] = []
+    sampler_index: dict[str, int] = {}
+    names: list[str] = []
+    offset = 0
+    for instance in depsgraph.object_instances:
+        if not _is_rendered(instance):
+            continue
+        obj = instance.object
+        try:
+            mesh = obj.to_mesh()
+        except RuntimeError:
+            continue
+        if mesh is None:
+            continue
+        try:
+            co, tri, slots, uv = _mesh_arrays(mesh)
+            materials = [slot.material for slot in obj.material_slots] or list(mesh.materials)
+        finally:
+            obj.to_mesh_clear()
+        if len(tri) == 0:
+            continue
+        matrix = np.array(instance.matrix_world, dtype=np.float64)
+        co = co @ matrix[:3, :3].T + matrix[:3, 3]
+        if np.linalg.det(matrix[:3, :3]) < 0.0:  # mirrored: keep faces pointing outwards
+            tri, uv = tri[:, ::-1], uv[:, ::-1]
+        slot_to_sampler = []
+        for material in materials or [None]:
+            key = material.name_full if material is not None else ""
+            if key not in sampler_index:
+                sampler_index[key] = len(samplers)
+                samplers.append(material_sampler(material))
+            slot_to_sampler.append(sampler_index[key])
+        slot_map = np.asarray(slot_to_sampler, dtype=np.int64)
+        object_id = len(names)
+        names.append(obj.name)
+        verts.append(co)
+        tris.append(tri.astype(np.int64) + offset)
+        objects.append(np.full(len(tri), object_id, dtype=np.int32))
+        mats.append(slot_map[np.clip(slots, 0, len(slot_map) - 1)])
+        uvs.append(uv)
+        offset += len(co)
+    if not tris:
+        return None
+    return BVHIntersector(np.concatenate(verts), np.concatenate(tris), np.concatenate(objects),
+                          np.concatenate(mats), np.concatenate(uvs), samplers, names)

@@ -1,0 +1,147 @@
+"""Material colours for the intersector: a base colour, optionally an image texture.
+
+Reading happens on the main thread (``material_sampler``); the returned
+``MaterialSampler`` is plain numpy and is safe to use from the render worker thread.
+
+Understood: a Principled BSDF's Base Color, either its value or an Image Texture node
+linked straight into it (sampled at the mesh's active UV map; the texture's Mapping/Vector
+input is ignored). Anything else falls back to the material's viewport colour. Images are
+converted to linear RGB as Blender does for sRGB byte images.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import bpy
+import numpy as np
+
+DEFAULT_COLOR = (0.8, 0.8, 0.8, 1.0)
+"""Colour of faces without a material (Blender's default surface)."""
+MISSING_TEXTURE_COLOR = (1.0, 0.0, 1.0, 1.0)
+"""Colour of a texture whose image has no pixels (Blender's magenta)."""
+
+
+@dataclass
+class MaterialSampler:
+    """Colour of one material at given UVs: ``base`` times an optional texture."""
+
+    base: np.ndarray
+    image: np.ndarray | None = None
+    """(h, w, 4) float32 linear RGBA, row 0 at the bottom (Blender's order), or None."""
+    closest: bool = False
+    extension: str = "REPEAT"
+
+    def sample(self, uv: np.ndarray) -> np.ndarray:
+        """RGBA (M, 4) float64 at texture coordinates ``uv`` (M, 2)."""
+        m = uv.shape[0]
+        out = np.broadcast_to(self.base, (m, 4)).astype(np.float64)
+        if self.image is None or m == 0:
+            return out
+        return out * sample_image(self.image, uv, self.closest, self.extension)
+
+
+def _wrap(i: np.ndarray, n: int, extension: str) -> np.ndarray:
+    """Integer texel indices mapped into [0, n) by the texture's extension mode."""
+    if extension in ("EXTEND", "CLIP"):
+        return np.clip(i, 0, n - 1)
+    if extension == "MIRROR":
+        period = np.mod(i, 2 * n)
+        return np.where(period < n, period, 2 * n - 1 - period)
+    return np.mod(i, n)
+
+
+def sample_image(image: np.ndarray, uv: np.ndarray, closest: bool = False,
+                 extension: str = "REPEAT") -> np.ndarray:
+    """Sample an (h, w, 4) bottom-up image at ``uv`` (M, 2), bilinear or closest, as float64."""
+    h, w = image.shape[:2]
+    x = uv[:, 0] * w - 0.5
+    y = uv[:, 1] * h - 0.5
+    if closest:
+        xi = _wrap(np.floor(x + 0.5).astype(np.int64), w, extension)
+        yi = _wrap(np.floor(y + 0.5).astype(np.int64), h, extension)
+        out = image[yi, xi].astype(np.float64)
+    else:
+        x0, y0 = np.floor(x), np.floor(y)
+        fx, fy = (x - x0)[:, None], (y - y0)[:, None]
+        xa, ya = x0.astype(np.int64), y0.astype(np.int64)
+        xa_, xb_ = _wrap(xa, w, extension), _wrap(xa + 1, w, extension)
+        ya_, yb_ = _wrap(ya, h, extension), _wrap(ya + 1, h, extension)
+        out = ((1 - fx) * (1 - fy) * image[ya_, xa_] + fx * (1 - fy) * image[ya_, xb_]
+               + (1 - fx) * fy * image[yb_, xa_] + fx * fy * image[yb_, xb_])
+    if extension == "CLIP":
+        outside = (uv[:, 0] < 0) | (uv[:, 0] > 1) | (uv[:, 1] < 0) | (uv[:, 1] > 1)
+        out[outside] = 0.0
+    return out
+
+
+def srgb_to_linear(c: np.ndarray) -> np.ndarray:
+    """The sRGB transfer function, inverted (colour channels only)."""
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def image_pixels(image: bpy.types.Image) -> np.ndarray | None:
+    """A linear float32 (h, w, 4) copy of an image's pixels (bottom row first), or None."""
+    try:
+        w, h = image.size
+        channels = image.channels
+    except (RuntimeError, ReferenceError):
+        return None
+    if w == 0 or h == 0 or channels not in (1, 3, 4):
+        return None
+    flat = np.empty(w * h * channels, dtype=np.float32)
+    image.pixels.foreach_get(flat)
+    pix = flat.reshape(h, w, channels)
+    if channels != 4:
+        rgb = np.repeat(pix[:, :, :1], 3, axis=2) if channels == 1 else pix
+        pix = np.concatenate([rgb, np.ones((h, w, 1), np.float32)], axis=2)
+    colorspace = image.colorspace_settings.name
+    if not image.is_float and colorspace in ("sRGB", "sRGB 2.2"):
+        pix = pix.copy()
+        pix[:, :, :3] = srgb_to_linear(pix[:, :, :3])
+    return np.ascontiguousarray(pix, dtype=np.float32)
+
+
+def node_tree_of(datablock: bpy.types.ID) -> bpy.types.NodeTree | None:
+    """The shader node tree a material or world renders with, or None (no nodes)."""
+    if bpy.app.version >= (5, 0, 0):  # always node-based; use_nodes is deprecated
+        return datablock.node_tree
+    return datablock.node_tree if datablock.use_nodes else None
+
+
+def _principled(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
+    """The Principled BSDF feeding the active material output, else the first one found."""
+    outputs = [n for n in tree.nodes if n.type == "OUTPUT_MATERIAL"]
+    active = next((n for n in outputs if n.is_active_output), outputs[0] if outputs else None)
+    if active is not None:
+        surface = active.inputs.get("Surface")
+        if surface is not None and surface.is_linked:
+            node = surface.links[0].from_node
+            if node.type == "BSDF_PRINCIPLED":
+                return node
+    return next((n for n in tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
+
+
+def material_sampler(material: bpy.types.Material | None) -> MaterialSampler:
+    """Read a material's base colour (and image texture) into a MaterialSampler."""
+    if material is None:
+        return MaterialSampler(np.array(DEFAULT_COLOR))
+    base = np.array(material.diffuse_color, dtype=np.float64)
+    tree = node_tree_of(material)
+    node = _principled(tree) if tree is not None else None
+    if node is None:
+        return MaterialSampler(base)
+    socket = node.inputs["Base Color"]
+    alpha_socket = node.inputs.get("Alpha")
+    alpha = float(alpha_socket.default_value) if alpha_socket is not None else 1.0
+    if not socket.is_linked:
+        return MaterialSampler(np.array([*socket.default_value[:3], alpha], dtype=np.float64))
+    source = socket.links[0].from_node
+    if source.type != "TEX_IMAGE" or source.image is None:
+        return MaterialSampler(np.array([*base[:3], alpha]))
+    pixels = image_pixels(source.image)
+    if pixels is None:
+        return MaterialSampler(np.array(MISSING_TEXTURE_COLOR))
+    return MaterialSampler(np.array([1.0, 1.0, 1.0, alpha]), pixels,
+                           closest=source.interpolation == "Closest",
+                           extension=source.extension)

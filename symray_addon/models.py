@@ -1,0 +1,123 @@
+"""SymRay settings -> the core's model (a Hamiltonian) and where it sits in the world.
+
+Pure Python apart from reading property values, so the same code serves the operator
+and the render engine. Every problem is raised as a ValueError with a message meant for
+the user (``core.expressions.ExpressionError`` is one).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..core import expressions
+from ..core import hamiltonians as hm
+from . import validation
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where the model sits: centre (3,), unit spin axis (3,), rotation (3, 3) local->world."""
+
+    center: np.ndarray
+    axis: np.ndarray
+    rotation: np.ndarray
+
+
+def placement(matrix_world: Any | None) -> Placement:
+    """Placement from the centre object's world matrix (None = the world origin, +Z up)."""
+    if matrix_world is None:
+        return Placement(np.zeros(3), np.array([0.0, 0.0, 1.0]), np.eye(3))
+    m = np.array(matrix_world, dtype=np.float64)
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise ValueError("The SymRay centre object has an invalid transform")
+    basis = m[:3, :3]
+    norms = np.linalg.norm(basis, axis=0)
+    if np.any(norms < 1e-12):
+        raise ValueError("The SymRay centre object has zero scale")
+    q, r = np.linalg.qr(basis)
+    q = q * np.sign(np.diag(r))  # orthonormal rotation closest to the object's axes
+    return Placement(m[:3, 3].copy(), q[:, 2].copy(), q)
+
+
+def _expression(text: str, names: tuple[str, ...], what: str) -> str:
+    """``text`` if valid over ``names``; else a ValueError naming ``what`` and the problem."""
+    try:
+        expressions.check(text, names)
+    except expressions.ExpressionError as err:
+        raise expressions.ExpressionError(f"Invalid {what}: {err}", None) from None
+    return text
+
+
+def build_model(settings: Any, metric_source: str) -> Any | None:
+    """The core Hamiltonian for ``settings`` (a scene.symray), or None for flat space."""
+    model = settings.model
+    if model == "FLAT":
+        return None
+    if model == "SCHWARZSCHILD":
+        return hm.schwarzschild(rg=float(settings.rg))
+    if model == "KERR":
+        spin = float(settings.spin)
+        if not math.isfinite(spin) or abs(spin) > 1.0:
+            raise ValueError(f"Kerr spin a/M = {spin:g} is beyond extremal: it must lie in "
+                             "[-1, 1]")
+        rg = float(settings.rg)
+        return hm.kerr(rg=rg, a=spin * rg / 2.0, chart="kerr_schild")
+    if model == "MEDIUM":
+        index = _expression(settings.refractive_index, validation.INDEX_NAMES,
+                            "refractive index n(x, y, z)")
+        bounds = None
+        if settings.use_medium_bounds:
+            lo, hi = np.array(settings.medium_min), np.array(settings.medium_max)
+            if np.any(hi <= lo):
+                raise ValueError("The medium's box is empty: every Box Max must exceed Box Min")
+            bounds = (lo, hi)
+        return hm.medium(index, literal=settings.index_form == "SEED", bounds=bounds)
+    if model == "METRIC":
+        try:
+            spec = validation.parse_metric(metric_source)
+        except expressions.ExpressionError as err:
+            raise expressions.ExpressionError(f"Invalid metric: {err}", None) from None
+        return hm.metric(inverse=[list(row) for row in spec.rows],
+                         coords=validation.METRIC_NAMES, definitions=list(spec.definitions))
+    if model == "CUSTOM":
+        text = _expression(settings.hamiltonian, validation.HAMILTONIAN_NAMES, "Hamiltonian")
+        return hm.from_expression(text, q=list(validation.HAMILTONIAN_COORDS),
+                                  p=list(validation.HAMILTONIAN_MOMENTA))
+    raise ValueError(f"Unknown SymRay model '{model}'")
+
+
+def horizon_radius(settings: Any) -> float:
+    """Outer horizon radius r+ of the black-hole models (0 for the others)."""
+    if settings.model == "SCHWARZSCHILD":
+        return float(settings.rg)
+    if settings.model == "KERR":
+        m = float(settings.rg) / 2.0
+        a = min(abs(float(settings.spin)), 1.0) * m
+        return m + math.sqrt(max(m * m - a * a, 0.0))
+    return 0.0
+
+
+def kerr_schild_radius(local: np.ndarray, a: float) -> float:
+    """Kerr–Schild r of a point (x, y, z) in the hole's frame (spin length a)."""
+    x, y, z = (float(v) for v in local)
+    rho2 = x * x + y * y + z * z - a * a
+    return math.sqrt(0.5 * (rho2 + math.sqrt(rho2 * rho2 + 4.0 * a * a * z * z)))
+
+
+def check_observer(settings: Any, where: Placement, camera_position: np.ndarray) -> None:
+    """ValueError if the camera sits inside (or on) a black hole's horizon."""
+    r_plus = horizon_radius(settings)
+    if r_plus <= 0.0:
+        return
+    local = where.rotation.T @ (np.asarray(camera_position, dtype=np.float64) - where.center)
+    a = 0.0
+    if settings.model == "KERR":
+        a = min(abs(float(settings.spin)), 1.0) * float(settings.rg) / 2.0
+    r = kerr_schild_radius(local, a)
+    if r <= r_plus * (1.0 + 1e-9):
+        raise ValueError(f"The camera is inside the black hole's horizon (r = {r:.4g} <= "
+                         f"r+ = {r_plus:.4g}): move it further from the centre object")

@@ -1,0 +1,211 @@
+"""``symray.render``: trace the scene into an image (and optionally an EXR).
+
+From the UI (invoke) the core render runs in a worker thread while a modal operator shows
+progress in the status bar and the window's progress indicator; Esc cancels and leaves
+the previous image as it was. Called from a script (execute) or in background mode it runs
+synchronously. Only the main thread touches bpy data: the scene is read before the worker
+starts (``render_job.prepare``) and the image/EXR written after it ends.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any, ClassVar
+
+import bpy
+
+from . import output, render_job
+
+last_summary: dict[str, Any] = {}
+"""Summary of the last finished operator render (for scripts and tests)."""
+
+
+class RenderTask:
+    """A core render in a worker thread, with progress and cancellation for the UI."""
+
+    def __init__(self, job: render_job.RenderJob) -> None:
+        """Wrap ``job``; call start() to begin."""
+        self.job = job
+        self.done = 0
+        self.total = 0
+        self.result: Any = None
+        self.error: BaseException | None = None
+        self._cancel = threading.Event()
+        self._thread = threading.Thread(target=self._work, name="SymRay render", daemon=True)
+
+    def start(self) -> None:
+        """Start tracing in the worker thread."""
+        self._thread.start()
+
+    def _progress(self, done: int, total: int) -> None:
+        self.done, self.total = int(done), int(total)
+
+    def _work(self) -> None:
+        try:
+            self.result = render_job.run(self.job, self._progress, self._cancel.is_set)
+        except Exception as err:  # handed to the main thread, which decides what to do
+            self.error = err
+
+    def cancel(self) -> None:
+        """Ask the core to stop at its next check."""
+        self._cancel.set()
+
+    @property
+    def cancelled(self) -> bool:
+        """Whether cancel() was called."""
+        return self._cancel.is_set()
+
+    @property
+    def finished(self) -> bool:
+        """Whether the worker thread has ended."""
+        return not self._thread.is_alive()
+
+    @property
+    def fraction(self) -> float:
+        """Progress in [0, 1]."""
+        return min(self.done / self.total, 1.0) if self.total > 0 else 0.0
+
+    def join(self, timeout: float | None = None) -> None:
+        """Wait for the worker thread to end."""
+        self._thread.join(timeout)
+
+    def collect(self) -> Any:
+        """After the worker ended: its result, None if cancelled; re-raises its error."""
+        if self.error is not None:
+            raise self.error
+        if self.cancelled or self.result is None or getattr(self.result, "cancelled", False):
+            return None
+        return self.result
+
+
+def finish(operator: bpy.types.Operator, result: Any, image_name: str,
+           exr_path: str) -> set[str]:
+    """Write a finished render (EXR first, then the image); report and return the status."""
+    if result is None or getattr(result, "cancelled", False):
+        operator.report({"WARNING"}, "SymRay render cancelled; the previous image is unchanged")
+        return {"CANCELLED"}
+    if exr_path:
+        output.write_exr(exr_path, result.rgba, result.passes)
+    output.write_image(image_name, result.rgba)
+    last_summary.clear()
+    last_summary.update(result.summary)
+    text = render_job.summary_text(result.summary)
+    if bpy.app.background:
+        print(f"SymRay: {text}")
+    operator.report({"INFO"}, f"SymRay: {text}")
+    return {"FINISHED"}
+
+
+class SYMRAY_OT_render(bpy.types.Operator):
+    """Trace the scene with SymRay into the image named in the SymRay panel"""
+
+    bl_idname = "symray.render"
+    bl_label = "Render SymRay Image"
+    bl_options = {"REGISTER"}
+
+    _running: ClassVar[bool] = False
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        """Needs a scene and no other SymRay render running."""
+        return context.scene is not None and not cls._running
+
+    def _prepare(self, context: bpy.types.Context) -> tuple[render_job.RenderJob, str, str]:
+        """Check the settings and read the scene: the job, image name and EXR path."""
+        scene = context.scene
+        image_name = scene.symray.image_name.strip()
+        if not image_name:
+            raise ValueError("Set the name of the image SymRay should write")
+        exr_path = scene.symray.exr_path.strip()
+        if exr_path:
+            output.check_writable(exr_path)
+        job = render_job.prepare(scene, context.evaluated_depsgraph_get())
+        return job, image_name, exr_path
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        """Render synchronously (scripts, background mode)."""
+        try:
+            job, image_name, exr_path = self._prepare(context)
+            result = render_job.run(job)
+            return finish(self, result, image_name, exr_path)
+        except (ValueError, OSError) as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+
+    def invoke(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
+        """Render in a worker thread with progress; Esc cancels."""
+        if bpy.app.background or context.window is None:
+            return self.execute(context)
+        try:
+            job, self._image_name, self._exr_path = self._prepare(context)
+        except (ValueError, OSError) as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+        self._task = RenderTask(job)
+        self._task.start()
+        wm = context.window_manager
+        self._timer = wm.event_timer_add(0.1, window=context.window)
+        wm.progress_begin(0, 1000)
+        wm.modal_handler_add(self)
+        type(self)._running = True
+        self._status(context, "SymRay: starting… (Esc to cancel)")
+        return {"RUNNING_MODAL"}
+
+    @staticmethod
+    def _status(context: bpy.types.Context, text: str | None) -> None:
+        workspace = getattr(context, "workspace", None)
+        if workspace is not None:
+            workspace.status_text_set(text)
+
+    def _cleanup(self, context: bpy.types.Context) -> None:
+        wm = context.window_manager
+        if getattr(self, "_timer", None) is not None:
+            wm.event_timer_remove(self._timer)
+            self._timer = None
+        wm.progress_end()
+        self._status(context, None)
+        type(self)._running = False
+
+    def modal(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
+        """Poll the worker on timer events; Esc cancels."""
+        task = self._task
+        if event.type == "ESC" and event.value == "PRESS" and not task.cancelled:
+            task.cancel()
+            self._status(context, "SymRay: cancelling…")
+            return {"RUNNING_MODAL"}
+        if event.type != "TIMER" or event.timer is not self._timer:
+            return {"PASS_THROUGH"}
+        if not task.finished:
+            context.window_manager.progress_update(int(1000 * task.fraction))
+            if not task.cancelled:
+                self._status(context, f"SymRay: {100 * task.fraction:.0f}% (Esc to cancel)")
+            return {"PASS_THROUGH"}
+        self._cleanup(context)
+        try:
+            return finish(self, task.collect(), self._image_name, self._exr_path)
+        except (ValueError, OSError) as err:
+            self.report({"ERROR"}, str(err))
+            return {"CANCELLED"}
+
+    def cancel(self, context: bpy.types.Context) -> None:
+        """Blender ended the modal operator (e.g. a file was loaded): stop the worker."""
+        task = getattr(self, "_task", None)
+        if task is not None:
+            task.cancel()
+            task.join(5.0)
+        self._cleanup(context)
+
+
+CLASSES = (SYMRAY_OT_render,)
+
+
+def register() -> None:
+    """Register the render operator."""
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    """Unregister the render operator."""
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

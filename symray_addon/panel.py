@@ -1,0 +1,146 @@
+"""The SymRay panels in Render Properties (shown whatever the render engine)."""
+
+from __future__ import annotations
+
+import textwrap
+
+import bpy
+
+from . import presets, properties, validation
+from .operator import SYMRAY_OT_render
+
+WRAP = 60
+"""Characters per line of error messages in the panel."""
+
+
+def _error_lines(layout: bpy.types.UILayout, message: str) -> None:
+    """Show an error message, wrapped, with an error icon on the first line."""
+    col = layout.column(align=True)
+    col.alert = True
+    for i, line in enumerate(textwrap.wrap(message, WRAP) or [message]):
+        col.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
+
+
+def _expression(layout: bpy.types.UILayout, settings: bpy.types.PropertyGroup, prop: str,
+                error: str) -> None:
+    """An expression field, red with its message below while it is invalid."""
+    row = layout.row()
+    row.alert = bool(error)
+    row.prop(settings, prop)
+    if error:
+        _error_lines(layout, error)
+
+
+class SymRayPanelMixin:
+    """Common placement: Render Properties, any engine."""
+
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "render"
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        """Shown whenever there is a scene with SymRay settings."""
+        return context.scene is not None and hasattr(context.scene, "symray")
+
+
+class RENDER_PT_symray(SymRayPanelMixin, bpy.types.Panel):
+    """Model, its parameters and the render button"""
+
+    bl_label = "SymRay"
+    bl_order = 0
+
+    def draw_header_preset(self, _context: bpy.types.Context) -> None:
+        """The presets menu in the panel header."""
+        self.layout.menu(presets.SYMRAY_MT_presets.bl_idname, text="Presets", icon="PRESET")
+
+    def draw(self, context: bpy.types.Context) -> None:
+        """Draw the model settings."""
+        settings = context.scene.symray
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = True
+        layout.prop(settings, "model")
+        layout.prop(settings, "center")
+        model = settings.model
+        if model in {"SCHWARZSCHILD", "KERR"}:
+            layout.prop(settings, "rg")
+        if model == "KERR":
+            row = layout.row()
+            row.alert = abs(settings.spin) > 1.0
+            row.prop(settings, "spin")
+            if abs(settings.spin) > 1.0:
+                _error_lines(layout, "Spin beyond extremal: |a/M| must be at most 1")
+        elif model == "MEDIUM":
+            _expression(layout, settings, "refractive_index", settings.refractive_index_error)
+            layout.prop(settings, "index_form")
+            layout.prop(settings, "use_medium_bounds")
+            col = layout.column()
+            col.active = settings.use_medium_bounds
+            col.prop(settings, "medium_min")
+            col.prop(settings, "medium_max")
+        elif model == "METRIC":
+            if settings.metric_text is None:
+                _expression(layout, settings, "metric", settings.metric_error)
+            layout.prop(settings, "metric_text")
+            if settings.metric_text is not None:
+                error = validation.check_metric(properties.metric_source(settings))
+                if error:
+                    _error_lines(layout, error)
+        elif model == "CUSTOM":
+            _expression(layout, settings, "hamiltonian", settings.hamiltonian_error)
+        layout.separator()
+        row = layout.row()
+        row.scale_y = 1.3
+        row.operator(SYMRAY_OT_render.bl_idname, icon="RENDER_STILL")
+
+
+class RENDER_PT_symray_integration(SymRayPanelMixin, bpy.types.Panel):
+    """How Hamilton's equations are integrated"""
+
+    bl_label = "Integration"
+    bl_parent_id = "RENDER_PT_symray"
+
+    def draw(self, context: bpy.types.Context) -> None:
+        """Draw method, tolerance and step limit."""
+        settings = context.scene.symray
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(settings, "method")
+        layout.prop(settings, "tolerance")
+        layout.prop(settings, "max_steps")
+
+
+class RENDER_PT_symray_output(SymRayPanelMixin, bpy.types.Panel):
+    """Background, passes and where the SymRay Render operator writes"""
+
+    bl_label = "Output"
+    bl_parent_id = "RENDER_PT_symray"
+
+    def draw(self, context: bpy.types.Context) -> None:
+        """Draw background, passes, image and EXR settings."""
+        settings = context.scene.symray
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(settings, "background")
+        col = layout.column(heading="Passes", align=True)
+        col.prop(settings, "pass_error")
+        col.prop(settings, "pass_steps")
+        col.prop(settings, "pass_ending")
+        layout.prop(settings, "image_name")
+        layout.prop(settings, "exr_path")
+
+
+CLASSES = (RENDER_PT_symray, RENDER_PT_symray_integration, RENDER_PT_symray_output)
+
+
+def register() -> None:
+    """Register the panels."""
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    """Unregister the panels."""
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

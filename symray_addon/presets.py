@@ -1,0 +1,108 @@
+"""Presets for the seed paper's scenes, and the operator that applies them.
+
+The refractive-index expressions of the seed's mirage figures (Satoh, "Symplectic Ray
+Tracing", Eq. 17 and 18) live in the two constants below and nowhere else. They are used
+with the seed's literal optical Hamiltonian H = n |p|^2 / 2 (``index_form = 'SEED'``), so
+the figures can be reproduced as printed; see DESIGN.md, "Refractive media".
+"""
+
+from __future__ import annotations
+
+import bpy
+
+# TODO(lead): replace with the exact expressions of the seed's Eq. 17 and Eq. 18 (over the
+# centre object's local x, y, z). These stand-ins have the right shape: an index that varies
+# with height (inferior / superior mirage), plus a weak horizontal ripple for Eq. 18.
+MIRAGE_EQ17_INDEX = "1 + 0.5*exp(-4*z)"
+MIRAGE_EQ18_INDEX = "0.85 - 0.3*z**3 + 0.03*cos(3*pi*x)"
+
+MINKOWSKI_METRIC = "-1, 0, 0, 0; 0, 1, 0, 0; 0, 0, 1, 0; 0, 0, 0, 1"
+"""Flat spacetime in Cartesian coordinates (seed Eq. 13): the default user metric."""
+
+PRESETS: dict[str, tuple[str, str, dict[str, object]]] = {
+    "SCHWARZSCHILD_LENS": (
+        "Schwarzschild Lens",
+        "Non-rotating black hole (seed Eq. 15) lensing the sky and the objects behind it",
+        {"model": "SCHWARZSCHILD", "rg": 1.0, "method": "yoshida4", "tolerance": 1e-6},
+    ),
+    "KERR": (
+        "Kerr Black Hole",
+        "Rotating black hole, a/M = 0.9 (seed Eq. 12), spin axis = the centre's local Z",
+        {"model": "KERR", "rg": 1.0, "spin": 0.9, "method": "yoshida4", "tolerance": 1e-6},
+    ),
+    "MIRAGE_EQ17": (
+        "Mirage (Eq. 17)",
+        "Refractive index of the seed's Eq. 17 with its literal Hamiltonian H = n|p|^2/2",
+        {"model": "MEDIUM", "refractive_index": MIRAGE_EQ17_INDEX, "index_form": "SEED",
+         "method": "yoshida4", "tolerance": 1e-6},
+    ),
+    "MIRAGE_EQ18": (
+        "Mirage (Eq. 18)",
+        "Refractive index of the seed's Eq. 18 with its literal Hamiltonian H = n|p|^2/2",
+        {"model": "MEDIUM", "refractive_index": MIRAGE_EQ18_INDEX, "index_form": "SEED",
+         "method": "yoshida4", "tolerance": 1e-6},
+    ),
+}
+"""identifier -> (label, description, settings to assign to scene.symray)."""
+
+
+def apply_preset(settings: bpy.types.PropertyGroup, identifier: str) -> None:
+    """Assign the values of preset ``identifier`` to ``settings`` (a scene.symray)."""
+    for key, value in PRESETS[identifier][2].items():
+        setattr(settings, key, value)
+
+
+class SYMRAY_OT_apply_preset(bpy.types.Operator):
+    """Set the SymRay model and its parameters to one of the seed paper's scenes"""
+
+    bl_idname = "symray.apply_preset"
+    bl_label = "Apply SymRay Preset"
+    bl_options = {"REGISTER", "UNDO"}
+
+    preset: bpy.props.EnumProperty(  # type: ignore[valid-type]
+        name="Preset",
+        items=[(key, label, desc) for key, (label, desc, _) in PRESETS.items()],
+    )
+    add_center: bpy.props.BoolProperty(  # type: ignore[valid-type]
+        name="Add Centre",
+        description="Create an Empty at the world origin as the model's centre if none is set",
+        default=True,
+    )
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        """Apply the preset to the active scene."""
+        settings = context.scene.symray
+        apply_preset(settings, self.preset)
+        if self.add_center and settings.center is None:
+            empty = bpy.data.objects.new("SymRay Centre", None)
+            empty.empty_display_type = "SPHERE"
+            context.scene.collection.objects.link(empty)
+            settings.center = empty
+        return {"FINISHED"}
+
+
+class SYMRAY_MT_presets(bpy.types.Menu):
+    """Menu of the seed paper's scenes"""
+
+    bl_idname = "SYMRAY_MT_presets"
+    bl_label = "Presets"
+
+    def draw(self, context: bpy.types.Context) -> None:
+        """One entry per preset."""
+        for key, (label, _desc, _values) in PRESETS.items():
+            self.layout.operator(SYMRAY_OT_apply_preset.bl_idname, text=label).preset = key
+
+
+CLASSES = (SYMRAY_OT_apply_preset, SYMRAY_MT_presets)
+
+
+def register() -> None:
+    """Register the preset operator and menu."""
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+
+
+def unregister() -> None:
+    """Unregister the preset operator and menu."""
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

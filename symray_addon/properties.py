@@ -1,0 +1,205 @@
+"""``scene.symray``: every SymRay setting of a scene (the Blender contract of DESIGN.md)."""
+
+from __future__ import annotations
+
+import bpy
+from bpy.app.handlers import persistent
+
+from . import presets, validation
+
+MODEL_ITEMS = [
+    ("FLAT", "Flat", "No bending: straight rays, an ordinary ray tracer"),
+    ("SCHWARZSCHILD", "Schwarzschild", "Non-rotating black hole of Schwarzschild radius rg"),
+    ("KERR", "Kerr", "Rotating black hole; spin axis = the centre's local Z"),
+    ("MEDIUM", "Medium", "Refractive index n(x, y, z) in the centre's local frame (mirages)"),
+    ("METRIC", "Metric", "Any spacetime given by its inverse metric g^ij(t, x, y, z)"),
+    ("CUSTOM", "Hamiltonian", "Any Hamiltonian H(x, y, z, p_x, p_y, p_z)"),
+]
+
+METHOD_ITEMS = [
+    ("symplectic_euler", "Symplectic Euler", "1st order, seed Eq. 11"),
+    ("stormer_verlet", "Störmer–Verlet", "2nd order, symmetric"),
+    ("implicit_midpoint", "Implicit Midpoint", "2nd order, implicit"),
+    ("gauss4", "Gauss–Legendre 4", "4th order, implicit (2-stage Gauss–Legendre)"),
+    ("yoshida4", "Yoshida 4", "4th order composition (triple jump)"),
+    ("yoshida6", "Yoshida 6", "6th order composition"),
+    ("yoshida8", "Yoshida 8", "8th order composition"),
+    ("suzuki4", "Suzuki 4", "4th order fractal composition"),
+    ("suzuki6", "Suzuki 6", "6th order fractal composition"),
+    ("tao2", "Tao 2", "2nd order, explicit for non-separable H (extended phase space)"),
+    ("tao4", "Tao 4", "4th order, explicit for non-separable H (extended phase space)"),
+    ("rk4", "Runge–Kutta 4", "Non-symplectic reference, 4th order"),
+    ("dopri5", "Dormand–Prince 5", "Non-symplectic reference, adaptive"),
+]
+
+INDEX_FORM_ITEMS = [
+    ("PHYSICAL", "Physical", "H = |p|² / 2n²: rays obey the ray equation of optics"),
+    ("SEED", "Seed (literal)", "H = n|p|² / 2 as printed in the seed paper (Eq. 8/16)"),
+]
+
+BACKGROUND_ITEMS = [
+    ("AUTO", "Auto", "The world's environment texture if it has one, else the procedural sky"),
+    ("WORLD", "World", "The world: its environment texture or its background colour"),
+    ("PROCEDURAL", "Procedural Sky", "SymRay's procedural star field and grid"),
+]
+
+# Each expression property -> (validator, name of its error property).
+_EXPRESSIONS = {
+    "refractive_index": (
+        lambda s: validation.check_expression(s.refractive_index, validation.INDEX_NAMES),
+        "refractive_index_error"),
+    "metric": (lambda s: validation.check_metric(metric_source(s)), "metric_error"),
+    "hamiltonian": (
+        lambda s: validation.check_expression(s.hamiltonian, validation.HAMILTONIAN_NAMES),
+        "hamiltonian_error"),
+}
+
+
+def metric_source(settings: bpy.types.PropertyGroup) -> str:
+    """The inverse-metric text in use: the Text data-block if one is set, else ``metric``."""
+    text = settings.metric_text
+    return text.as_string() if text is not None else settings.metric
+
+
+def validate_expressions(settings: bpy.types.PropertyGroup) -> None:
+    """Re-check every expression of ``settings`` and store the error strings."""
+    for check, error_prop in _EXPRESSIONS.values():
+        _store(settings, error_prop, check(settings))
+
+
+def _store(settings: bpy.types.PropertyGroup, error_prop: str, message: str) -> None:
+    """Set an error property only when it changes (avoids needless redraws)."""
+    if getattr(settings, error_prop) != message:
+        setattr(settings, error_prop, message)
+
+
+def _validator(prop: str):
+    """Update callback for expression property ``prop``."""
+    check, error_prop = _EXPRESSIONS[prop]
+
+    def update(self: bpy.types.PropertyGroup, _context: bpy.types.Context) -> None:
+        _store(self, error_prop, check(self))
+
+    return update
+
+
+def _update_passes(self: bpy.types.PropertyGroup, context: bpy.types.Context) -> None:
+    """Tell the view layers that SymRay's passes changed, so the compositor sees them."""
+    scene = self.id_data
+    for view_layer in getattr(scene, "view_layers", ()):
+        view_layer.update_render_passes()
+
+
+def _center_poll(_self: bpy.types.PropertyGroup, obj: bpy.types.Object) -> bool:
+    return obj.type == "EMPTY"
+
+
+class SymRaySettings(bpy.types.PropertyGroup):
+    """SymRay settings of one scene (``scene.symray``)"""
+
+    model: bpy.props.EnumProperty(  # type: ignore[valid-type]
+        name="Model", items=MODEL_ITEMS, default="SCHWARZSCHILD",
+        description="What bends the light")
+    center: bpy.props.PointerProperty(  # type: ignore[valid-type]
+        name="Centre", type=bpy.types.Object, poll=_center_poll,
+        description="Empty placing the model: its position is the black hole's centre, its "
+                    "local Z the spin axis, its local axes the frame of n(x, y, z) and g^ij; "
+                    "none = the world origin")
+    rg: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Schwarzschild Radius", default=1.0, min=1e-6, soft_max=100.0,
+        subtype="DISTANCE", description="rg = 2GM/c² of the black hole, in scene units")
+    spin: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Spin a/M", default=0.9, min=-1e6, max=1e6, soft_min=-1.0, soft_max=1.0,
+        description="Kerr spin parameter a/M; |a/M| <= 1 (1 = extremal)")
+    refractive_index: bpy.props.StringProperty(  # type: ignore[valid-type]
+        name="Refractive Index", default=presets.MIRAGE_EQ17_INDEX,
+        update=_validator("refractive_index"),
+        description="n(x, y, z) in the centre's local frame; + - * / **, sin, exp, sqrt, pi")
+    refractive_index_error: bpy.props.StringProperty(  # type: ignore[valid-type]
+        name="Refractive Index Error", default="")
+    index_form: bpy.props.EnumProperty(  # type: ignore[valid-type]
+        name="Hamiltonian", items=INDEX_FORM_ITEMS, default="PHYSICAL",
+        description="Optical Hamiltonian built from n")
+    use_medium_bounds: bpy.props.BoolProperty(  # type: ignore[valid-type]
+        name="Bounded Medium", default=True,
+        description="Outside the box the medium is uniform and rays travel straight")
+    medium_min: bpy.props.FloatVectorProperty(  # type: ignore[valid-type]
+        name="Box Min", size=3, default=(-10.0, -10.0, -10.0), subtype="XYZ",
+        description="Lower corner of the medium's box, in the centre's local frame")
+    medium_max: bpy.props.FloatVectorProperty(  # type: ignore[valid-type]
+        name="Box Max", size=3, default=(10.0, 10.0, 10.0), subtype="XYZ",
+        description="Upper corner of the medium's box, in the centre's local frame")
+    metric: bpy.props.StringProperty(  # type: ignore[valid-type]
+        name="Inverse Metric", default=presets.MINKOWSKI_METRIC, update=_validator("metric"),
+        description="g^ij(t, x, y, z): 4 rows separated by ';', entries by ','; "
+                    "'name = expr;' statements before the rows define helpers")
+    metric_text: bpy.props.PointerProperty(  # type: ignore[valid-type]
+        name="Metric Text", type=bpy.types.Text, update=_validator("metric"),
+        description="Text data-block holding the inverse metric (one row or definition per "
+                    "line); overrides the one-line field")
+    metric_error: bpy.props.StringProperty(  # type: ignore[valid-type]
+        name="Metric Error", default="")
+    hamiltonian: bpy.props.StringProperty(  # type: ignore[valid-type]
+        name="Hamiltonian", default="0.5*(p_x**2 + p_y**2 + p_z**2)",
+        update=_validator("hamiltonian"),
+        description="H(x, y, z, p_x, p_y, p_z) in the centre's local frame")
+    hamiltonian_error: bpy.props.StringProperty(  # type: ignore[valid-type]
+        name="Hamiltonian Error", default="")
+    method: bpy.props.EnumProperty(  # type: ignore[valid-type]
+        name="Method", items=METHOD_ITEMS, default="yoshida4",
+        description="Integrator for Hamilton's equations")
+    tolerance: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Tolerance", default=1e-6, min=1e-14, max=0.1, precision=6, step=0.0001,
+        description="Target accuracy; sets the integration step")
+    max_steps: bpy.props.IntProperty(  # type: ignore[valid-type]
+        name="Max Steps", default=20000, min=1, max=100_000_000,
+        description="Steps after which a ray is given up (ending 'max_steps')")
+    pass_error: bpy.props.BoolProperty(  # type: ignore[valid-type]
+        name="Error", default=True, update=_update_passes,
+        description="Per-pixel error estimate (radians): 'SymRay Error' pass")
+    pass_steps: bpy.props.BoolProperty(  # type: ignore[valid-type]
+        name="Steps", default=True, update=_update_passes,
+        description="Integration steps per pixel: 'SymRay Steps' pass")
+    pass_ending: bpy.props.BoolProperty(  # type: ignore[valid-type]
+        name="Ending", default=False, update=_update_passes,
+        description="How each ray ended (core.ENDING code): 'SymRay Ending' pass")
+    background: bpy.props.EnumProperty(  # type: ignore[valid-type]
+        name="Background", items=BACKGROUND_ITEMS, default="AUTO",
+        description="What rays that escape to infinity see")
+    image_name: bpy.props.StringProperty(  # type: ignore[valid-type]
+        name="Image", default="SymRay Result",
+        description="Image the SymRay Render operator writes (created if missing)")
+    exr_path: bpy.props.StringProperty(  # type: ignore[valid-type]
+        name="EXR Path", default="", subtype="FILE_PATH",
+        description="Also write the operator's result as OpenEXR here (empty = no EXR)")
+
+    def passes(self) -> tuple[str, ...]:
+        """Names of the core passes to compute ("error", "steps", "ending")."""
+        names = (("error", self.pass_error), ("steps", self.pass_steps),
+                 ("ending", self.pass_ending))
+        return tuple(name for name, wanted in names if wanted)
+
+
+@persistent
+def _revalidate_on_load(_dummy: object = None) -> None:
+    """After a .blend loads, refresh the stored expression errors of every scene."""
+    for scene in bpy.data.scenes:
+        settings = getattr(scene, "symray", None)
+        if settings is not None:
+            validate_expressions(settings)
+
+
+def register() -> None:
+    """Register SymRaySettings as ``bpy.types.Scene.symray``."""
+    bpy.utils.register_class(SymRaySettings)
+    bpy.types.Scene.symray = bpy.props.PointerProperty(type=SymRaySettings)
+    if _revalidate_on_load not in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.append(_revalidate_on_load)
+
+
+def unregister() -> None:
+    """Remove ``bpy.types.Scene.symray`` and the load handler."""
+    if _revalidate_on_load in bpy.app.handlers.load_post:
+        bpy.app.handlers.load_post.remove(_revalidate_on_load)
+    del bpy.types.Scene.symray
+    bpy.utils.unregister_class(SymRaySettings)

@@ -1,0 +1,112 @@
+"""One render: read a Blender scene into core objects (main thread), then trace (any thread).
+
+``prepare`` does all bpy work and all input checks, so that every problem surfaces as a
+ValueError (or OSError) with a clear message before anything is traced, and ``run`` needs
+no bpy at all: the operator calls it from a worker thread, the engine from its render
+thread, background mode directly.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import bpy
+import numpy as np
+
+from .. import core
+from . import export_camera, export_meshes, models, properties, world
+
+Progress = Callable[[int, int], None]
+Cancel = Callable[[], bool]
+
+
+@dataclass
+class RenderJob:
+    """Everything core.render needs, plus what the caller needs to write the result."""
+
+    scene: Any
+    camera: Any
+    options: dict[str, Any] = field(default_factory=dict)
+    width: int = 0
+    height: int = 0
+    transparent: bool = False
+
+
+def _evaluated(obj: bpy.types.Object, depsgraph: bpy.types.Depsgraph) -> bpy.types.Object:
+    """The evaluated version of ``obj`` in ``depsgraph`` (obj itself if already evaluated)."""
+    return obj if obj.is_evaluated else obj.evaluated_get(depsgraph)
+
+
+def prepare(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, use_border: bool = False,
+            camera_object: bpy.types.Object | None = None) -> RenderJob:
+    """Check the inputs and build core.Scene, core.Camera and the render options.
+
+    ``camera_object`` overrides the scene camera. Raises ValueError (bad settings, no
+    camera, camera inside a horizon, nothing to render).
+    """
+    settings = scene.symray
+    camera_object = camera_object or scene.camera
+    if camera_object is None:
+        raise ValueError("The scene has no active camera: add one or set Scene > Camera")
+    camera_object = _evaluated(camera_object, depsgraph)
+    kwargs = export_camera.camera_kwargs(scene, camera_object, use_border=use_border)
+    camera = core.Camera.blender(**kwargs)
+
+    center_matrix = None
+    if settings.center is not None:
+        center_matrix = _evaluated(settings.center, depsgraph).matrix_world
+    where = models.placement(center_matrix)
+    model = models.build_model(settings, properties.metric_source(settings))
+    models.check_observer(settings, where, np.array(kwargs["matrix_world"])[:3, 3])
+
+    intersector = export_meshes.build_intersector(depsgraph)
+    if intersector is None and model is None:
+        raise ValueError("Nothing to render: the scene has no visible mesh objects and the "
+                         "model is Flat (choose a model or add objects)")
+    core_scene = core.Scene(
+        model=model,
+        center=tuple(where.center),
+        axis=tuple(where.axis),
+        objects=[] if intersector is None else [intersector],
+        background=world.world_background(scene, settings.background),
+    )
+    transparent = bool(scene.render.film_transparent)
+    passes = settings.passes()
+    if transparent and "ending" not in passes:
+        passes += ("ending",)  # needed to cut the background out
+    options = {
+        "method": settings.method,
+        "tolerance": float(settings.tolerance),
+        "max_steps": int(settings.max_steps),
+        "passes": passes,
+    }
+    return RenderJob(core_scene, camera, options, camera.width, camera.height, transparent)
+
+
+def run(job: RenderJob, progress: Progress | None = None,
+        should_cancel: Cancel | None = None) -> Any:
+    """Trace ``job`` with core.render; no bpy is touched (safe in a worker thread)."""
+    result = core.render(job.scene, job.camera, progress=progress,
+                         should_cancel=should_cancel, **job.options)
+    if job.transparent and not getattr(result, "cancelled", False):
+        ending = result.passes.get("ending")
+        if ending is not None:
+            escaped = ending == core.ENDING["escaped"]
+            result.rgba[escaped] = 0.0
+    return result
+
+
+def summary_text(summary: dict[str, Any]) -> str:
+    """One line describing a render summary (time, rays, steps, errors, failures)."""
+    parts = []
+    for key, fmt in (("time_s", "{:.2f} s"), ("rays", "{} rays"), ("steps", "{} steps"),
+                     ("failed", "{} failed"), ("error_median", "median error {:.3g}"),
+                     ("error_max", "max error {:.3g}")):
+        if key in summary and summary[key] is not None:
+            try:
+                parts.append(fmt.format(summary[key]))
+            except (TypeError, ValueError):
+                parts.append(f"{key} {summary[key]}")
+    return ", ".join(parts)

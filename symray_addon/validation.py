@@ -1,0 +1,174 @@
+"""Checking the user's expressions (n(x,y,z), g^ij, H) as they are typed.
+
+Nothing here imports bpy: it works on plain strings, so it is shared by the property
+update callbacks, the operator and the render engine, and is testable on its own.
+
+The inverse metric is one text (the ``metric`` property, or a Text data-block named by
+``metric_text``): statements separated by newlines or ``;``. A statement ``name = expr``
+defines a helper quantity usable by later statements; every other statement is one row of
+g^ij: four comma-separated expressions over t, x, y, z. Exactly four rows are required,
+and ``#`` starts a comment. Example (Minkowski)::
+
+    -1, 0, 0, 0; 0, 1, 0, 0; 0, 0, 1, 0; 0, 0, 0, 1
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..core import expressions
+
+INDEX_NAMES: tuple[str, ...] = ("x", "y", "z")
+"""Names a refractive index n(x, y, z) may use (the centre object's local frame)."""
+METRIC_NAMES: tuple[str, ...] = ("t", "x", "y", "z")
+"""Coordinates of a user metric g^ij(t, x, y, z)."""
+HAMILTONIAN_COORDS: tuple[str, ...] = ("x", "y", "z")
+HAMILTONIAN_MOMENTA: tuple[str, ...] = ("p_x", "p_y", "p_z")
+HAMILTONIAN_NAMES: tuple[str, ...] = HAMILTONIAN_COORDS + HAMILTONIAN_MOMENTA
+"""Names a user Hamiltonian H(x, y, z, p_x, p_y, p_z) may use."""
+METRIC_SIZE = 4
+
+
+@dataclass(frozen=True)
+class MetricSpec:
+    """A parsed inverse metric: helper definitions (in order) and the 4x4 entry texts."""
+
+    definitions: tuple[tuple[str, str], ...]
+    rows: tuple[tuple[str, ...], ...]
+
+
+def describe(err: expressions.ExpressionError) -> str:
+    """One-line message for an ExpressionError, naming the column when known."""
+    return str(err)
+
+
+def check_expression(text: str, names: tuple[str, ...]) -> str:
+    """Return "" if ``text`` is a valid expression over ``names``, else the error message."""
+    try:
+        expressions.check(text, names)
+    except expressions.ExpressionError as err:
+        return describe(err)
+    return ""
+
+
+def _split_top_level(text: str, separators: str, start: int) -> list[tuple[int, str]]:
+    """Split at separator characters outside parentheses; pieces keep their start offset."""
+    pieces: list[tuple[int, str]] = []
+    depth, begin = 0, 0
+    for i, ch in enumerate(text):
+        if ch in "([":
+            depth += 1
+        elif ch in ")]":
+            depth = max(depth - 1, 0)
+        elif ch in separators and depth == 0:
+            pieces.append((start + begin, text[begin:i]))
+            begin = i + 1
+    pieces.append((start + begin, text[begin:]))
+    return pieces
+
+
+def _statements(text: str) -> list[tuple[int, str]]:
+    """Statements of a metric text with their 0-based offsets; comments and blanks dropped."""
+    out: list[tuple[int, str]] = []
+    offset = 0
+    for line in text.splitlines(keepends=True):
+        body = line.split("#", 1)[0]
+        for start, piece in _split_top_level(body, ";", offset):
+            if piece.strip():
+                out.append((start, piece))
+        offset += len(line)
+    return out
+
+
+def _located(text: str, problem: str, offset: int | None) -> expressions.ExpressionError:
+    """An error at 0-based ``offset`` of ``text``: a column, and a line if text has several."""
+    if offset is None:
+        return expressions.ExpressionError(problem)
+    if "\n" not in text.rstrip("\n"):
+        return expressions.ExpressionError(problem, offset + 1)
+    line = text.count("\n", 0, offset) + 1
+    column = offset - (text.rfind("\n", 0, offset) + 1) + 1
+    return expressions.ExpressionError(f"line {line}: {problem}", column)
+
+
+def _shifted(text: str, err: expressions.ExpressionError, offset: int,
+             label: str) -> expressions.ExpressionError:
+    """The error of a piece starting at ``offset`` of ``text``, relocated and labelled."""
+    where = None if err.column is None else offset + err.column - 1
+    return _located(text, f"{label}: {err.problem}", where)
+
+
+def _is_definition(piece: str) -> tuple[str, str, int] | None:
+    """(name, expression, offset of the expression) if ``piece`` reads ``name = expr``."""
+    head, sep, tail = piece.partition("=")
+    if not sep or tail.startswith("=") or head.rstrip().endswith(("<", ">", "!", "=")):
+        return None
+    name = head.strip()
+    if not name.isidentifier():
+        return None
+    return name, tail, len(head) + 1
+
+
+def parse_metric(text: str) -> MetricSpec:
+    """Parse and check an inverse-metric text (format: module docstring).
+
+    Raises expressions.ExpressionError whose column counts from the start of ``text``.
+    """
+    if len(text) > expressions.MAX_LENGTH:
+        raise expressions.ExpressionError(
+            f"metric is too long ({len(text)} > {expressions.MAX_LENGTH} characters)")
+    known = list(METRIC_NAMES)
+    definitions: list[tuple[str, str]] = []
+    rows: list[tuple[str, ...]] = []
+    for start, piece in _statements(text):
+        definition = _is_definition(piece)
+        if definition is not None:
+            name, expr, shift = definition
+            if rows:
+                raise _located(text, f"definition '{name}' must come before the metric rows",
+                               start)
+            if name in known or name in expressions.CONSTANTS:
+                raise _located(text, f"'{name}' is already defined or reserved", start)
+            try:
+                expressions.check(expr.strip(), known)
+            except expressions.ExpressionError as err:
+                lead = len(expr) - len(expr.lstrip())
+                raise _shifted(text, err, start + shift + lead, f"definition '{name}'") from None
+            definitions.append((name, expr.strip()))
+            known.append(name)
+            continue
+        row_number = len(rows) + 1
+        entries = _split_top_level(piece, ",", start)
+        if len(entries) != METRIC_SIZE:
+            raise _located(
+                text, f"metric row {row_number} has {len(entries)} entries, needs {METRIC_SIZE}",
+                start)
+        row = []
+        for j, (estart, entry) in enumerate(entries):
+            lead = len(entry) - len(entry.lstrip())
+            try:
+                expressions.check(entry.strip(), known)
+            except expressions.ExpressionError as err:
+                raise _shifted(text, err, estart + lead, f"g^{row_number - 1}{j}") from None
+            row.append(entry.strip())
+        rows.append(tuple(row))
+    if len(rows) != METRIC_SIZE:
+        raise expressions.ExpressionError(
+            f"metric has {len(rows)} rows, needs {METRIC_SIZE} (rows are separated by ';' "
+            "or new lines, entries by ',')")
+    for i in range(METRIC_SIZE):
+        for j in range(i):
+            if rows[i][j].replace(" ", "") != rows[j][i].replace(" ", ""):
+                raise expressions.ExpressionError(
+                    f"metric must be symmetric: g^{i}{j} = '{rows[i][j]}' but "
+                    f"g^{j}{i} = '{rows[j][i]}'")
+    return MetricSpec(tuple(definitions), tuple(rows))
+
+
+def check_metric(text: str) -> str:
+    """Return "" if ``text`` is a valid inverse metric, else the error message."""
+    try:
+        parse_metric(text)
+    except expressions.ExpressionError as err:
+        return describe(err)
+    return ""

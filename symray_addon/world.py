@@ -1,0 +1,98 @@
+"""The scene's world -> the core's ``background=`` (procedural sky, colour or environment).
+
+Understood: a Background node feeding the World Output, with either a constant Color or an
+Environment Texture (equirectangular image, optionally rotated by a Mapping node) linked
+into it, times its Strength. Without nodes, ``world.color``. Images are handed to the core
+with row 0 at the top, in Blender's equirectangular orientation (see core/sky.py).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import bpy
+import numpy as np
+from mathutils import Euler
+
+from ..core.sky import Background
+from .materials import image_pixels, node_tree_of
+
+
+def _background_node(world: bpy.types.World) -> bpy.types.Node | None:
+    """The Background node feeding the active world output, if any."""
+    tree = node_tree_of(world)
+    if tree is None:
+        return None
+    outputs = [n for n in tree.nodes if n.type == "OUTPUT_WORLD"]
+    active = next((n for n in outputs if n.is_active_output), outputs[0] if outputs else None)
+    if active is None:
+        return None
+    surface = active.inputs.get("Surface")
+    if surface is None or not surface.is_linked:
+        return None
+    node = surface.links[0].from_node
+    return node if node.type == "BACKGROUND" else None
+
+
+def _mapping_matrix(texture: bpy.types.Node) -> np.ndarray | None:
+    """The core Background matrix of a Mapping node rotating an environment texture."""
+    vector = texture.inputs.get("Vector")
+    if vector is None or not vector.is_linked:
+        return None
+    mapping = vector.links[0].from_node
+    if mapping.type != "MAPPING":
+        return None
+    rotation = mapping.inputs.get("Rotation")
+    if rotation is None or rotation.is_linked:
+        return None
+    r = np.array(Euler(rotation.default_value).to_matrix(), dtype=np.float64)
+    # POINT/VECTOR look the world direction d up at R d (matrix.T @ d): the matrix is R^T.
+    # TEXTURE is the inverse transform: the lookup is at R^T d.
+    return r if mapping.vector_type == "TEXTURE" else r.T
+
+
+def _environment(node: bpy.types.Node, strength: float) -> Background | None:
+    """A Background for an Environment Texture node, or None when it has no usable image."""
+    if node.type != "TEX_ENVIRONMENT" or node.image is None:
+        return None
+    if getattr(node, "projection", "EQUIRECTANGULAR") != "EQUIRECTANGULAR":
+        return None
+    pixels = image_pixels(node.image)
+    if pixels is None:
+        return None
+    top_first = np.ascontiguousarray(pixels[::-1])
+    interpolation = "closest" if node.interpolation == "Closest" else "linear"
+    return Background(top_first, strength=strength, matrix=_mapping_matrix(node),
+                      interpolation=interpolation)
+
+
+def world_background(scene: bpy.types.Scene, mode: str = "AUTO") -> Any:
+    """The ``background=`` for core.Scene: "procedural", an rgba tuple or a Background.
+
+    ``mode``: 'PROCEDURAL', 'WORLD' (texture or colour of the world, black without one) or
+    'AUTO' (the world's environment texture if it has one, else procedural).
+    """
+    if mode == "PROCEDURAL":
+        return "procedural"
+    world = scene.world
+    if world is None:
+        return "procedural" if mode == "AUTO" else (0.0, 0.0, 0.0, 1.0)
+    node = _background_node(world)
+    if node is None:
+        if mode == "AUTO":
+            return "procedural"
+        return (*(float(c) for c in world.color[:3]), 1.0)
+    strength_socket = node.inputs.get("Strength")
+    strength = 1.0
+    if strength_socket is not None and not strength_socket.is_linked:
+        strength = float(strength_socket.default_value)
+    color = node.inputs["Color"]
+    if color.is_linked:
+        environment = _environment(color.links[0].from_node, strength)
+        if environment is not None:
+            return environment
+        return "procedural" if mode == "AUTO" else (0.0, 0.0, 0.0, 1.0)
+    if mode == "AUTO":
+        return "procedural"
+    rgb = np.array(color.default_value[:3], dtype=np.float64) * strength
+    return (*rgb.tolist(), 1.0)

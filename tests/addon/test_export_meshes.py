@@ -1,0 +1,146 @@
+"""The BVH intersector agrees with direct BVHTree.ray_cast and reads materials/UVs."""
+
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+import pytest
+from mathutils import Matrix, Vector
+from mathutils.bvhtree import BVHTree
+
+
+@pytest.fixture
+def objects(scene, helpers):
+    """A bevelled cube, a rotated scaled quad and a linked duplicate of the cube."""
+    red = helpers.solid_material("Red", (1.0, 0.0, 0.0, 1.0))
+    cube = helpers.add_cube(scene, "Cube", material=red, location=(0.5, 0.0, 0.0))
+    bevel = cube.modifiers.new("Bevel", "BEVEL")
+    bevel.width = 0.2
+    twin = bpy.data.objects.new("Twin", cube.data)
+    twin.location, twin.rotation_euler, twin.scale = (-3.0, 2.0, 1.0), (0.3, 0.2, 0.1), (0.5,) * 3
+    scene.collection.objects.link(twin)
+    quad = helpers.add_quad(scene, "Quad", half=2.0, y=0.0, location=(0.0, 6.0, 0.0),
+                            rotation=(0.2, 0.0, 0.4), scale=(1.5, 1.5, 1.5))
+    hidden = helpers.add_cube(scene, "Hidden", location=(0.0, -4.0, 0.0))
+    hidden.hide_render = True
+    bpy.context.view_layer.update()
+    return [cube, twin, quad]
+
+
+def _reference(depsgraph, objects, a, b):
+    """Nearest hit per segment over per-object BVHTree.FromObject trees (local space)."""
+    trees = []
+    for obj in objects:
+        ev = obj.evaluated_get(depsgraph)
+        trees.append((obj.name, BVHTree.FromObject(ev, depsgraph), Matrix(ev.matrix_world)))
+    out = []
+    for pa, pb in zip(a, b, strict=True):
+        best = None
+        for name, tree, m in trees:
+            inv = m.inverted()
+            la, lb = inv @ Vector(pa), inv @ Vector(pb)
+            loc, nor, _index, _dist = tree.ray_cast(la, lb - la, (lb - la).length)
+            if loc is None:
+                continue
+            world = m @ loc
+            t = (world - Vector(pa)).length / (Vector(pb) - Vector(pa)).length
+            normal = (m.to_3x3().inverted().transposed() @ nor).normalized()
+            if best is None or t < best[1]:
+                best = (name, t, np.array(world), np.array(normal))
+        out.append(best)
+    return out
+
+
+def test_hits_agree_with_direct_ray_cast(addon, scene, objects):
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    meshes = addon.module("symray_addon.export_meshes")
+    intersector = meshes.build_intersector(depsgraph)
+    assert intersector.names == ["Cube", "Twin", "Quad"] or \
+        sorted(intersector.names) == ["Cube", "Quad", "Twin"]
+    rng = np.random.default_rng(7)
+    a = rng.uniform(-8, 8, (400, 3))
+    targets = np.array([o.matrix_world.translation[:] for o in objects])
+    aim = targets[rng.integers(0, len(objects), 400)] + rng.normal(0, 1.2, (400, 3))
+    b = a + (aim - a) * rng.uniform(0.3, 2.0, (400, 1))
+    hits = intersector.intersect(a, b)
+    assert hits.hit.shape == (400,) and hits.color.shape == (400, 4)
+    ref = _reference(depsgraph, objects, a, b)
+    expected_hit = np.array([r is not None for r in ref])
+    assert 40 < expected_hit.sum() < 360  # a meaningful mix of hits and misses
+    np.testing.assert_array_equal(hits.hit, expected_hit)
+    for i in np.flatnonzero(expected_hit):
+        name, t, pos, normal = ref[i]
+        assert intersector.names[hits.object_id[i]] == name
+        assert hits.t[i] == pytest.approx(t, abs=1e-5)
+        np.testing.assert_allclose(hits.position[i], pos, atol=1e-4)
+        assert abs(np.dot(hits.normal[i], normal)) == pytest.approx(1.0, abs=1e-4)
+    assert np.all(np.isinf(hits.t[~hits.hit])) and np.all(hits.object_id[~hits.hit] == -1)
+    assert np.all((hits.t[hits.hit] >= 0) & (hits.t[hits.hit] <= 1))
+
+
+def test_bounds_cover_evaluated_world_geometry(addon, scene, objects):
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    intersector = addon.module("symray_addon.export_meshes").build_intersector(depsgraph)
+    points = []
+    for obj in objects:
+        ev = obj.evaluated_get(depsgraph)
+        m = np.array(ev.matrix_world)
+        co = np.array([v.co[:] for v in ev.to_mesh().vertices])
+        ev.to_mesh_clear()
+        points.append(co @ m[:3, :3].T + m[:3, 3])
+    points = np.concatenate(points)
+    lo, hi = intersector.bounds
+    np.testing.assert_allclose(lo, points.min(axis=0), atol=1e-9)
+    np.testing.assert_allclose(hi, points.max(axis=0), atol=1e-9)
+
+
+def test_hidden_and_empty_scene(addon, scene, helpers):
+    meshes = addon.module("symray_addon.export_meshes")
+    helpers.add_cube(scene, "Hidden").hide_render = True
+    assert meshes.build_intersector(bpy.context.evaluated_depsgraph_get()) is None
+
+
+def test_material_colors_and_texture_uv(addon, scene, helpers):
+    """Base colour from the Principled BSDF; an image texture sampled at the hit's UV."""
+    img = bpy.data.images.new("Quadrants", 2, 2, alpha=True, float_buffer=True)
+    # bottom-left, bottom-right, top-left, top-right (Blender rows go bottom-up)
+    colors = np.array([[1, 0, 0, 1], [0, 1, 0, 1], [0, 0, 1, 1], [1, 1, 0, 1]], np.float32)
+    img.pixels.foreach_set(colors.ravel())
+    textured = helpers.solid_material("Textured", (1, 1, 1, 1))
+    tree = textured.node_tree
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation = img, "Closest"
+    bsdf = next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED")
+    tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
+    helpers.add_quad(scene, "Board", half=1.0, y=5.0, material=textured)
+    helpers.add_cube(scene, "Green", size=1.0, location=(0, 0, 5),
+                     material=helpers.solid_material("G", (0.1, 0.6, 0.2, 1.0)))
+    helpers.add_cube(scene, "Plain", size=1.0, location=(0, 0, -5))
+    intersector = addon.module("symray_addon.export_meshes").build_intersector(
+        bpy.context.evaluated_depsgraph_get())
+    # quad corners: (-1,5,-1) uv (0,0); (1,5,-1) uv (1,0) ... u along +x, v along +z
+    a = np.array([[-0.5, 0, -0.5], [0.5, 0, -0.5], [-0.5, 0, 0.5], [0.5, 0, 0.5],
+                  [0, 0, 5], [0, 0, -5]], float)
+    a[4], a[5] = (0, -3, 5), (0, -3, -5)
+    b = a + np.array([0.0, 10.0, 0.0])
+    hits = intersector.intersect(a, b)
+    assert hits.hit.all()
+    np.testing.assert_allclose(hits.uv[0], (0.25, 0.25), atol=1e-6)
+    np.testing.assert_allclose(hits.uv[3], (0.75, 0.75), atol=1e-6)
+    np.testing.assert_allclose(hits.color[:4], colors, atol=1e-6)
+    np.testing.assert_allclose(hits.color[4], (0.1, 0.6, 0.2, 1.0), atol=1e-6)
+    np.testing.assert_allclose(hits.color[5], (0.8, 0.8, 0.8, 1.0), atol=1e-6)
+
+
+def test_srgb_byte_texture_is_linearised(addon):
+    materials = addon.module("symray_addon.materials")
+    img = bpy.data.images.new("Bytes", 1, 1, alpha=True, float_buffer=False)
+    img.pixels.foreach_set(np.array([0.5, 0.5, 0.5, 1.0], np.float32))
+    pix = materials.image_pixels(img)
+    stored = img.pixels[0]  # 8-bit quantised
+    expected = ((stored + 0.055) / 1.055) ** 2.4
+    assert pix[0, 0, 0] == pytest.approx(expected, rel=1e-5)
+    assert pix[0, 0, 3] == pytest.approx(1.0)
+    assert math.isclose(materials.srgb_to_linear(np.array(1.0)), 1.0)

@@ -1,0 +1,114 @@
+"""The extension installs, enables, survives disable/enable, and registers the contract."""
+
+from __future__ import annotations
+
+import bpy
+import pytest
+
+MODELS = {"FLAT", "SCHWARZSCHILD", "KERR", "MEDIUM", "METRIC", "CUSTOM"}
+METHODS = {"symplectic_euler", "stormer_verlet", "implicit_midpoint", "gauss4", "yoshida4",
+           "yoshida6", "yoshida8", "suzuki4", "suzuki6", "tao2", "tao4", "rk4", "dopri5"}
+
+
+def _registered() -> bool:
+    return (hasattr(bpy.types.Scene, "symray") and hasattr(bpy.types, "RENDER_PT_symray")
+            and "SYMRAY" in _engines())
+
+
+def _engines() -> set[str]:
+    """Render engines Blender accepts now (assigning an unknown one raises TypeError)."""
+    render = bpy.context.scene.render
+    previous = render.engine
+    try:
+        render.engine = "SYMRAY"
+    except TypeError:
+        return {previous}
+    render.engine = previous
+    return {previous, "SYMRAY"}
+
+
+def test_installed_and_enabled(addon):
+    import addon_utils
+
+    assert addon_utils.check(addon.package) == (True, True)
+    assert _registered()
+    assert hasattr(bpy.ops.symray, "render")
+    assert bpy.ops.symray.render.idname() == "SYMRAY_OT_render"
+
+
+def test_disable_enable_survives(addon, scene):
+    bpy.ops.preferences.addon_disable(module=addon.package)
+    try:
+        assert not hasattr(bpy.types.Scene, "symray")
+        assert "SYMRAY" not in _engines()
+        assert "SYMRAY" not in bpy.types.RENDER_PT_format.COMPAT_ENGINES
+    finally:
+        bpy.ops.preferences.addon_enable(module=addon.package)
+    assert _registered()
+    bpy.ops.preferences.addon_disable(module=addon.package)
+    bpy.ops.preferences.addon_enable(module=addon.package)
+    assert _registered()
+    scene.render.engine = "SYMRAY"
+    assert scene.symray.image_name == "SymRay Result"
+    assert "SYMRAY" in bpy.types.RENDER_PT_format.COMPAT_ENGINES
+
+
+def test_contract_properties(scene):
+    settings = scene.symray
+    rna = settings.bl_rna.properties
+    assert {item.identifier for item in rna["model"].enum_items} == MODELS
+    assert {item.identifier for item in rna["method"].enum_items} == METHODS
+    assert rna["center"].fixed_type.identifier == "Object"
+    assert settings.center is None
+    assert settings.image_name == "SymRay Result"
+    assert settings.exr_path == ""
+    assert settings.rg > 0 and rna["rg"].hard_min > 0
+    assert rna["spin"].soft_min == -1.0 and rna["spin"].soft_max == 1.0
+    for name in ("refractive_index", "metric", "hamiltonian", "tolerance", "max_steps",
+                 "pass_error", "pass_steps", "pass_ending"):
+        assert name in rna, name
+    assert settings.tolerance > 0 and settings.max_steps > 0
+    assert settings.passes() == ("steps",)  # the fixture switched the error pass off
+    settings.pass_error = settings.pass_steps = settings.pass_ending = True
+    assert settings.passes() == ("error", "steps", "ending")
+
+
+def test_center_picker_offers_empties(scene, helpers):
+    empty = helpers.add_empty(scene)
+    helpers.add_cube(scene, "Cube")
+    scene.symray.center = empty
+    assert scene.symray.center == empty
+    poll = type(scene.symray).bl_rna.properties["center"]
+    assert poll.fixed_type.identifier == "Object"
+
+
+def test_panels_and_compat_engines(addon):
+    for name in ("RENDER_PT_symray", "RENDER_PT_symray_integration", "RENDER_PT_symray_output"):
+        panel = getattr(bpy.types, name)
+        assert panel.bl_context == "render"
+        assert not hasattr(panel, "COMPAT_ENGINES")  # shown for every engine
+    for name in ("RENDER_PT_format", "RENDER_PT_output", "DATA_PT_lens", "DATA_PT_context_mesh",
+                 "EEVEE_MATERIAL_PT_surface", "EEVEE_WORLD_PT_surface"):
+        assert "SYMRAY" in getattr(bpy.types, name).COMPAT_ENGINES, name
+
+
+def test_engine_passes_declared(scene):
+    scene.render.engine = "SYMRAY"
+    scene.symray.pass_error = scene.symray.pass_steps = True
+    engine = next(c for c in bpy.types.RenderEngine.__subclasses__()
+                  if getattr(c, "bl_idname", "") == "SYMRAY")
+    assert engine.bl_use_postprocess is True
+    assert engine.bl_label == "SymRay"
+
+
+@pytest.mark.parametrize("preset, model", [("SCHWARZSCHILD_LENS", "SCHWARZSCHILD"),
+                                           ("KERR", "KERR"), ("MIRAGE_EQ17", "MEDIUM"),
+                                           ("MIRAGE_EQ18", "MEDIUM")])
+def test_presets(scene, preset, model):
+    assert bpy.ops.symray.apply_preset(preset=preset) == {"FINISHED"}
+    settings = scene.symray
+    assert settings.model == model
+    assert settings.center is not None and settings.center.type == "EMPTY"
+    if model == "MEDIUM":
+        assert settings.index_form == "SEED"
+        assert settings.refractive_index_error == ""
