@@ -4,22 +4,24 @@ The contract (DESIGN.md): ``core.integrate``, ``core.hamiltonians``, ``core.Came
 ``core.Scene``, ``core.render``, ``core.ENDING`` and the intersectors.
 """
 
-from . import dual, expressions, hamiltonians, imageio, integrators, sky
-from .camera import Camera
+from . import camera, dual, expressions, hamiltonians, imageio, integrators, intersect, presets, sky
+from .camera import Camera, Frame
 from .expressions import ExpressionError
-from .imageio import FAILED_COLOR, write_exr, write_png
+from .imageio import FAILED_COLOR, ImageWriteError, read_png, write_exr, write_png
 from .integrators import METHODS, PoincareTransformed, get_method, integrate
 from .intersect import Disk, Group, Hits, Plane, Sphere, TriangleMesh, Volume, checker, colormap
 from .observer import InsideHorizonError
 from .render import MAX_STEPS_COLOR, RenderResult, render
-from .sky import Background, procedural_sky
+from .sky import Background, equirect_lookup, procedural_sky
 from .trace import ENDING, Scene
 
 __all__ = [
-    "dual", "expressions", "hamiltonians", "imageio", "integrators", "sky",
-    "Camera", "ExpressionError", "FAILED_COLOR", "MAX_STEPS_COLOR", "write_exr", "write_png",
+    "camera", "dual", "expressions", "hamiltonians", "imageio", "integrators", "intersect",
+    "presets", "sky", "Camera", "Frame", "ExpressionError", "FAILED_COLOR", "MAX_STEPS_COLOR",
+    "ImageWriteError", "read_png", "write_exr", "write_png",
     "METHODS", "PoincareTransformed", "get_method", "integrate",
     "Disk", "Group", "Hits", "Plane", "Sphere", "TriangleMesh", "Volume", "checker", "colormap",
-    "InsideHorizonError", "RenderResult", "render", "Background", "procedural_sky",
+    "InsideHorizonError", "RenderResult", "render", "Background", "equirect_lookup",
+    "procedural_sky",
     "ENDING", "Scene",
 ]

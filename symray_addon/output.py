@@ -15,7 +15,7 @@ instead: choose OpenEXR MultiLayer there to get every pass ("SymRay Error", ...)
 from __future__ import annotations
 
 import os
-import tempfile
+import uuid
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 
@@ -124,9 +124,8 @@ def _scratch_scene() -> Iterator[bpy.types.Scene]:
 def atomic_target(path: str) -> Iterator[str]:
     """Yield a temporary file name next to ``path``; on success move it over ``path``."""
     folder = os.path.dirname(path) or "."
-    fd, temp = tempfile.mkstemp(prefix=".symray-", suffix=os.path.splitext(path)[1],
-                                dir=folder)
-    os.close(fd)
+    # A fresh unique name that Blender creates itself (normal permissions, unlike mkstemp).
+    temp = os.path.join(folder, f".symray-{uuid.uuid4().hex}{os.path.splitext(path)[1]}")
     try:
         yield temp
         if not os.path.isfile(temp) or os.path.getsize(temp) == 0:

@@ -21,8 +21,11 @@ MODULE = "bl_ext.user_default.symray"
 
 def install(zip_path: Path) -> str:
     """Install and enable the extension; returns its module name."""
-    import bpy  # noqa: I001  (bpy first: it makes addon_utils importable)
-    import addon_utils
+    import importlib
+
+    import bpy
+
+    addon_utils = importlib.import_module("addon_utils")  # importable once bpy is
 
     result = bpy.ops.extensions.package_install_files(
         filepath=str(zip_path), repo="user_default", enable_on_install=True)

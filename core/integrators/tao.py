@@ -7,6 +7,7 @@ rotates (q − x, p − y) by the angle 2ωδ. One tao2 step is A(δ/2) B(δ/2) 
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -50,18 +51,22 @@ class Tao2(Method):
             Q += ch * dp
             Y -= ch * dq
         else:
+            # rotate (u, v) = (q - x, p - y) by 2 omega ch; q + x and p + y are unchanged:
+            # q += du, x -= du, p += dv, y -= dv with du = a u + b v, dv = a v - b u
             angle = 2.0 * self.omega * ch
-            c, s = np.cos(angle), np.sin(angle)
+            if np.ndim(angle):
+                a, b = 0.5 * (np.cos(angle) - 1.0), 0.5 * np.sin(angle)
+            else:
+                a, b = 0.5 * (math.cos(angle) - 1.0), 0.5 * math.sin(angle)
             u, v = Q - X, P - Y
-            sq, sp = Q + X, P + Y
-            ru = c * u + s * v
-            rv = c * v - s * u
-            np.add(sq, ru, out=Q)
-            np.subtract(sq, ru, out=X)
-            np.add(sp, rv, out=P)
-            np.subtract(sp, rv, out=Y)
-            for a in state:
-                a *= 0.5
+            du = a * u
+            du += b * v
+            v *= a
+            v -= b * u
+            Q += du
+            X -= du
+            P += v
+            Y -= v
 
     @quiet
     def step(self, H: Any, state: State, h: Any) -> tuple[State, np.ndarray]:

@@ -83,8 +83,9 @@ class Addon:
 @pytest.fixture(scope="session")
 def addon(extension_zip: Path) -> Iterator[Addon]:
     """Install the zip into the isolated user folder and enable it (once per session)."""
-    import addon_utils  # noqa: I001  (importable once bpy is)
     import bpy
+
+    addon_utils = importlib.import_module("addon_utils")  # importable once bpy is
 
     result = bpy.ops.extensions.package_install_files(
         filepath=str(extension_zip), repo="user_default", enable_on_install=True)

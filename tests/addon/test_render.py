@@ -308,6 +308,9 @@ def test_operator_writes_exr(addon, scene, helpers, tmp_path):
     assert set(passes["B"].ravel()) <= {float(c) for c in addon.core.ENDING.values()}
     leftovers = [f for f in os.listdir(tmp_path) if f.startswith(".symray-")]
     assert leftovers == []
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (tmp_path / "result.exr").stat().st_mode & 0o777 == 0o666 & ~umask
 
 
 def test_render_task_cancel_keeps_previous_image(addon, scene, helpers):

@@ -1,0 +1,85 @@
+"""The panels draw every model's settings with existing properties and operators."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import bpy
+import pytest
+
+
+class FakeLayout:
+    """Records what a panel draws and checks that every property/operator exists."""
+
+    def __init__(self, log: list):
+        self.log = log
+        self.use_property_split = self.use_property_decorate = False
+        self.alert = self.active = False
+        self.scale_y = 1.0
+
+    def _child(self, *_args, **_kwargs) -> FakeLayout:
+        return FakeLayout(self.log)
+
+    row = column = split = box = _child
+
+    def prop(self, data, name: str, **_kwargs) -> None:
+        assert name in data.bl_rna.properties, name
+        self.log.append(("prop", name))
+
+    def operator(self, idname: str, **_kwargs):
+        module, op = idname.split(".")
+        assert hasattr(getattr(bpy.ops, module), op), idname
+        self.log.append(("operator", idname))
+        return SimpleNamespace()
+
+    def menu(self, idname: str, **_kwargs) -> None:
+        assert hasattr(bpy.types, idname), idname
+        self.log.append(("menu", idname))
+
+    def label(self, text: str = "", **_kwargs) -> None:
+        self.log.append(("label", text))
+
+    def separator(self, **_kwargs) -> None:
+        pass
+
+
+def _draw(panel_name: str, scene) -> list:
+    panel = getattr(bpy.types, panel_name)
+    log: list = []
+    fake = SimpleNamespace(layout=FakeLayout(log))
+    context = SimpleNamespace(scene=scene)
+    assert panel.poll(context)
+    panel.draw(fake, context)
+    if hasattr(panel, "draw_header_preset"):
+        panel.draw_header_preset(fake, context)
+    return log
+
+
+@pytest.mark.parametrize("model", ["FLAT", "SCHWARZSCHILD", "KERR", "MEDIUM", "METRIC",
+                                   "CUSTOM"])
+def test_main_panel_draws(scene, model):
+    scene.symray.model = model
+    log = _draw("RENDER_PT_symray", scene)
+    assert ("prop", "model") in log and ("operator", "symray.render") in log
+    expected = {"KERR": "spin", "MEDIUM": "refractive_index", "METRIC": "metric",
+                "CUSTOM": "hamiltonian", "SCHWARZSCHILD": "rg"}.get(model)
+    if expected:
+        assert ("prop", expected) in log
+
+
+def test_panel_shows_expression_errors(scene):
+    scene.symray.model = "MEDIUM"
+    scene.symray.refractive_index = "1 + w"
+    labels = [text for kind, text in _draw("RENDER_PT_symray", scene) if kind == "label"]
+    assert any("unknown name 'w'" in text for text in labels)
+    scene.symray.model = "METRIC"
+    text = bpy.data.texts.new("g")
+    text.write("-1, 0, 0, 0\n0, 1, 0, 0\n0, 0, 1, 0\n0, 0, 0, zz\n")
+    scene.symray.metric_text = text
+    labels = [t for kind, t in _draw("RENDER_PT_symray", scene) if kind == "label"]
+    assert any("zz" in t for t in labels)
+
+
+@pytest.mark.parametrize("panel", ["RENDER_PT_symray_integration", "RENDER_PT_symray_output"])
+def test_sub_panels_draw(scene, panel):
+    assert _draw(panel, scene)
