@@ -8,7 +8,7 @@ from . import camera, dual, expressions, hamiltonians, imageio, integrators, int
 from .camera import Camera, Frame
 from .expressions import ExpressionError
 from .imageio import FAILED_COLOR, ImageWriteError, read_png, write_exr, write_png
-from .integrators import METHODS, PoincareTransformed, get_method, integrate
+from .integrators import METHODS, IntegrationResult, PoincareTransformed, get_method, integrate
 from .intersect import Disk, Group, Hits, Plane, Sphere, TriangleMesh, Volume, checker, colormap
 from .observer import InsideHorizonError
 from .render import MAX_STEPS_COLOR, RenderResult, render
@@ -19,7 +19,7 @@ __all__ = [
     "camera", "dual", "expressions", "hamiltonians", "imageio", "integrators", "intersect",
     "presets", "sky", "Camera", "Frame", "ExpressionError", "FAILED_COLOR", "MAX_STEPS_COLOR",
     "ImageWriteError", "read_png", "write_exr", "write_png",
-    "METHODS", "PoincareTransformed", "get_method", "integrate",
+    "METHODS", "IntegrationResult", "PoincareTransformed", "get_method", "integrate",
     "Disk", "Group", "Hits", "Plane", "Sphere", "TriangleMesh", "Volume", "checker", "colormap",
     "InsideHorizonError", "RenderResult", "render", "Background", "equirect_lookup",
     "procedural_sky",

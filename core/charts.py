@@ -36,10 +36,6 @@ class CartesianChart:
         """Cartesian velocity (3, N) from coordinate velocity dq/ds at S."""
         return dS
 
-    def radius(self, S: np.ndarray) -> np.ndarray:
-        """Distance from the centre (N,)."""
-        return np.sqrt(S[0] ** 2 + S[1] ** 2 + S[2] ** 2)
-
     def axial_killing(self, S: np.ndarray) -> np.ndarray:
         """Spatial components of the rotation generator about z: (-y, x, 0)."""
         return np.stack([-S[1], S[0], np.zeros_like(S[0])])
@@ -102,10 +98,6 @@ class SpheroidalChart:
         """Cartesian velocity (3, N) from (dr, dtheta, dphi)/ds."""
         J = self.jacobian(S)
         return np.einsum("nij,jn->in", J, dS)
-
-    def radius(self, S):
-        """The Boyer–Lindquist r (N,)."""
-        return S[0]
 
     def axial_killing(self, S):
         """Components of d/dphi: (0, 0, 1)."""

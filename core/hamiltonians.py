@@ -363,6 +363,11 @@ class SphericalSpacetime(MetricHamiltonian):
         self.rg, self.a = rg, a
         self.horizon = horizon
 
+    def captured_soa(self, Q) -> np.ndarray:
+        """Rays at r < 1.01 r+ (N,): the Poincaré step only reaches r+ asymptotically here,
+        and an ingoing photon that close to the horizon cannot come back out."""
+        return Q[1] < 1.01 * self.horizon if self.horizon > 0 else np.zeros(Q.shape[1], bool)
+
     def invariants_soa(self, Q, P):
         """E = -p_t, L = p_phi and the Carter constant (photons, mu = 0)."""
         if self.rg == 0.0:
@@ -456,6 +461,10 @@ class KerrSchild(ExpressionHamiltonian):
         x, y, z = Q[1], Q[2], Q[3]
         rho2 = x * x + y * y + z * z - self.a ** 2
         return np.sqrt(0.5 * (rho2 + np.sqrt(rho2 * rho2 + 4 * self.a ** 2 * z * z)))
+
+    def captured_soa(self, Q) -> np.ndarray:
+        """Rays inside the outer horizon, r < r+ (N,)."""
+        return self.radius_soa(Q) < self.horizon
 
     def invariants_soa(self, Q, P):
         """E = -p_t and L_z = x p_y - y p_x."""

@@ -60,17 +60,23 @@ def render(scene: Scene, camera, *, method: str = "yoshida4", tolerance: float =
     chunks = [(s, min(s + chunk_size, n)) for s in range(0, n, chunk_size)]
     cancel_event = threading.Event()
 
+    lock = threading.Lock()
+
     def cancelled() -> bool:
-        if not cancel_event.is_set() and should_cancel is not None and should_cancel():
-            cancel_event.set()
+        """Poll the caller's should_cancel (serialised: it may touch the UI) and latch."""
+        if not cancel_event.is_set() and should_cancel is not None:
+            with lock:
+                if should_cancel():
+                    cancel_event.set()
         return cancel_event.is_set()
 
     def work(span):
-        if cancel_event.is_set():
+        if cancelled():
             return span, None
         a, b = span
         origins, directions = camera.rays(a, b)
-        return span, _trace_chunk(tracer, origins, directions, with_error, cancel_event.is_set)
+        chunk = _trace_chunk(tracer, origins, directions, with_error, cancelled)
+        return span, (None if cancelled() else chunk)
 
     workers = threads or min(2, os.cpu_count() or 1)
     done = 0
@@ -84,7 +90,7 @@ def render(scene: Scene, camera, *, method: str = "yoshida4", tolerance: float =
                 progress(done, n)
             if cancelled():
                 break
-    was_cancelled = done < n
+    was_cancelled = done < n or cancel_event.is_set()
     return image.result(camera, passes, time.perf_counter() - start_time, was_cancelled,
                         tracer)
 

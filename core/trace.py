@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import integrators
+from . import hamiltonians, integrators
 from .charts import chart_for
 from .intersect import Group, segment_overlaps
 from .observer import medium_momenta, spacetime_momenta
@@ -39,6 +39,10 @@ class Scene:
     volumes: list = field(default_factory=list)
     region_radius: float | None = None
     """Radius of the model's region (world units); default from the model and tolerance."""
+    rotation: object = None
+    """Optional 3x3 matrix: columns = the model's local x, y, z axes in the world (its z
+    must be ``axis``); default: z = axis with x, y chosen. Needed to turn a medium or a
+    user metric about the axis."""
 
     def __post_init__(self):
         self.center = np.asarray(self.center, dtype=np.float64).reshape(3)
@@ -47,6 +51,12 @@ class Scene:
         if not (np.isfinite(norm) and norm > 0):
             raise ValueError(f"scene axis must be a non-zero vector, got {axis.tolist()}")
         self.axis = axis / norm
+        if self.rotation is not None:
+            R = np.asarray(self.rotation, dtype=np.float64).reshape(3, 3)
+            if not np.allclose(R.T @ R, np.eye(3), atol=1e-9) or np.linalg.det(R) < 0:
+                raise ValueError("scene rotation must be a proper rotation matrix")
+            self.rotation = R
+            self.axis = R[:, 2].copy()
 
     @property
     def curved(self) -> bool:
@@ -56,8 +66,10 @@ class Scene:
             return False
         return not (getattr(m, "chart", None) == "cartesian" and getattr(m, "rg", 1.0) == 0.0)
 
-    def rotation(self) -> np.ndarray:
+    def frame(self) -> np.ndarray:
         """3x3 matrix whose columns are the model's local x, y, z axes in the world."""
+        if self.rotation is not None:
+            return self.rotation
         z = self.axis
         helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
         x = helper - z * (helper @ z)
@@ -96,15 +108,12 @@ class Tracer:
     def __init__(self, scene: Scene, options: TraceOptions, extent: float = 1.0):
         self.scene = scene
         self.options = options
-        self.rotation = scene.rotation()
+        self.rotation = scene.frame()
         self.objects = scene.objects if hasattr(scene.objects, "intersect") else \
             Group(list(scene.objects))
         self.volumes = list(scene.volumes)
         model = scene.model
-        backward = getattr(model, "for_backward_tracing", None)
-        if backward is not None:  # rays are followed from the camera into the past
-            model = backward()
-        self.model = model
+        self.model = model = tracing_model(model)
         self.curved = scene.curved
         if not self.curved:
             return
@@ -113,9 +122,7 @@ class Tracer:
         self.mass = 0.5 * float(getattr(model, "rg", 0.0)) if self.spacetime else 0.0
         self.method = integrators.get_method(options.method)
         self.region = _Region.for_model(model, options, extent, scene.region_radius)
-        horizon = float(getattr(model, "horizon", 0.0))
-        self.capture_radius = horizon * (1.0 + 1e-2) if self.chart.name == "spherical" else \
-            horizon
+        self.captured = getattr(model, "captured_soa", None)
         self.step = options.step if options.step else default_step(
             self.method.order, options.tolerance, self.region.length_scale(model))
 
@@ -213,9 +220,8 @@ class Tracer:
             out.ending[idx[~ok]] = ENDING["failed"]
             out.position[idx[~ok]] = world_prev[~ok]
             ended |= ~ok
-            radius = self._radius(Q, S)
-            if self.capture_radius > 0:
-                captured = ~ended & (radius < self.capture_radius)
+            if self.captured is not None:
+                captured = ~ended & self.captured(Q)
                 out.ending[idx[captured]] = ENDING["captured"]
                 out.position[idx[captured]] = world[captured]
                 ended |= captured
@@ -239,11 +245,6 @@ class Tracer:
         Q, P = method.qp(state)
         out.position[idx] = world_prev
         self._finish_energy(out, idx, Q, P, H0)
-
-    def _radius(self, Q, S):
-        """The model's own radial coordinate (Kerr–Schild r, BL r) or the distance."""
-        radius_soa = getattr(self.model, "radius_soa", None)
-        return radius_soa(Q) if radius_soa is not None else self.chart.radius(S)
 
     def _finish_energy(self, out, rows, Q, P, H0):
         with np.errstate(all="ignore"):
@@ -314,6 +315,22 @@ class Tracer:
                 radiance[rows] += trans[rows, None] * r
                 trans[rows] *= t
         return radiance, trans
+
+
+def tracing_model(model):
+    """The chart rays are followed in: regular where rays followed into the past go.
+
+    Kerr–Schild: the outgoing chart (regular on the past horizon). Schwarzschild in
+    (t, r, theta, phi): Kerr–Schild with a = 0, which has the same r, theta, phi but no
+    coordinate pole and no horizon singularity; the picture is the same.
+    """
+    if model is None:
+        return None
+    if getattr(model, "chart", None) == "spherical" and getattr(model, "a", None) == 0.0 \
+            and getattr(model, "rg", 0.0) > 0:
+        model = hamiltonians.kerr(model.rg, 0.0, chart="kerr_schild")
+    backward = getattr(model, "for_backward_tracing", None)
+    return backward() if backward is not None else model
 
 
 def _accumulate(out: RayResults, rows, radiance, trans):

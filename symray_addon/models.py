@@ -40,6 +40,8 @@ def placement(matrix_world: Any | None) -> Placement:
         raise ValueError("The SymRay centre object has zero scale")
     q, r = np.linalg.qr(basis)
     q = q * np.sign(np.diag(r))  # orthonormal rotation closest to the object's axes
+    if np.linalg.det(q) < 0:  # a mirrored centre object: keep a proper rotation, same Z
+        q[:, 0] = -q[:, 0]
     return Placement(m[:3, 3].copy(), q[:, 2].copy(), q)
 
 

@@ -147,7 +147,7 @@ class SYMRAY_OT_render(bpy.types.Operator):
         self._timer = wm.event_timer_add(0.1, window=context.window)
         wm.progress_begin(0, 1000)
         wm.modal_handler_add(self)
-        type(self)._running = True
+        SYMRAY_OT_render._running = True
         self._status(context, "SymRay: starting… (Esc to cancel)")
         return {"RUNNING_MODAL"}
 
@@ -164,7 +164,7 @@ class SYMRAY_OT_render(bpy.types.Operator):
             self._timer = None
         wm.progress_end()
         self._status(context, None)
-        type(self)._running = False
+        SYMRAY_OT_render._running = False
 
     def modal(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
         """Poll the worker on timer events; Esc cancels."""
@@ -173,7 +173,7 @@ class SYMRAY_OT_render(bpy.types.Operator):
             task.cancel()
             self._status(context, "SymRay: cancelling…")
             return {"RUNNING_MODAL"}
-        if event.type != "TIMER" or event.timer is not self._timer:
+        if event.type != "TIMER":
             return {"PASS_THROUGH"}
         if not task.finished:
             context.window_manager.progress_update(int(1000 * task.fraction))

@@ -1,20 +1,16 @@
 """Presets for the seed paper's scenes, and the operator that applies them.
 
 The refractive-index expressions of the seed's mirage figures (Satoh, "Symplectic Ray
-Tracing", Eq. 17 and 18) live in the two constants below and nowhere else. They are used
-with the seed's literal optical Hamiltonian H = n |p|^2 / 2 (``index_form = 'SEED'``), so
-the figures can be reproduced as printed; see DESIGN.md, "Refractive media".
+Tracing", Eq. 17 and 18) live in ``core/presets.py`` and nowhere else. They are written for
+the seed's literal optical Hamiltonian H = n |p|^2 / 2 (``index_form = 'SEED'``), so the
+figures can be reproduced as printed; see DESIGN.md, "Refractive media".
 """
 
 from __future__ import annotations
 
 import bpy
 
-# TODO(lead): replace with the exact expressions of the seed's Eq. 17 and Eq. 18 (over the
-# centre object's local x, y, z). These stand-ins have the right shape: an index that varies
-# with height (inferior / superior mirage), plus a weak horizontal ripple for Eq. 18.
-MIRAGE_EQ17_INDEX = "1 + 0.5*exp(-4*z)"
-MIRAGE_EQ18_INDEX = "0.85 - 0.3*z**3 + 0.03*cos(3*pi*x)"
+from ..core.presets import MIRAGE_EQ17_INDEX, MIRAGE_EQ18_INDEX
 
 MINKOWSKI_METRIC = "-1, 0, 0, 0; 0, 1, 0, 0; 0, 0, 1, 0; 0, 0, 0, 1"
 """Flat spacetime in Cartesian coordinates (seed Eq. 13): the default user metric."""
@@ -34,13 +30,13 @@ PRESETS: dict[str, tuple[str, str, dict[str, object]]] = {
         "Mirage (Eq. 17)",
         "Refractive index of the seed's Eq. 17 with its literal Hamiltonian H = n|p|^2/2",
         {"model": "MEDIUM", "refractive_index": MIRAGE_EQ17_INDEX, "index_form": "SEED",
-         "method": "yoshida4", "tolerance": 1e-6},
+         "use_medium_bounds": False, "method": "yoshida4", "tolerance": 1e-6},
     ),
     "MIRAGE_EQ18": (
         "Mirage (Eq. 18)",
         "Refractive index of the seed's Eq. 18 with its literal Hamiltonian H = n|p|^2/2",
         {"model": "MEDIUM", "refractive_index": MIRAGE_EQ18_INDEX, "index_form": "SEED",
-         "method": "yoshida4", "tolerance": 1e-6},
+         "use_medium_bounds": False, "method": "yoshida4", "tolerance": 1e-6},
     ),
 }
 """identifier -> (label, description, settings to assign to scene.symray)."""

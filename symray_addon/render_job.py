@@ -69,6 +69,7 @@ def prepare(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, use_border: 
         model=model,
         center=tuple(where.center),
         axis=tuple(where.axis),
+        rotation=where.rotation,
         objects=[] if intersector is None else [intersector],
         background=world.world_background(scene, settings.background),
     )

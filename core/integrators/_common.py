@@ -77,6 +77,10 @@ class Method:
         """Positions and momenta (each (n, N)) of a state."""
         return state[0], state[1]
 
+    def accepts(self, option: str) -> bool:
+        """Whether with_options takes this option."""
+        return option in self.options
+
     def with_options(self, **options: Any) -> Method:
         """A copy of this method with some constructor options replaced."""
         unknown = set(options) - set(self.options)

@@ -96,6 +96,10 @@ class Composition(Method):
         """The base method's (Q, P)."""
         return self.base.qp(state)
 
+    def accepts(self, option: str) -> bool:
+        """base, or any option of the base."""
+        return option == "base" or self.base.accepts(option)
+
     def with_options(self, base: str | Method | None = None, **options: Any) -> Composition:
         """A copy with another base and/or options passed on to the base (tol, omega, ...)."""
         new_base = self.base if base is None else resolve_base(base)

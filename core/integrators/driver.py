@@ -36,29 +36,41 @@ class IntegrationResult:
     failed: Any                   # NaN/Inf, implicit solve not converged, step too small
     steps: Any                    # steps taken (accepted steps for dopri5)
     trajectory: Trajectory | None = None
+    captured: Any = None          # reached the model's horizon (frozen there, not failed)
 
 
 class _Run:
-    """Book-keeping of a batch: the active rays' state, and frozen outputs of ended rays."""
+    """Book-keeping of a batch: the active rays' state, and frozen outputs of ended rays.
+
+    mode: "fixed" (s = steps * h), "clock" (s is the last coordinate of the clocked state)
+    or "adaptive" (s tracked per ray in live["s"]).
+    """
 
     def __init__(self, method: Method, H: Any, Henergy: Any, Q: np.ndarray, P: np.ndarray,
-                 n: int, E0: np.ndarray, clock: bool) -> None:
+                 n: int, E0: np.ndarray, mode: str, h: Any) -> None:
         N = Q.shape[1]
-        self.method, self.H, self.Henergy, self.n, self.clock = method, H, Henergy, n, clock
+        self.method, self.H, self.Henergy, self.n, self.mode = method, H, Henergy, n, mode
+        self.capture = capture_test(Henergy)
         self.state = method.init(H, Q, P)
         self.act = np.arange(N)
         self.out = {"q": Q[:n].copy(), "p": P[:n].copy(), "s": np.zeros(N),
                     "err": np.zeros(N), "steps": np.zeros(N, dtype=np.int64),
-                    "failed": np.zeros(N, dtype=bool)}
+                    "failed": np.zeros(N, dtype=bool), "captured": np.zeros(N, dtype=bool)}
         self.live = {"s": np.zeros(N), "err": np.zeros(N), "E0": E0,
-                     "steps": np.zeros(N, dtype=np.int64)}
+                     "steps": np.zeros(N, dtype=np.int64),
+                     "h": np.broadcast_to(np.asarray(h, dtype=np.float64), (N,)).copy()}
+        self.h = self.live["h"] if np.ndim(h) else float(h)  # the fixed step
         self.record_list: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
     def s_now(self) -> np.ndarray:
         """(M,) parameter of the active rays."""
-        return self.method.qp(self.state)[0][-1] if self.clock else self.live["s"]
+        if self.mode == "clock":
+            return self.method.qp(self.state)[0][-1]
+        if self.mode == "fixed":
+            return self.live["steps"] * self.live["h"]
+        return self.live["s"]
 
-    def retire(self, mask: np.ndarray, failed: bool) -> None:
+    def retire(self, mask: np.ndarray, failed: bool, captured: bool = False) -> None:
         """Freeze the active rays `mask` (bool, (M,)) at their current state."""
         ids = self.act[mask]
         Q, P = self.method.qp(self.state)
@@ -69,9 +81,12 @@ class _Run:
         out["err"][ids] = self.live["err"][mask]
         out["steps"][ids] = self.live["steps"][mask]
         out["failed"][ids] = failed
+        out["captured"][ids] = captured
         keep = ~mask
         self.state = tuple(a[..., keep] for a in self.state)
         self.live = {k: v[keep] for k, v in self.live.items()}
+        if np.ndim(self.h):
+            self.h = self.live["h"]
         self.act = self.act[keep]
         self.H = restrict(self.H, keep)
         self.Henergy = restrict(self.Henergy, keep)
@@ -97,24 +112,34 @@ class _Run:
         s[self.act] = self.s_now()
         self.record_list.append((s, q, p))
 
+    def check_capture(self) -> None:
+        """Freeze rays that have crossed the model's capture surface (captured, not failed)."""
+        if self.capture is None or self.act.size == 0:
+            return
+        with np.errstate(all="ignore"):
+            inside = self.capture(self.method.qp(self.state)[0][:self.n])
+        if inside.any():
+            self.check_energy()
+            inside = self.capture(self.method.qp(self.state)[0][:self.n])
+            self.retire(inside, failed=False, captured=True)
+
     def finish(self) -> None:
         """Freeze the rays still active (not failed)."""
         if self.act.size:
             self.retire(np.ones(self.act.size, dtype=bool), failed=False)
 
 
-def _run_fixed(run: _Run, h: Any, steps: int, energy_every: int, record_every: int) -> None:
-    """Fixed steps h (float or per-ray (N,) in run.live['h'])."""
+def _run_fixed(run: _Run, steps: int, energy_every: int, record_every: int) -> None:
+    """`steps` fixed steps run.h (float or per ray)."""
     checked = True
     for k in range(1, steps + 1):
-        new, ok = run.method.step(run.H, run.state, run.live.get("h", h))
+        new, ok = run.method.step(run.H, run.state, run.h)
         if not ok.all():
             run.retire(~ok, failed=True)
             new = tuple(a[..., ok] for a in new)
         run.state = new
-        if not run.clock:
-            run.live["s"] += run.live.get("h", h)
         run.live["steps"] += 1
+        run.check_capture()
         checked = bool(energy_every) and k % energy_every == 0
         if checked:
             run.check_energy()
@@ -126,31 +151,35 @@ def _run_fixed(run: _Run, h: Any, steps: int, energy_every: int, record_every: i
         run.check_energy()
 
 
-def _run_dopri(run: _Run, s_end: np.ndarray, max_steps: int, energy_every: int,
-               record_every: int) -> None:
-    """Adaptive per-ray steps up to s_end with the method's attempt()/factor()."""
+def _run_adaptive(run: _Run, s_end: np.ndarray, max_steps: int, energy_every: int,
+                  record_every: int) -> None:
+    """Per-ray step sizes up to s_end (either sign) with the method's attempt()/factor()."""
     method = run.method
-    run.live["s_end"] = s_end
-    run.live["h_min"] = 1e-13 * np.abs(s_end)
+    live = run.live
+    live["s_end"] = s_end
+    live["sign"] = np.where(s_end < 0, -1.0, 1.0)
+    live["h"] = np.abs(live["h"])
+    live["h_min"] = 1e-13 * np.abs(s_end)
     for k in range(1, max_steps + 1):
         live = run.live
-        s = live["s"]
-        rest = live["s_end"] - s
+        s, rest = live["s"], np.abs(live["s_end"] - live["s"])
         hh = np.minimum(live["h"], rest)
-        new, err, ok = method.attempt(run.H, run.state, hh)
+        new, err, ok = method.attempt(run.H, run.state, hh * live["sign"])
         acc = ok & (err <= 1.0)
-        last = acc & (hh >= rest)
+        arrived = acc & (hh >= rest)
         run.state = tuple(np.where(acc, a1, a0) for a1, a0 in zip(new, run.state, strict=True))
-        live["s"] = np.where(last, live["s_end"], np.where(acc, s + hh, s))
+        live["s"] = np.where(arrived, live["s_end"], np.where(acc, s + hh * live["sign"], s))
         live["steps"] += acc
         live["h"] = hh * method.factor(err)
+        live["arrived"] = arrived
+        run.check_capture()
         if energy_every and k % energy_every == 0:
             run.check_energy()
         if record_every and k % record_every == 0:
             run.record()
-        if (run.live["s"] >= run.live["s_end"]).any():
+        if run.live["arrived"].any():
             run.check_energy()  # the final state of the rays that arrive
-            run.retire(run.live["s"] >= run.live["s_end"], failed=False)
+            run.retire(run.live["arrived"], failed=False)
         tiny = run.live["h"] < run.live["h_min"]
         if tiny.any():
             run.retire(tiny, failed=True)
@@ -158,6 +187,11 @@ def _run_dopri(run: _Run, s_end: np.ndarray, max_steps: int, energy_every: int,
             return
     run.check_energy()
     run.retire(np.ones(run.act.size, dtype=bool), failed=True)  # out of steps
+
+
+def capture_test(H: Any) -> Any:
+    """Q (n, N) -> (N,) bool: inside the model's horizon (H.captured_soa); None if none."""
+    return getattr(H, "captured_soa", None)
 
 
 def _to_soa(q0: Any, p0: Any, dim: int | None) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -187,38 +221,36 @@ def integrate(H: Any, q0: Any, p0: Any, step: float | np.ndarray = 0.01, steps: 
     s = step * steps adaptively (rtol = atol = tol unless given as options; at most
     `max_steps` attempts per ray, default 10 * steps + 100). `tol` is also the implicit
     solver tolerance of implicit methods. energy_every: check |H − H0| every that many steps
-    (0: only at the end). Further keyword options go to the method (get_method).
+    (0: only at the end). Rays are frozen where they fail (res.failed) or cross the model's
+    horizon (res.captured, see capture_test). Further keyword options go to the method
+    (get_method), e.g. base="implicit_midpoint", omega=20.0, max_iter=20.
     """
     meth = get_method(method, **options)
     is_rk_adaptive = hasattr(meth, "attempt")
-    if tol is not None and "tol" in meth.options:
-        meth = meth.with_options(tol=tol)
-    elif tol is not None and is_rk_adaptive:
+    if tol is not None and is_rk_adaptive:
         meth = meth.with_options(rtol=tol, **({} if "atol" in options else {"atol": tol}))
+    elif tol is not None and getattr(meth, "accepts", lambda _: False)("tol"):
+        meth = meth.with_options(tol=tol)
     Q, P, single = _to_soa(q0, p0, getattr(H, "dim", None))
     n, N = Q.shape
     with np.errstate(all="ignore"):
         E0 = H.value_soa(Q, P)
-    clock = adaptive and not is_rk_adaptive
+    mode = "adaptive" if is_rk_adaptive else "clock" if adaptive else "fixed"
     Hk = H
-    if clock:
+    if mode == "clock":
         Hk = PoincareTransformed(Clocked(H), 0.0)
         Q = np.concatenate((Q, np.zeros((1, N))))
         P = np.concatenate((P, -E0[None]))
-    run = _Run(meth, Hk, H, Q, P, n, E0.copy(), clock)
-    if np.ndim(step):
-        run.live["h"] = np.broadcast_to(np.asarray(step, dtype=np.float64), (N,)).copy()
+    run = _Run(meth, Hk, H, Q, P, n, E0.copy(), mode, step)
     if not np.isfinite(E0).all():
         run.retire(~np.isfinite(E0), failed=True)
     if record_every:
         run.record()
-    if is_rk_adaptive:
-        run.live["h"] = np.broadcast_to(np.asarray(step, dtype=np.float64), (N,)).copy()
-        s_end = run.live["h"] * steps
-        _run_dopri(run, s_end, 10 * steps + 100 if max_steps is None else max_steps,
-                   energy_every, record_every or 0)
+    if mode == "adaptive":
+        _run_adaptive(run, run.live["h"] * steps, 10 * steps + 100 if max_steps is None
+                      else max_steps, energy_every, record_every or 0)
     else:
-        _run_fixed(run, step, steps, energy_every, record_every or 0)
+        _run_fixed(run, steps, energy_every, record_every or 0)
     run.finish()
     return _result(run, single)
 
@@ -235,5 +267,7 @@ def _result(run: _Run, single: bool) -> IntegrationResult:
     q, p = out["q"].T.copy(), out["p"].T.copy()
     if single:
         return IntegrationResult(q[0], p[0], float(out["s"][0]), float(out["err"][0]),
-                                 bool(out["failed"][0]), int(out["steps"][0]), traj)
-    return IntegrationResult(q, p, out["s"], out["err"], out["failed"], out["steps"], traj)
+                                 bool(out["failed"][0]), int(out["steps"][0]), traj,
+                                 bool(out["captured"][0]))
+    return IntegrationResult(q, p, out["s"], out["err"], out["failed"], out["steps"], traj,
+                             out["captured"])

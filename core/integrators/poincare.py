@@ -31,6 +31,8 @@ class PoincareTransformed:
 
     def subset(self, keep: np.ndarray) -> PoincareTransformed:
         """K for the rays keep (bool mask or index array) of the current batch."""
+        if self.H0.ndim == 0 and not hasattr(self.H, "subset"):
+            return self
         H0 = self.H0 if self.H0.ndim == 0 else self.H0[keep]
         return PoincareTransformed(restrict(self.H, keep), H0)
 

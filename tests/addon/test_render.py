@@ -371,3 +371,72 @@ def test_image_resized_and_reused(addon, scene, helpers):
     second = output.write_image("SymRay Result", rgba)
     assert second == first and tuple(second.size) == (3, 5)
     np.testing.assert_array_equal(helpers.image_array("SymRay Result"), rgba)
+
+
+def test_film_transparent_clears_the_background(scene, helpers):
+    flat_scene(scene, helpers)
+    scene.render.film_transparent = True
+    assert bpy.ops.symray.render() == {"FINISHED"}
+    image = helpers.image_array(scene.symray.image_name)
+    sky = np.all(np.abs(image[..., :3] - WORLD[:3]) < 1e-6, axis=2)
+    assert not sky.any()
+    assert (image[..., 3] == 0).any() and (image[..., 3] == 1).any()
+
+
+class _FakeWM:
+    def __init__(self):
+        self.progress: list[int] = []
+        self.ended = False
+
+    def progress_update(self, value: int) -> None:
+        self.progress.append(value)
+
+    def event_timer_remove(self, _timer) -> None:
+        pass
+
+    def progress_end(self) -> None:
+        self.ended = True
+
+
+def _drive_modal(addon, scene, cancel: bool):
+    """Run the modal operator's event handling by hand (the bpy wheel has no event loop)."""
+    from types import SimpleNamespace
+
+    operator = addon.module("symray_addon.operator")
+    job = addon.module("symray_addon.render_job").prepare(
+        scene, bpy.context.evaluated_depsgraph_get())
+    reports: list = []
+    status: list = []
+    wm = _FakeWM()
+    context = SimpleNamespace(window_manager=wm, scene=scene,
+                              workspace=SimpleNamespace(status_text_set=status.append))
+    cls = operator.SYMRAY_OT_render
+    fake = SimpleNamespace(_task=operator.RenderTask(job), _timer=object(),
+                           _image_name=scene.symray.image_name, _exr_path="",
+                           report=lambda kind, text: reports.append((kind, text)))
+    fake._status = lambda ctx, text: cls._status(ctx, text)
+    fake._cleanup = lambda ctx: cls._cleanup(fake, ctx)
+    if cancel:
+        esc = SimpleNamespace(type="ESC", value="PRESS")
+        assert cls.modal(fake, context, esc) == {"RUNNING_MODAL"}
+    fake._task.start()
+    timer = SimpleNamespace(type="TIMER", value="NOTHING")
+    mouse = SimpleNamespace(type="MOUSEMOVE", value="NOTHING")
+    assert cls.modal(fake, context, mouse) == {"PASS_THROUGH"}
+    fake._task.join(120)
+    outcome = cls.modal(fake, context, timer)
+    return outcome, reports, wm, status
+
+
+def test_modal_operator_finishes_and_cancels(addon, scene, helpers):
+    flat_scene(scene, helpers)
+    assert bpy.ops.symray.render() == {"FINISHED"}
+    before = helpers.image_array(scene.symray.image_name).copy()
+    outcome, reports, wm, status = _drive_modal(addon, scene, cancel=True)
+    assert outcome == {"CANCELLED"} and wm.ended and status[-1] is None
+    assert reports and reports[-1][0] == {"WARNING"}
+    np.testing.assert_array_equal(helpers.image_array(scene.symray.image_name), before)
+    scene.render.resolution_x = 32
+    outcome, reports, wm, status = _drive_modal(addon, scene, cancel=False)
+    assert outcome == {"FINISHED"} and reports[-1][0] == {"INFO"}
+    assert helpers.image_array(scene.symray.image_name).shape == (48, 32, 4)
