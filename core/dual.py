@@ -87,20 +87,32 @@ class Dual:
         return Dual(value, _scale(self.d, value * np.log(base)))
 
 
+def _times(g, factor):
+    """g * factor, where a seed g = 1.0 (a plain float) costs no array operation."""
+    return factor if g.__class__ is float and g == 1.0 else g * factor
+
+
 def _scale(d: Partials, factor) -> Partials:
     """Partials times a common factor (the chain rule for a unary function)."""
-    return {k: g * factor for k, g in d.items()}
+    return {k: _times(g, factor) for k, g in d.items()}
 
 
 def _combine(da: Partials, fa, db: Partials, fb) -> Partials:
     """fa * da + fb * db, touching only the partials that exist."""
-    out = {k: g * fa for k, g in da.items()}
+    out = {k: _times(g, fa) for k, g in da.items()}
     for k, g in db.items():
         if k in out:
-            out[k] = out[k] + g * fb
+            out[k] = out[k] + _times(g, fb)
         else:
-            out[k] = g * fb
+            out[k] = _times(g, fb)
     return out
+
+
+def subset(x, idx):
+    """The rays idx (last axis) of a Dual, an array or a float (floats are shared)."""
+    if isinstance(x, Dual):
+        return Dual(subset(x.v, idx), {k: subset(g, idx) for k, g in x.d.items()})
+    return x[..., idx] if isinstance(x, np.ndarray) and x.ndim else x
 
 
 def value_of(x):

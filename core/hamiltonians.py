@@ -10,13 +10,52 @@ Signature (-, +, +, +) throughout; photons have H = 1/2 g^ij p_i p_j = 0.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from . import dual
 from . import expressions as ex
 from .dual import Dual
+
+BLOCK = 8192
+"""Evaluations of more rays than 2 * BLOCK go block by block: the temporaries of one block
+stay small (numpy temporaries of a few hundred kB are allocated fresh, page by page, and
+cost more than the arithmetic on them), and the outputs are filled in place."""
+
+
+def blocked(method):
+    """Run a model's SoA evaluation (self, Q, *per-ray args) in blocks of BLOCK rays.
+
+    Arguments that are arrays with rays on the last axis are cut into blocks; the results
+    (an array, or a tuple of arrays and Nones) are assembled along the last axis.
+    """
+
+    @functools.wraps(method)
+    def wrapper(self, Q, *args, **kwargs):
+        n_rays = Q.shape[-1]
+        if n_rays <= 2 * BLOCK:
+            return method(self, Q, *args, **kwargs)
+        out = None
+        for start in range(0, n_rays, BLOCK):
+            cut = slice(start, min(start + BLOCK, n_rays))
+            part = method(self, Q[..., cut], *(
+                a[..., cut] if isinstance(a, np.ndarray) and a.ndim and a.shape[-1] == n_rays
+                else a for a in args), **kwargs)
+            single = not isinstance(part, tuple)
+            parts = (part,) if single else part
+            if out is None:
+                out = tuple(None if x is None else np.empty(np.shape(x)[:-1] + (n_rays,))
+                            for x in parts)
+            for o, x in zip(out, parts, strict=True):
+                if o is not None:
+                    o[..., cut] = x
+        return out[0] if single else out
+
+    return wrapper
+
 
 # ----------------------------------------------------------------------------------
 # base class
@@ -45,11 +84,13 @@ class Hamiltonian:
         """H at each ray, (N,)."""
         raise NotImplementedError
 
+    @blocked
     def gradient_soa(self, Q, P, wrt: str = "qp"):
         """(dH/dq, dH/dp), each (n, N); the half not in ``wrt`` is None."""
         _, dq, dp = self._value_gradient(Q, P, wrt)
         return dq, dp
 
+    @blocked
     def value_gradient_soa(self, Q, P):
         """(H, dH/dq, dH/dp) in one evaluation."""
         return self._value_gradient(Q, P, "qp")
@@ -135,6 +176,28 @@ def _value_and_partials(result, n: int, n_rays: int, offset: int):
     return value, grad
 
 
+class FrozenQ:
+    """dH/dq at fixed positions Q for any momenta P: the q-dependence evaluated once.
+
+    For H quadratic in p (a metric), an implicit kick P' = P - c dH/dq(Q, P') iterates over
+    P' at fixed Q. The model's coefficients and their q-derivatives (dual numbers over q,
+    the costly part) are its *form* at Q, computed once; each iterate then costs a few
+    products in p. With H0 given, the gradient is that of K = g (H - H0) (Poincaré).
+    """
+
+    def __init__(self, apply, form, H0=None):
+        self.apply, self.form, self.H0 = apply, form, H0
+
+    def grad_q(self, P: np.ndarray) -> np.ndarray:
+        """dH/dq (or dK/dq) at the frozen Q for momenta P, (n, N)."""
+        return self.apply(self.form, P, True, self.H0)[1]
+
+    def subset(self, idx) -> FrozenQ:
+        """The same for the rays idx."""
+        H0 = self.H0 if self.H0 is None or np.ndim(self.H0) == 0 else self.H0[idx]
+        return FrozenQ(self.apply, [dual.subset(x, idx) for x in self.form], H0)
+
+
 # ----------------------------------------------------------------------------------
 # H given as one expression of (q, p)
 
@@ -177,6 +240,7 @@ class ExpressionHamiltonian(Hamiltonian):
             bad = mask if bad is None else (bad | mask)
         return None if bad is None else np.broadcast_to(bad, (n_rays,))
 
+    @blocked
     def value_soa(self, Q, P):
         h, bad = self._evaluate(Q, P, "")
         h = np.array(np.broadcast_to(h, (Q.shape[-1],)), dtype=np.float64)
@@ -283,6 +347,49 @@ class MetricHamiltonian(Hamiltonian):
         values = self.program.evaluate(env)
         return [values[k] for k in self._outputs]
 
+    def _form(self, Q, seed: bool, scaled: bool = False):
+        """[*entries g^ij, time scale g(q) or None]: values, or Duals over q if seed."""
+        entries = self.inverse_metric_soa(Q, seed)
+        scale = None
+        if scaled and self._time_scale is not None:
+            env = {name: (Dual.variable(Q[i], i) if seed else Q[i])
+                   for i, name in enumerate(self.coords)}
+            (scale,) = self._time_scale.evaluate(env)
+        return [*entries, scale]
+
+    def _apply(self, form, P, need_q: bool, H0=None):
+        """(H, dH/dq or None, dH/dp) from a form; with H0: K = g (H - H0) and its gradient."""
+        entries, scale = form[:-1], form[-1]
+        n, n_rays = self.dim, P.shape[-1]
+        h = np.zeros(n_rays)
+        dq = np.zeros((n, n_rays)) if need_q else None
+        dp = np.zeros((n, n_rays))
+        for (i, j), g in zip(self.pairs, entries, strict=True):
+            w = 0.5 if i == j else 1.0
+            gv = g.v if isinstance(g, Dual) else g
+            pipj = P[i] * P[j]
+            h += w * gv * pipj
+            dp[i] += gv * P[j]
+            if i != j:
+                dp[j] += gv * P[i]
+            if need_q and isinstance(g, Dual):
+                wp = w * pipj
+                for k, dg in g.d.items():
+                    dq[k] += dg * wp
+        if H0 is None:
+            return h, dq, dp
+        dh = h - H0
+        if scale is None:
+            return dh, dq, dp
+        sv = scale.v if isinstance(scale, Dual) else scale
+        dp *= sv
+        if need_q:
+            dq *= sv
+            for k, dg in (scale.d.items() if isinstance(scale, Dual) else ()):
+                dq[k] += dg * dh
+        return sv * dh, dq, dp
+
+    @blocked
     def value_soa(self, Q, P):
         n_rays = Q.shape[-1]
         h = np.zeros(n_rays)
@@ -292,26 +399,19 @@ class MetricHamiltonian(Hamiltonian):
         return h
 
     def _value_gradient(self, Q, P, wrt):
-        n, n_rays = self.dim, Q.shape[-1]
         need_q = "q" in wrt
-        entries = self.inverse_metric_soa(Q, seed=need_q)
-        h = np.zeros(n_rays)
-        dq = np.zeros((n, n_rays)) if need_q else None
-        dp = np.zeros((n, n_rays)) if "p" in wrt else None
-        for (i, j), g in zip(self.pairs, entries, strict=True):
-            w = 0.5 if i == j else 1.0
-            gv = g.v if isinstance(g, Dual) else g
-            pipj = P[i] * P[j]
-            h += w * gv * pipj
-            if dp is not None:
-                dp[i] += gv * P[j]
-                if i != j:
-                    dp[j] += gv * P[i]
-            if need_q and isinstance(g, Dual):
-                wp = w * pipj
-                for k, dg in g.d.items():
-                    dq[k] += dg * wp
-        return h, dq, dp
+        h, dq, dp = self._apply(self._form(Q, need_q), P, need_q)
+        return h, dq, (dp if "p" in wrt else None)
+
+    @blocked
+    def poincare_soa(self, Q, P, H0, wrt: str = "qp"):
+        """K = g (H - H0), dK/dq (None unless "q" in wrt) and dK/dp, in one evaluation."""
+        need_q = "q" in wrt
+        return self._apply(self._form(Q, need_q, scaled=True), P, need_q, H0)
+
+    def frozen_q(self, Q, H0=None) -> FrozenQ:
+        """dH/dq at Q for any momenta (dK/dq of K = g (H - H0) with H0), see FrozenQ."""
+        return FrozenQ(self._apply, self._form(Q, True, scaled=H0 is not None), H0)
 
     def partials_allocated(self, q, p) -> set[str]:
         """Coordinates whose partial derivative the metric's evaluation carries."""
@@ -430,7 +530,14 @@ def kerr(rg: float = 1.0, a: float = 0.0, chart: str = "boyer_lindquist",
 
 
 class KerrSchild(ExpressionHamiltonian):
-    """Kerr in Cartesian Kerr–Schild coordinates: g^uv = eta^uv - f l^u l^v (DESIGN.md)."""
+    """Kerr in Cartesian Kerr–Schild coordinates: g^uv = eta^uv - f l^u l^v (DESIGN.md).
+
+    H is kept as text (``self.program``, the definition), but evaluated in its Kerr–Schild
+    form H = 1/2 eta^uv p_u p_v - 1/2 f (k.p)^2, where l.p = k(q).p is linear in p: f, the
+    k_i and r are dual numbers over (x, y, z) only (t is cyclic; no momentum seeds), and
+    dH/dp = eta p - f (k.p) k,  dH/dq = -1/2 (k.p)^2 df - f (k.p) p_i dk_i.
+    The Poincaré time scale g = r comes out of the same evaluation.
+    """
 
     kind = "spacetime"
     chart = "kerr_schild"
@@ -439,22 +546,111 @@ class KerrSchild(ExpressionHamiltonian):
         # ingoing: l_mu = (1, l_i(a)), regular on the future horizon; outgoing: the time
         # reverse of ingoing with spin -a, l_mu = (-1, l_i(-a)), regular on the past horizon
         # (the one rays traced backwards from a camera cross).
-        lp = ("p_t + ((r*x - a*y)*p_x + (r*y + a*x)*p_y)/ra2 + z*p_z/r" if outgoing else
-              "-p_t + ((r*x + a*y)*p_x + (r*y - a*x)*p_y)/ra2 + z*p_z/r")
+        s = "-" if outgoing else "+"
+        o = "+" if outgoing else "-"
+        k = [f"(r*x {s} a*y)/ra2", f"(r*y {o} a*x)/ra2", "z/r"]
+        lp = f"{'' if outgoing else '-'}p_t + ({k[0]})*p_x + ({k[1]})*p_y + ({k[2]})*p_z"
         defs = [("rho2", "x**2 + y**2 + z**2 - a**2"),
                 ("r2", "0.5*(rho2 + sqrt(rho2**2 + 4*a**2*z**2))"), ("r", "sqrt(r2)"),
-                ("f", "rg*r*r2/(r2**2 + a**2*z**2)"), ("ra2", "r2 + a**2"), ("lp", lp)]
+                ("f", "rg*r*r2/(r2**2 + a**2*z**2)"), ("ra2", "r2 + a**2")]
         text = "0.5*(-p_t**2 + p_x**2 + p_y**2 + p_z**2 - f*lp**2)"
         super().__init__(text, ("t", "x", "y", "z"), ("p_t", "p_x", "p_y", "p_z"),
-                         parameters={"rg": rg, "a": a}, definitions=defs,
+                         parameters={"rg": rg, "a": a}, definitions=defs + [("lp", lp)],
                          time_scale="sqrt(0.5*(x**2 + y**2 + z**2 - a**2 + "
                                     "sqrt((x**2 + y**2 + z**2 - a**2)**2 + 4*a**2*z**2)))")
         self.rg, self.a, self.horizon = rg, a, horizon
         self.outgoing = outgoing
+        self._k_t = 1.0 if outgoing else -1.0
+        self._form = ex.compile_program(["f", *k, "r"], self.coords, self.parameters, defs)
 
     def for_backward_tracing(self) -> KerrSchild:
         """The outgoing chart: rays followed into the past cross the past horizon smoothly."""
         return self if self.outgoing else KerrSchild(self.rg, self.a, self.horizon, True)
+
+    # --- evaluation in Kerr–Schild form ---
+    def _form_soa(self, Q, seed: bool):
+        """f, k_x, k_y, k_z, r at Q: Duals over x, y, z (indices 1..3) if seed, else arrays."""
+        env = {"t": Q[0]}
+        for i, name in ((1, "x"), (2, "y"), (3, "z")):
+            env[name] = Dual.variable(Q[i], i) if seed else Q[i]
+        return self._form.evaluate(env)
+
+    def _apply(self, form, P, need_q: bool, H0=None):
+        """H and its gradient (dH/dq None unless need_q) from the form [f, k_x, k_y, k_z, r].
+
+        With H0 given: the Poincaré-transformed K = r (H - H0) and its gradient instead.
+        """
+        f, kx, ky, kz, r = form
+        if need_q:
+            (f, df), (kx, dkx), (ky, dky), (kz, dkz), (r, dr) = (
+                (d.v, d.d) for d in (f, kx, ky, kz, r))
+        else:
+            f, kx, ky, kz, r = (dual.value_of(d) for d in form)
+        kt = self._k_t
+        kp = kt * P[0] + kx * P[1] + ky * P[2] + kz * P[3]
+        fkp = f * kp
+        h = P[1] * P[1] + P[2] * P[2] + P[3] * P[3] - P[0] * P[0] - fkp * kp
+        h *= 0.5
+        dh = None if H0 is None else h - H0
+        dp = np.empty_like(P)
+        np.multiply(fkp, -kt, out=dp[0])
+        dp[0] -= P[0]
+        for i, k in ((1, kx), (2, ky), (3, kz)):
+            np.multiply(fkp, k, out=dp[i])
+            np.subtract(P[i], dp[i], out=dp[i])
+        if dh is not None:
+            dp *= r
+        dq = None
+        if need_q:
+            dq = np.empty_like(P)
+            dq[0] = 0.0
+            half_kp2 = -0.5 * kp * kp
+            for j in (1, 2, 3):
+                row = dq[j]
+                row[:] = 0.0
+                if j in df:
+                    np.multiply(half_kp2, df[j], out=row)
+                acc = None
+                for i, dk in ((1, dkx), (2, dky), (3, dkz)):
+                    if j in dk:
+                        term = P[i] * dk[j]
+                        acc = term if acc is None else acc + term
+                if acc is not None:
+                    acc *= fkp
+                    row -= acc
+                if dh is not None:
+                    row *= r
+                    if j in dr:
+                        row += dr[j] * dh
+        return (h if dh is None else r * dh), dq, dp
+
+    def _kernel(self, Q, P, need_q: bool, H0=None):
+        return self._apply(self._form_soa(Q, need_q), P, need_q, H0)
+
+    def frozen_q(self, Q, H0=None) -> FrozenQ:
+        """dH/dq at Q for any momenta (dK/dq of K = r (H - H0) with H0), see FrozenQ."""
+        return FrozenQ(self._apply, self._form_soa(Q, True), H0)
+
+    @blocked
+    def value_soa(self, Q, P):
+        return self._kernel(Q, P, False)[0]
+
+    def _value_gradient(self, Q, P, wrt):
+        h, dq, dp = self._kernel(Q, P, "q" in wrt)
+        return h, dq, (dp if "p" in wrt else None)
+
+    def time_scale_soa(self, Q):
+        """g = r (Kerr–Schild radius) and dr/dq."""
+        r = self._form_soa(Q, True)[4]
+        dr = np.zeros_like(Q)
+        for j, g in r.d.items():
+            dr[j] = g
+        return np.array(r.v), dr
+
+    @blocked
+    def poincare_soa(self, Q, P, H0, wrt: str = "qp"):
+        """K = r (H - H0), dK/dq (None unless "q" in wrt) and dK/dp, in one evaluation."""
+        return self._kernel(Q, P, "q" in wrt, H0)
 
     def radius_soa(self, Q):
         """Kerr–Schild r > 0 from r^4 - (x^2+y^2+z^2-a^2) r^2 - a^2 z^2 = 0."""

@@ -57,7 +57,7 @@ def spacetime_momenta(model, chart, S: np.ndarray, D: np.ndarray):
     V += u[:, :, None] * np.einsum("nij,ni,nja->na", g, u, V)[:, None, :]  # project out u
     E = _orthonormalize(g, V)
     k = -u + np.einsum("nia,an->ni", E, D)
-    P = np.einsum("nij,nj->in", g, k)
+    P = np.ascontiguousarray(np.einsum("nij,nj->in", g, k))
     return Q, P
 
 

@@ -20,11 +20,12 @@ import numpy as np
 
 from .imageio import FAILED_COLOR
 from .sky import Background
-from .trace import ENDING, RayResults, Scene, TraceOptions, Tracer
+from .trace import DEFAULT_METHOD, ENDING, RayResults, Scene, TraceOptions, Tracer
 
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
 ALL_PASSES = ("error", "steps", "ending")
+_MIN_CHUNK = 2048
 
 
 @dataclass
@@ -37,7 +38,7 @@ class RenderResult:
     cancelled: bool = False
 
 
-def render(scene: Scene, camera, *, method: str = "yoshida4", tolerance: float = 1e-8,
+def render(scene: Scene, camera, *, method: str = DEFAULT_METHOD, tolerance: float = 1e-8,
            step: float | None = None, max_steps: int = 20_000,
            passes: Sequence[str] = ALL_PASSES, chunk_size: int = 16_384,
            threads: int | None = None,
@@ -57,7 +58,11 @@ def render(scene: Scene, camera, *, method: str = "yoshida4", tolerance: float =
     n = camera.n_pixels
     with_error = "error" in passes and tracer.curved
     image = _Buffers(n, with_error)
-    chunks = [(s, min(s + chunk_size, n)) for s in range(0, n, chunk_size)]
+    workers = threads or min(2, os.cpu_count() or 1)
+    # at least two chunks per worker (a small image still keeps every core busy), but not
+    # below _MIN_CHUNK rays: per-step work is Python overhead on small batches
+    size = max(_MIN_CHUNK, min(chunk_size, -(-n // (2 * workers))))
+    chunks = [(s, min(s + size, n)) for s in range(0, n, size)]
     cancel_event = threading.Event()
 
     lock = threading.Lock()
@@ -78,7 +83,6 @@ def render(scene: Scene, camera, *, method: str = "yoshida4", tolerance: float =
         chunk = _trace_chunk(tracer, origins, directions, with_error, cancelled)
         return span, (None if cancelled() else chunk)
 
-    workers = threads or min(2, os.cpu_count() or 1)
     done = 0
     with ThreadPoolExecutor(max_workers=workers) as pool:
         for span, chunk in pool.map(work, chunks):
@@ -170,6 +174,7 @@ class _Buffers:
             "error_max": float(errs.max()) if errs.size and self.with_error else 0.0,
             "energy_error_max": float(np.max(self.energy[traced], initial=0.0)),
             "endings": counts, "step": getattr(tracer, "step", None),
+            "region_radius": getattr(getattr(tracer, "region", None), "radius", None),
             "method": tracer.options.method if tracer.curved else "straight",
         }
 

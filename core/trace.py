@@ -24,7 +24,12 @@ from .observer import medium_momenta, spacetime_momenta
 ENDING = {"escaped": 0, "captured": 1, "hit": 2, "failed": 3, "max_steps": 4}
 """Ending codes of the ``ending`` pass (int8)."""
 
+DEFAULT_METHOD = "gauss4"
+"""The default integrator of images: around a black hole Gauss–Legendre 4 reaches a given
+escape accuracy at about a third of yoshida4's cost (smaller error constant, so fewer,
+longer steps; see ERROR_CONSTANTS and examples/bench_perf.py)."""
 _FAR = 1e12  # length of the straight segment cast after a ray leaves the model's region
+_SPLITS = 3  # a failed step is retried as 2, then 4, then 8 shorter steps
 
 
 @dataclass
@@ -81,7 +86,7 @@ class Scene:
 class TraceOptions:
     """How rays are integrated."""
 
-    method: str = "yoshida4"
+    method: str = DEFAULT_METHOD
     tolerance: float = 1e-8
     step: float | None = None
     max_steps: int = 20_000
@@ -123,8 +128,10 @@ class Tracer:
         self.method = integrators.get_method(options.method)
         self.region = _Region.for_model(model, options, extent, scene.region_radius)
         self.captured = getattr(model, "captured_soa", None)
+        self._near = self._local_box()
         self.step = options.step if options.step else default_step(
-            self.method.order, options.tolerance, self.region.length_scale(model))
+            self.method, options.tolerance, self.region.length_scale(model),
+            scaled=self.region.scaled(model))
 
     # --- public ----------------------------------------------------------------------
     def trace(self, origins: np.ndarray, directions: np.ndarray, step: float | None = None,
@@ -183,7 +190,12 @@ class Tracer:
 
     # --- the integration ---------------------------------------------------------------
     def _integrate(self, rows, X, D, out: RayResults, h: float, cancel):
-        """Follow rays from local positions X (3, M) along local directions D (3, M)."""
+        """Follow rays from local positions X (3, M) along local directions D (3, M).
+
+        Per step, everything is done in the model's local frame on (3, M) arrays; world
+        coordinates are computed only for the rays that need them: segments near geometry
+        (a local box around the objects and volumes), and rays that end.
+        """
         model, chart, off = self.model, self.chart, self.chart.offset
         S = chart.to_coords(X)
         if self.spacetime:
@@ -195,56 +207,107 @@ class Tracer:
         method = self.method
         state = method.init(K, Q, P)
         idx = rows.copy()
-        world_prev = self._to_world(X.T)
-        local_prev = X.T.copy()
-        max_steps = self.options.max_steps
-        for step in range(1, max_steps + 1):
+        X_prev = X
+        step = 0
+        for step in range(1, self.options.max_steps + 1):
             if cancel is not None and step % 32 == 0 and cancel():
+                step -= 1
                 break
-            state, ok = method.step(K, state, h)
+            state, ok = self._step(K, state, h, _SPLITS)
             Q, P = method.qp(state)
             S = Q[off:]
-            local = chart.to_cartesian(S).T
-            world = self._to_world(local)
-            ok &= np.isfinite(world).all(axis=1)
-            ended = np.zeros(idx.size, dtype=bool)
-            # surfaces along this step's straight segment
-            hits = self._cast(world_prev, world, ok)
-            rad, trans = self._volumes(world_prev, world, hits)
-            _accumulate(out, idx, rad, trans)
-            hit = hits.hit & ok
-            out.ending[idx[hit]] = ENDING["hit"]
-            out.position[idx[hit]] = hits.position[hit]
-            out.surface[idx[hit]] = hits.color[hit]
-            ended |= hit
-            out.ending[idx[~ok]] = ENDING["failed"]
-            out.position[idx[~ok]] = world_prev[~ok]
-            ended |= ~ok
+            X = chart.to_cartesian(S)
+            ok &= np.isfinite(X).all(axis=0)
+            ended = ~ok
+            if not ok.all():
+                out.ending[idx[ended]] = ENDING["failed"]
+                out.position[idx[ended]] = self._to_world(X_prev[:, ended].T)
+            if self._near is not None:  # surfaces and volumes along this step's segment
+                ended |= self._segments(idx, X_prev, X, ok, out)
             if self.captured is not None:
                 captured = ~ended & self.captured(Q)
-                out.ending[idx[captured]] = ENDING["captured"]
-                out.position[idx[captured]] = world[captured]
-                ended |= captured
-            leaving = ~ended & self.region.left(local, local - local_prev)
+                if captured.any():
+                    out.ending[idx[captured]] = ENDING["captured"]
+                    out.position[idx[captured]] = self._to_world(X[:, captured].T)
+                    ended |= captured
+            leaving = ~ended & self.region.left_soa(X, X_prev)
             if leaving.any():
+                local = X[:, leaving].T
                 self._escape(idx[leaving], S[:, leaving], Q[:, leaving], P[:, leaving],
-                             local[leaving], world[leaving], out)
+                             local, self._to_world(local), out)
                 ended |= leaving
-            out.steps[idx] = step
             if ended.any():
-                keep = np.flatnonzero(~ended)
+                out.steps[idx[ended]] = step
                 self._finish_energy(out, idx[ended], Q[:, ended], P[:, ended], H0[ended])
+                keep = np.flatnonzero(~ended)
                 if keep.size == 0:
                     return
-                idx, world, local = idx[keep], world[keep], local[keep]
+                idx, X = idx[keep], X[:, keep]
                 state = tuple(a[..., keep] for a in state)
                 K = K.subset(keep)
                 H0 = H0[keep]
-            world_prev, local_prev = world, local
+            X_prev = X
         out.ending[idx] = ENDING["max_steps"]
+        out.steps[idx] = step
         Q, P = method.qp(state)
-        out.position[idx] = world_prev
+        out.position[idx] = self._to_world(X_prev.T)
         self._finish_energy(out, idx, Q, P, H0)
+
+    def _step(self, K, state, h, splits: int):
+        """One step of every ray; rays whose step fails are retried as two half steps.
+
+        A fixed step can be too long for the implicit solve where K is stiff (the last
+        steps of a ray falling into a horizon, steep index gradients): those rays redo it
+        as two steps of h/2 (at most ``splits`` halvings deep); a ray captured at the
+        midpoint stops there (the capture test ends it).
+        """
+        method = self.method
+        new, ok = method.step(K, state, h)
+        if splits == 0 or ok.all():
+            return new, ok
+        bad = np.flatnonzero(~ok)
+        K_bad = K.subset(bad)
+        mid, ok_mid = self._step(K_bad, tuple(a[..., bad] for a in state), 0.5 * h, splits - 1)
+        go = ok_mid.copy()
+        if self.captured is not None:
+            go &= ~self.captured(method.qp(mid)[0])
+        end, ok_end = mid, ok_mid
+        if go.any():
+            g = np.flatnonzero(go)
+            e2, o2 = self._step(K_bad.subset(g), tuple(a[..., g] for a in mid), 0.5 * h,
+                                splits - 1)
+            for a, b in zip(end, e2, strict=True):
+                a[..., g] = b
+            ok_end[g] = o2
+        for a, b in zip(new, end, strict=True):
+            a[..., bad] = b
+        ok[bad] = ok_end
+        return new, ok
+
+    def _segments(self, idx, X_prev, X, ok, out: RayResults) -> np.ndarray:
+        """Surface hits and volume emission along the segments X_prev -> X near geometry.
+
+        -> (M,) bool: the rays that hit a surface (their ending is recorded in ``out``).
+        """
+        lo, hi = self._near
+        near = ok.copy()
+        for i in range(3):
+            near &= (np.minimum(X_prev[i], X[i]) <= hi[i]) & (np.maximum(X_prev[i], X[i]) >= lo[i])
+        hit_rows = np.zeros(ok.shape[0], dtype=bool)
+        c = np.flatnonzero(near)
+        if c.size == 0:
+            return hit_rows
+        a, b = self._to_world(X_prev[:, c].T), self._to_world(X[:, c].T)
+        hits = self._cast(a, b)
+        rad, trans = self._volumes(a, b, hits)
+        _accumulate(out, idx[c], rad, trans)
+        h = hits.hit
+        r = idx[c[h]]
+        out.ending[r] = ENDING["hit"]
+        out.position[r] = hits.position[h]
+        out.surface[r] = hits.color[h]
+        hit_rows[c[h]] = True
+        return hit_rows
 
     def _finish_energy(self, out, rows, Q, P, H0):
         with np.errstate(all="ignore"):
@@ -279,6 +342,22 @@ class Tracer:
         return np.cos(angle)[:, None] * D + np.sin(angle)[:, None] * toward
 
     # --- geometry helpers ------------------------------------------------------------
+    def _local_box(self):
+        """(lo, hi) in local coordinates around every object and volume (None: nothing)."""
+        boxes = [(np.asarray(v.lo, float), np.asarray(v.hi, float)) for v in self.volumes]
+        lo, hi = self.objects.bounds
+        if not np.any(np.asarray(lo) > np.asarray(hi)):
+            boxes.append((np.asarray(lo, float), np.asarray(hi, float)))
+        if not boxes:
+            return None
+        lo = np.min([b[0] for b in boxes], axis=0)
+        hi = np.max([b[1] for b in boxes], axis=0)
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            return np.full(3, -np.inf), np.full(3, np.inf)
+        corners = np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T
+        local = self._to_local(corners)
+        return local.min(axis=0), local.max(axis=0)
+
     def _to_local(self, world):
         return (world - self.scene.center) @ self.rotation
 
@@ -303,10 +382,10 @@ class Tracer:
 
     def _volumes(self, a, b, hits):
         """Emission and transmittance of every volume along a -> (b or the hit point)."""
+        if not self.volumes:
+            return None, None
         n = a.shape[0]
         radiance, trans = np.zeros((n, 3)), np.ones(n)
-        if not self.volumes:
-            return radiance, trans
         end = np.where(hits.hit[:, None], hits.position, b)
         for vol in self.volumes:
             rows = np.flatnonzero(segment_overlaps(a, end, vol.lo, vol.hi))
@@ -335,6 +414,8 @@ def tracing_model(model):
 
 def _accumulate(out: RayResults, rows, radiance, trans):
     """Composite a segment's volume emission behind what the ray has collected so far."""
+    if radiance is None:  # no volumes in the scene
+        return
     out.radiance[rows] += out.transmittance[rows, None] * radiance
     out.transmittance[rows] *= trans
 
@@ -347,10 +428,42 @@ def _empty_results(n, origins, directions) -> RayResults:
         energy_error=np.zeros(n))
 
 
-def default_step(order: int, tolerance: float, length: float) -> float:
-    """Fictitious-time step for a method of ``order`` to reach ``tolerance`` (radians)."""
+ERROR_CONSTANTS = {
+    "symplectic_euler": 0.3, "stormer_verlet": 0.11, "implicit_midpoint": 0.07,
+    "gauss4": 0.01, "yoshida4": 1.0, "yoshida6": 0.9, "yoshida8": 350.0, "suzuki4": 0.013,
+    "suzuki6": 5e-3, "rk4": 0.125, "dopri5": 0.1,
+}
+"""C in err = C h^order: each method's escape-direction error around a mass, per step h of
+the Poincaré time (g = r). err is the *equivalent* error of the ray's initial direction
+(radians): the escape error over the lens's own magnification there, when that exceeds 1
+(rays grazing the photon region have their forward error magnified without bound, like
+any perturbation of their starting direction). The largest of 3000 rays on Kerr a/M = 0.9
+seen from 30 rg, times 1.5 (``examples/bench_perf.py --only calibrate``). Tao's methods
+have none: with the default binding they do not follow these rays."""
+
+FAR_FIELD_CONSTANT = 30.0
+"""The first-order far field leaves a forward escape error of at most ~ C (M / R)^2 for a
+region of radius R (measured as above: 28.4)."""
+
+MAX_STEP = 0.25
+"""Largest default step in the Poincaré time (a step that the implicit solve cannot take
+near a horizon is split, see Tracer._step)."""
+
+
+def default_step(method, tolerance: float, length: float, scaled: bool = False) -> float:
+    """Fictitious-time step for ``method`` to reach ``tolerance`` (radians).
+
+    Around a mass (``scaled``: g(q) grows with the distance) from the method's error
+    constant, so that the integration error stays below tolerance / 2 (the far field gets
+    the other half, see _Region). Otherwise (media, user models, methods without a
+    constant): h = 0.5 length tol^(1/order).
+    """
     tol = min(max(float(tolerance), 1e-14), 1e-1)
-    return length * min(0.25, 0.5 * tol ** (1.0 / max(order, 1)))
+    order = max(int(method.order), 1)
+    constant = ERROR_CONSTANTS.get(method.name) if scaled else None
+    if constant is None:
+        return length * min(MAX_STEP, 0.5 * tol ** (1.0 / order))
+    return min(MAX_STEP, (0.5 * tol / constant) ** (1.0 / order))
 
 
 class _Region:
@@ -362,7 +475,11 @@ class _Region:
 
     @classmethod
     def for_model(cls, model, options: TraceOptions, extent: float, radius=None):
-        """The region for a model: around a mass, M/sqrt(tol) (first-order far field)."""
+        """The region for a model: around a mass, sqrt(2 C / tol) M (first-order far field).
+
+        Beyond R the far field leaves an error ~ C (M / R)^2 (FAR_FIELD_CONSTANT): R keeps
+        it below tolerance / 2, and at least 1.5x beyond the camera and the objects.
+        """
         radius = radius or options.region_radius
         bounds = getattr(model, "bounds", None)
         if bounds is not None and radius is None:
@@ -371,15 +488,20 @@ class _Region:
         if radius is None:
             rg = float(getattr(model, "rg", 0.0))
             if rg > 0:
-                radius = min(max(0.5 * rg / math.sqrt(options.tolerance), 100 * rg), 1e6 * rg)
+                tol = min(max(float(options.tolerance), 1e-14), 1e-1)
+                radius = min(0.5 * rg * math.sqrt(2 * FAR_FIELD_CONSTANT / tol), 1e6 * rg)
                 radius = max(radius, 1.5 * extent)
             else:
                 radius = 2.0 * extent
         return cls(radius=float(radius), scale_time=getattr(model, "rg", 0.0) > 0)
 
+    def scaled(self, model) -> bool:
+        """Whether the model's Poincaré g(q) grows with the distance from a mass."""
+        return bool(self.scale_time and getattr(model, "_time_scale", None) is not None)
+
     def length_scale(self, model) -> float:
         """Step unit: 1 where the model's g(q) already scales with distance, else the size."""
-        if self.scale_time and getattr(model, "_time_scale", None) is not None:
+        if self.scaled(model):
             return 1.0
         if self.radius is not None:
             return self.radius / 20.0
@@ -410,9 +532,11 @@ class _Region:
         start[enters] = X[enters] + (t[enters, None] * (1 + 1e-12)) * D[enters]
         return start, inside
 
-    def left(self, local, moved):
-        """Rays (M,) now outside the region and moving away from it."""
+    def left_soa(self, X, X_prev):
+        """Rays (M,) at X (3, M), coming from X_prev, outside the region and moving away."""
         if self.radius is not None:
-            r2 = np.einsum("ij,ij->i", local, local)
-            return (r2 > self.radius ** 2) & (np.einsum("ij,ij->i", local, moved) > 0)
-        return ~np.all((local >= self.lo) & (local <= self.hi), axis=1)
+            r2 = X[0] * X[0] + X[1] * X[1] + X[2] * X[2]
+            away = X[0] * (X[0] - X_prev[0]) + X[1] * (X[1] - X_prev[1]) + \
+                X[2] * (X[2] - X_prev[2])
+            return (r2 > self.radius ** 2) & (away > 0)
+        return ~np.all((X >= self.lo[:, None]) & (X <= self.hi[:, None]), axis=0)

@@ -42,6 +42,10 @@ class BVHIntersector:
         self.materials = list(materials)
         self.names = list(names)
         self.bounds = (self.vertices.min(axis=0), self.vertices.max(axis=0))
+        tri = self.vertices[self.triangles]
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        norm = np.linalg.norm(normal, axis=1, keepdims=True)
+        self.face_normals = normal / np.where(norm > 0.0, norm, 1.0)  # as ray_cast reports
         self._tree = BVHTree.FromPolygons(self.vertices.tolist(), self.triangles.tolist(),
                                           all_triangles=True, epsilon=0.0)
 
@@ -65,26 +69,23 @@ class BVHIntersector:
         candidate = (np.all(np.maximum(a, b) >= lo, axis=1)
                      & np.all(np.minimum(a, b) <= hi, axis=1) & (length > 0.0))
         rows = np.flatnonzero(candidate)
-        found_rows: list[int] = []
-        found: list[tuple] = []
+        # one ray_cast per segment; keep only (face index, distance), None on a miss: the
+        # hit point and the face normal follow in numpy (Vectors are costly to convert)
         cast = self._tree.ray_cast
-        for row, origin, direction, dist in zip(rows.tolist(), a[rows].tolist(),
-                                                d[rows].tolist(), length[rows].tolist(),
-                                                strict=True):
-            hit = cast(origin, direction, dist)
-            if hit[2] is not None:
-                found_rows.append(row)
-                found.append(hit)
-        return self._hits(n, length, np.asarray(found_rows, dtype=np.int64), found)
+        found = np.array([cast(origin, direction, limit)[2:] for origin, direction, limit in
+                          zip(a[rows].tolist(), d[rows].tolist(), length[rows].tolist(),
+                              strict=True)], dtype=np.float64).reshape(-1, 2)
+        hit = ~np.isnan(found[:, 0])
+        return self._hits(n, a, d, length, rows[hit], found[hit, 0].astype(np.int64),
+                          found[hit, 1])
 
-    def _hits(self, n: int, length: np.ndarray, rows: np.ndarray, found: list[tuple]) -> Hits:
-        """Hits for ``n`` segments from the raw ray_cast results of ``rows`` (misses: t = inf)."""
+    def _hits(self, n: int, a: np.ndarray, d: np.ndarray, length: np.ndarray,
+              rows: np.ndarray, face: np.ndarray, dist: np.ndarray) -> Hits:
+        """Hits for ``n`` segments a -> a + d from the faces and distances of ``rows``."""
         hits = Hits.miss(n)
         if len(rows):
-            loc = np.array([f[0] for f in found], dtype=np.float64)
-            nor = np.array([f[1] for f in found], dtype=np.float64)
-            face = np.array([f[2] for f in found], dtype=np.int64)
-            dist = np.array([f[3] for f in found], dtype=np.float64)
+            loc = a[rows] + (dist / length[rows])[:, None] * d[rows]
+            nor = self.face_normals[face]
             uv = self._uv_at(face, loc)
             hits.hit[rows] = True
             hits.t[rows] = np.clip(dist / length[rows], 0.0, 1.0)

@@ -25,6 +25,28 @@ def restrict(H: Any, idx: np.ndarray | None) -> Any:
     return H if subset is None else subset(idx)
 
 
+class PerRay:
+    """Per-ray inputs of an implicit solve (H and arrays), restricted to the rays idx.
+
+    The solver passes the same idx object until it narrows its batch, so the restriction
+    is computed once per narrowing, not at every iteration. Call with idx (None: all rays).
+    """
+
+    def __init__(self, H: Any, *arrays: Any) -> None:
+        self.full = (H, *arrays)
+        self._idx: Any = None
+        self._sub = self.full
+
+    def __call__(self, idx: np.ndarray | None) -> tuple:
+        if idx is None:
+            return self.full
+        if idx is not self._idx:
+            H, *arrays = self.full
+            self._sub = (restrict(H, idx), *(take(a, idx) for a in arrays))
+            self._idx = idx
+        return self._sub
+
+
 def finite_rays(*arrays: np.ndarray) -> np.ndarray:
     """(N,) bool: True for the rays (last axis) whose entries are all finite in every array."""
     ok = np.isfinite(arrays[0]).all(axis=0)
@@ -34,8 +56,11 @@ def finite_rays(*arrays: np.ndarray) -> np.ndarray:
 
 
 def as_soa(a: Any) -> np.ndarray:
-    """A float64 copy of a state block (n, N)."""
-    return np.array(a, dtype=np.float64)
+    """A C-ordered float64 copy of a state block (n, N): rows are contiguous rays.
+
+    (Row order matters: per-ray reductions over the n rows, and every row view, are several
+    times slower on a transposed (Fortran-ordered) block.)"""
+    return np.array(a, dtype=np.float64, order="C")
 
 
 def flow(H: Any, Z: np.ndarray) -> np.ndarray:

@@ -12,8 +12,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._common import take
-
 Phi = Callable[[np.ndarray, "np.ndarray | None"], np.ndarray]
 
 _EPS = np.finfo(np.float64).eps
@@ -38,8 +36,9 @@ class SolverOptions:
 
 
 def _increment(new: np.ndarray, old: np.ndarray, scale: np.ndarray) -> np.ndarray:
-    """(M,) scaled max-norm of new - old per ray."""
-    d = np.abs(new - old)
+    """(M,) scaled max-norm of new - old per ray (one temporary: big ones are costly)."""
+    d = np.subtract(new, old)
+    np.abs(d, out=d)
     d /= scale
     return d.max(axis=0)
 
@@ -58,48 +57,62 @@ def _assess(err: np.ndarray, prev: np.ndarray | None, tol: float,
     return done, stuck
 
 
+_NARROW = 0.5
+"""The solver narrows its batch to the rays still iterating once at least this share of it
+has settled (converged or handed to Newton). Until then settled rays are evaluated along
+(cheaper than re-indexing every per-ray input at each iteration) but keep their iterate,
+so every ray gets exactly the iterations it would get on its own."""
+
+
 def solve(phi: Phi, W0: np.ndarray, scale: np.ndarray,
           opts: SolverOptions) -> tuple[np.ndarray, np.ndarray]:
     """Solve W = phi(W) per ray from the predictor W0; -> (W (k, N), converged (N,) bool)."""
     k, N = W0.shape
     newton_cost = 3.0 * (2 * k + 1)  # phi evaluations of ~3 Newton iterations
     ok = np.zeros(N, dtype=bool)
-    ids = np.arange(N)
-    full, W, prev, pending = True, W0, None, []
+    to_newton = np.zeros(N, dtype=bool)
+    W_all = None                       # every ray's iterate, once the batch was narrowed
+    ids, W, sc, prev = None, W0, scale, None
+    active = np.ones(N, dtype=bool)    # rays of the current batch still iterating
     for _ in range(opts.max_iter):
-        sub = None if full else ids
-        Wa = W if full else W[:, ids]
-        Wn = phi(Wa, sub)
-        err = _increment(Wn, Wa, take(scale, sub))
-        if full:
-            W = Wn
-        else:
-            W[:, ids] = Wn
+        Wn = phi(W, ids)
+        if not active.all():
+            np.copyto(Wn, W, where=~active)  # settled rays keep their iterate
+        err = _increment(Wn, W, sc)
+        W = Wn
         done, stuck = _assess(err, prev, opts.tol, newton_cost)
-        if done.all():
-            ok[ids] = True
+        done &= active
+        stuck &= active & ~done
+        ok[done if ids is None else ids[done]] = True
+        to_newton[stuck if ids is None else ids[stuck]] = True
+        active &= ~(done | stuck)
+        n_active = np.count_nonzero(active)
+        if n_active == 0:
             break
-        ok[ids[done]] = True
-        if stuck.any():
-            pending.append(ids[stuck])
-        keep = ~(done | stuck)
-        if not keep.all():
-            ids, err, full = ids[keep], err[keep], False
-        prev = err
-        if ids.size == 0:
-            break
+        if n_active <= _NARROW * active.size:
+            if ids is None:
+                W_all, ids = W, np.flatnonzero(active)
+            else:
+                W_all[:, ids] = W
+                ids = ids[active]
+            W, sc, prev = W[:, active], scale[:, ids], err[active]
+            active = np.ones(ids.size, dtype=bool)
+        else:
+            prev = err
     else:
-        pending.append(ids)
-    if pending:
-        idx = np.concatenate(pending)
-        if idx.size:
-            W = np.array(W) if W is W0 else W
-            Wp = W[:, idx]
-            bad = ~np.isfinite(Wp).all(axis=0)
-            Wp[:, bad] = W0[:, idx[bad]]  # restart diverged rays from the predictor
-            Wp, ok[idx] = newton(phi, Wp, idx, scale[:, idx], opts)
-            W[:, idx] = Wp
-    return W, ok
+        to_newton[active if ids is None else ids[active]] = True
+    if ids is None:
+        W_all = W if W is not W0 else W0.copy()
+    else:
+        W_all[:, ids] = W
+    if to_newton.any():
+        idx = np.flatnonzero(to_newton)
+        Wp = W_all[:, idx]
+        bad = ~np.isfinite(Wp).all(axis=0)
+        Wp[:, bad] = W0[:, idx[bad]]  # restart diverged rays from the predictor
+        Wp, ok[idx] = newton(phi, Wp, idx, scale[:, idx], opts)
+        W_all[:, idx] = Wp
+    return W_all, ok
 
 
 def newton(phi: Phi, W: np.ndarray, idx: np.ndarray, scale: np.ndarray,

@@ -120,6 +120,9 @@ class Composition(Method):
             if seq is None:
                 seq = self._merged[pat] = merge_pattern(pat, self.weights)
             return run_splitting(self.base, H, state, seq, h)
+        chain = getattr(self.base, "steps", None)
+        if chain is not None:  # the base runs its substeps itself, sharing work between them
+            return chain(H, state, [w * h for w in self.weights])
         ok = None
         for w in self.weights:
             state, okw = self.base.step(H, state, w * h)

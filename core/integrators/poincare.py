@@ -43,6 +43,9 @@ class PoincareTransformed:
 
     def value_gradient_soa(self, Q: np.ndarray, P: np.ndarray):
         """(K, ∂K/∂q = ∇g (H − H0) + g ∂H/∂q, ∂K/∂p = g ∂H/∂p)."""
+        fused = getattr(self.H, "poincare_soa", None)
+        if fused is not None:  # the model evaluates g with H (e.g. Kerr–Schild: g = r)
+            return fused(Q, P, self.H0)
         g, dg = self.H.time_scale_soa(Q)
         Hv, dq, dp = self.H.value_gradient_soa(Q, P)
         dH = Hv - self.H0
@@ -51,11 +54,19 @@ class PoincareTransformed:
     def gradient_soa(self, Q: np.ndarray, P: np.ndarray, wrt: str = "qp"):
         """(∂K/∂q or None, ∂K/∂p or None), each (n, N)."""
         if wrt == "p":
+            fused = getattr(self.H, "poincare_soa", None)
+            if fused is not None:
+                return None, fused(Q, P, self.H0, wrt="p")[2]
             g, _ = self.H.time_scale_soa(Q)
             _, dp = self.H.gradient_soa(Q, P, wrt="p")
             return None, g * dp
         _, dq, dp = self.value_gradient_soa(Q, P)
         return dq, (dp if "p" in wrt else None)
+
+    def frozen_q(self, Q: np.ndarray) -> Any:
+        """∂K/∂q at fixed Q for any momenta (the model's FrozenQ), or None if it has none."""
+        frozen = getattr(self.H, "frozen_q", None)
+        return None if frozen is None else frozen(Q, self.H0)
 
     def time_scale_soa(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """g = 1: K is already transformed."""
