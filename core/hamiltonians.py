@@ -190,7 +190,7 @@ class FrozenQ:
 
     def grad_q(self, P: np.ndarray) -> np.ndarray:
         """dH/dq (or dK/dq) at the frozen Q for momenta P, (n, N)."""
-        return self.apply(self.form, P, True, self.H0)[1]
+        return self.apply(self.form, P, "q", self.H0)[1]
 
     def subset(self, idx) -> FrozenQ:
         """The same for the rays idx."""
@@ -357,37 +357,46 @@ class MetricHamiltonian(Hamiltonian):
             (scale,) = self._time_scale.evaluate(env)
         return [*entries, scale]
 
-    def _apply(self, form, P, need_q: bool, H0=None):
-        """(H, dH/dq or None, dH/dp) from a form; with H0: K = g (H - H0) and its gradient."""
+    def _apply(self, form, P, want: str, H0=None):
+        """(H, dH/dq, dH/dp) from a form, each None unless wanted ("v", "q", "p" in want).
+
+        With H0: K = g (H - H0) and its gradient instead (g: the form's time scale, or 1).
+        """
         entries, scale = form[:-1], form[-1]
         n, n_rays = self.dim, P.shape[-1]
-        h = np.zeros(n_rays)
+        need_q, need_p = "q" in want, "p" in want
+        need_h = "v" in want or (need_q and H0 is not None and isinstance(scale, Dual))
+        h = np.zeros(n_rays) if need_h else None
         dq = np.zeros((n, n_rays)) if need_q else None
-        dp = np.zeros((n, n_rays))
+        dp = np.zeros((n, n_rays)) if need_p else None
         for (i, j), g in zip(self.pairs, entries, strict=True):
             w = 0.5 if i == j else 1.0
             gv = g.v if isinstance(g, Dual) else g
-            pipj = P[i] * P[j]
-            h += w * gv * pipj
-            dp[i] += gv * P[j]
-            if i != j:
-                dp[j] += gv * P[i]
+            if need_h or need_q:
+                pipj = P[i] * P[j]
+            if need_h:
+                h += w * gv * pipj
+            if need_p:
+                dp[i] += gv * P[j]
+                if i != j:
+                    dp[j] += gv * P[i]
             if need_q and isinstance(g, Dual):
                 wp = w * pipj
                 for k, dg in g.d.items():
                     dq[k] += dg * wp
         if H0 is None:
             return h, dq, dp
-        dh = h - H0
+        dh = None if h is None else h - H0
         if scale is None:
             return dh, dq, dp
         sv = scale.v if isinstance(scale, Dual) else scale
-        dp *= sv
+        if need_p:
+            dp *= sv
         if need_q:
             dq *= sv
             for k, dg in (scale.d.items() if isinstance(scale, Dual) else ()):
                 dq[k] += dg * dh
-        return sv * dh, dq, dp
+        return (None if dh is None else sv * dh), dq, dp
 
     @blocked
     def value_soa(self, Q, P):
@@ -399,15 +408,14 @@ class MetricHamiltonian(Hamiltonian):
         return h
 
     def _value_gradient(self, Q, P, wrt):
-        need_q = "q" in wrt
-        h, dq, dp = self._apply(self._form(Q, need_q), P, need_q)
-        return h, dq, (dp if "p" in wrt else None)
+        return self._apply(self._form(Q, "q" in wrt), P, "v" + wrt)
 
     @blocked
     def poincare_soa(self, Q, P, H0, wrt: str = "qp"):
-        """K = g (H - H0), dK/dq (None unless "q" in wrt) and dK/dp, in one evaluation."""
-        need_q = "q" in wrt
-        return self._apply(self._form(Q, need_q, scaled=True), P, need_q, H0)
+        """(K = g (H - H0), dK/dq, dK/dp) in one evaluation: the derivatives not in wrt are
+        None, and so is K when only dK/dp is asked for."""
+        return self._apply(self._form(Q, "q" in wrt, scaled=True), P,
+                           wrt if wrt == "p" else "v" + wrt, H0)
 
     def frozen_q(self, Q, H0=None) -> FrozenQ:
         """dH/dq at Q for any momenta (dK/dq of K = g (H - H0) with H0), see FrozenQ."""
@@ -575,31 +583,33 @@ class KerrSchild(ExpressionHamiltonian):
             env[name] = Dual.variable(Q[i], i) if seed else Q[i]
         return self._form.evaluate(env)
 
-    def _apply(self, form, P, need_q: bool, H0=None):
-        """H and its gradient (dH/dq None unless need_q) from the form [f, k_x, k_y, k_z, r].
-
-        With H0 given: the Poincaré-transformed K = r (H - H0) and its gradient instead.
-        """
-        f, kx, ky, kz, r = form
+    def _apply(self, form, P, want: str, H0=None):
+        """(H, dH/dq, dH/dp) from the form [f, k_x, k_y, k_z, r], each None unless wanted
+        ("v", "q", "p" in want). With H0: K = r (H - H0) and its gradient instead."""
+        need_q = "q" in want
         if need_q:
             (f, df), (kx, dkx), (ky, dky), (kz, dkz), (r, dr) = (
-                (d.v, d.d) for d in (f, kx, ky, kz, r))
+                (d.v, d.d) for d in form)
         else:
             f, kx, ky, kz, r = (dual.value_of(d) for d in form)
         kt = self._k_t
         kp = kt * P[0] + kx * P[1] + ky * P[2] + kz * P[3]
         fkp = f * kp
-        h = P[1] * P[1] + P[2] * P[2] + P[3] * P[3] - P[0] * P[0] - fkp * kp
-        h *= 0.5
-        dh = None if H0 is None else h - H0
-        dp = np.empty_like(P)
-        np.multiply(fkp, -kt, out=dp[0])
-        dp[0] -= P[0]
-        for i, k in ((1, kx), (2, ky), (3, kz)):
-            np.multiply(fkp, k, out=dp[i])
-            np.subtract(P[i], dp[i], out=dp[i])
-        if dh is not None:
-            dp *= r
+        h = dh = None
+        if "v" in want or (need_q and H0 is not None):
+            h = P[1] * P[1] + P[2] * P[2] + P[3] * P[3] - P[0] * P[0] - fkp * kp
+            h *= 0.5
+            dh = None if H0 is None else h - H0
+        dp = None
+        if "p" in want:
+            dp = np.empty_like(P)
+            np.multiply(fkp, -kt, out=dp[0])
+            dp[0] -= P[0]
+            for i, k in ((1, kx), (2, ky), (3, kz)):
+                np.multiply(fkp, k, out=dp[i])
+                np.subtract(P[i], dp[i], out=dp[i])
+            if H0 is not None:
+                dp *= r
         dq = None
         if need_q:
             dq = np.empty_like(P)
@@ -622,22 +632,16 @@ class KerrSchild(ExpressionHamiltonian):
                     row *= r
                     if j in dr:
                         row += dr[j] * dh
-        return (h if dh is None else r * dh), dq, dp
-
-    def _kernel(self, Q, P, need_q: bool, H0=None):
-        return self._apply(self._form_soa(Q, need_q), P, need_q, H0)
-
-    def frozen_q(self, Q, H0=None) -> FrozenQ:
-        """dH/dq at Q for any momenta (dK/dq of K = r (H - H0) with H0), see FrozenQ."""
-        return FrozenQ(self._apply, self._form_soa(Q, True), H0)
+        if h is not None and dh is not None:
+            h = r * dh
+        return (h if "v" in want else None), dq, dp
 
     @blocked
     def value_soa(self, Q, P):
-        return self._kernel(Q, P, False)[0]
+        return self._apply(self._form_soa(Q, False), P, "v")[0]
 
     def _value_gradient(self, Q, P, wrt):
-        h, dq, dp = self._kernel(Q, P, "q" in wrt)
-        return h, dq, (dp if "p" in wrt else None)
+        return self._apply(self._form_soa(Q, "q" in wrt), P, "v" + wrt)
 
     def time_scale_soa(self, Q):
         """g = r (Kerr–Schild radius) and dr/dq."""
@@ -649,8 +653,14 @@ class KerrSchild(ExpressionHamiltonian):
 
     @blocked
     def poincare_soa(self, Q, P, H0, wrt: str = "qp"):
-        """K = r (H - H0), dK/dq (None unless "q" in wrt) and dK/dp, in one evaluation."""
-        return self._kernel(Q, P, "q" in wrt, H0)
+        """(K = r (H - H0), dK/dq, dK/dp) in one evaluation: the derivatives not in wrt are
+        None, and so is K when only dK/dp is asked for."""
+        return self._apply(self._form_soa(Q, "q" in wrt), P, wrt if wrt == "p" else "v" + wrt,
+                           H0)
+
+    def frozen_q(self, Q, H0=None) -> FrozenQ:
+        """dH/dq at Q for any momenta (dK/dq of K = r (H - H0) with H0), see FrozenQ."""
+        return FrozenQ(self._apply, self._form_soa(Q, True), H0)
 
     def radius_soa(self, Q):
         """Kerr–Schild r > 0 from r^4 - (x^2+y^2+z^2-a^2) r^2 - a^2 z^2 = 0."""

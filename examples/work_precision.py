@@ -557,18 +557,18 @@ def image_reference(size: int, out: str):
 def image_runs(quick: bool):
     """(label, method name or class, tolerances, outer step, region radius) to compare."""
     if quick:
-        return [("rk4", "rk4", (1e-2, 1e-3, 1e-4, 1e-6), None, REGION),
-                ("gauss4", "gauss4", (1e-2, 1e-3, 1e-4, 1e-6), None, REGION),
-                ("yoshida4", "yoshida4", (1e-3, 1e-4), None, REGION),
-                ("dopri5", "dopri5", (1e-2, 1e-3, 1e-4, 1e-6), None, REGION),
-                ("dopri5_adaptive", AdaptiveDopri5, (1e-3, 1e-5, 1e-8), 0.1, REGION),
+        return [("rk4", "rk4", (1e-3, 1e-5, 1e-7), None, REGION),
+                ("gauss4", "gauss4", (1e-5, 1e-7), None, REGION),
+                ("yoshida4", "yoshida4", (1e-4, 1e-6), None, REGION),
+                ("dopri5", "dopri5", (1e-4, 1e-6, 1e-8), None, REGION),
+                ("dopri5_adaptive", AdaptiveDopri5, (1e-4, 1e-8), 0.1, REGION),
                 ("rk4, default region", "rk4", (1e-4, 1e-6, 1e-8), None, None)]
-    return [("rk4", "rk4", (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8), None, REGION),
-            ("gauss4", "gauss4", (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7), None, REGION),
-            ("yoshida4", "yoshida4", (1e-3, 1e-4, 1e-6), None, REGION),
-            ("yoshida6", "yoshida6", (1e-3, 1e-5), None, REGION),
-            ("dopri5", "dopri5", (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8), None, REGION),
-            ("dopri5_adaptive", AdaptiveDopri5, (1e-3, 1e-4, 1e-6, 1e-8, 1e-10), 0.1, REGION),
+    return [("rk4", "rk4", (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8), None, REGION),
+            ("gauss4", "gauss4", (1e-4, 1e-5, 1e-6, 1e-7, 1e-8), None, REGION),
+            ("yoshida4", "yoshida4", (1e-4, 1e-6, 1e-8), None, REGION),
+            ("yoshida6", "yoshida6", (1e-4, 1e-6), None, REGION),
+            ("dopri5", "dopri5", (1e-4, 1e-5, 1e-6, 1e-7, 1e-8), None, REGION),
+            ("dopri5_adaptive", AdaptiveDopri5, (1e-4, 1e-6, 1e-8, 1e-10), 0.1, REGION),
             ("rk4, default region", "rk4", (1e-4, 1e-6, 1e-8), None, None)]
 
 
@@ -619,16 +619,19 @@ def _plot_image(rows, size: int, path: str) -> None:
 
 
 def _image_verdict(rows) -> list[str]:
+    """Cheapest run with 99 % of pixels within 0.1, 0.01, 0.001 px and at most 1e-4 of the
+    pixels ending differently (the max is set by a few pixels on the shadow's edge)."""
     lines = []
-    for level in (1.0, 0.1, 0.01):
-        ok = [r for r in rows if r["disp_max_px"] <= level and r["mismatched_pixels"] == 0
-              and r["region_rg"] != "default"]
+    for level in (0.1, 0.01, 0.001):
+        ok = [r for r in rows if r["disp_p99_px"] <= level and r["region_rg"] != "default"
+              and r["mismatched_pixels"] <= 1e-4 * r["size"] ** 2]
         if ok:
             r = min(ok, key=lambda r: r["seconds"])
-            lines.append(f"  image: every pixel within {level:g} px: cheapest {r['method']} "
-                         f"at tolerance {r['tolerance']:g}, {r['seconds']:.1f} s")
+            lines.append(f"  image: 99% of pixels within {level:g} px: cheapest {r['method']} "
+                         f"at tolerance {r['tolerance']:g}, {r['seconds']:.1f} s (max "
+                         f"{r['disp_max_px']:.2g} px)")
         else:
-            lines.append(f"  image: every pixel within {level:g} px: no run got there")
+            lines.append(f"  image: 99% of pixels within {level:g} px: no run got there")
     return lines
 
 
