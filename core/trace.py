@@ -157,14 +157,7 @@ class Tracer:
     # --- straight parts --------------------------------------------------------------
     def _straight(self, rows, a, d, out: RayResults, far: float = _FAR):
         """Rays that stay straight from a along d: one cast each, ending hit or escaped."""
-        b = a + far * d
-        hits = self._cast(a, b)
-        rad, trans = self._volumes(a, b, hits)
-        _accumulate(out, rows, rad, trans)
-        h = hits.hit
-        out.ending[rows[h]] = ENDING["hit"]
-        out.position[rows[h]] = hits.position[h]
-        out.surface[rows[h]] = hits.color[h]
+        h = self._record_segments(rows, a, a + far * d, out)
         out.ending[rows[~h]] = ENDING["escaped"]
         out.direction[rows] = d
 
@@ -174,13 +167,7 @@ class Tracer:
         enters = np.isfinite(X_entry[:, 0])
         a = origins[rows]
         b = np.where(enters[:, None], self._to_world(X_entry), a + _FAR * directions[rows])
-        hits = self._cast(a, b)
-        rad, trans = self._volumes(a, b, hits)
-        _accumulate(out, rows, rad, trans)
-        h = hits.hit
-        out.ending[rows[h]] = ENDING["hit"]
-        out.position[rows[h]] = hits.position[h]
-        out.surface[rows[h]] = hits.color[h]
+        h = self._record_segments(rows, a, b, out)
         miss = ~h & ~enters
         if miss.any():
             X0 = self._to_local(a[miss])
@@ -298,16 +285,20 @@ class Tracer:
         if c.size == 0:
             return hit_rows
         a, b = self._to_world(X_prev[:, c].T), self._to_world(X[:, c].T)
+        hit_rows[c] = self._record_segments(idx[c], a, b, out)
+        return hit_rows
+
+    def _record_segments(self, rows, a, b, out: RayResults) -> np.ndarray:
+        """Cast world segments a -> b of rays ``rows``: composite the volumes crossed and
+        record surface hits in ``out``. Returns which segments hit a surface (M,)."""
         hits = self._cast(a, b)
         rad, trans = self._volumes(a, b, hits)
-        _accumulate(out, idx[c], rad, trans)
+        _accumulate(out, rows, rad, trans)
         h = hits.hit
-        r = idx[c[h]]
-        out.ending[r] = ENDING["hit"]
-        out.position[r] = hits.position[h]
-        out.surface[r] = hits.color[h]
-        hit_rows[c[h]] = True
-        return hit_rows
+        out.ending[rows[h]] = ENDING["hit"]
+        out.position[rows[h]] = hits.position[h]
+        out.surface[rows[h]] = hits.color[h]
+        return h
 
     def _finish_energy(self, out, rows, Q, P, H0):
         with np.errstate(all="ignore"):
