@@ -30,6 +30,7 @@ escape accuracy at about a third of yoshida4's cost (smaller error constant, so 
 longer steps; see ERROR_CONSTANTS and examples/bench_perf.py)."""
 _FAR = 1e12  # length of the straight segment cast after a ray leaves the model's region
 _SPLITS = 3  # a failed step is retried as 2, then 4, then 8 shorter steps
+_OFF_SHELL = 1e-3  # |H - H0| / (|H0| + |p|^2) after one step that marks it failed
 
 
 @dataclass
@@ -243,21 +244,33 @@ class Tracer:
     def _step(self, K, state, h, splits: int):
         """One step of every ray; rays whose step fails are retried as two half steps.
 
-        A fixed step can be too long for the implicit solve where K is stiff (the last
-        steps of a ray falling into a horizon, steep index gradients): those rays redo it
-        as two steps of h/2 (at most ``splits`` halvings deep); a ray captured at the
-        midpoint stops there (the capture test ends it).
+        A fixed step can be too long where K is stiff (the last steps of a ray falling
+        into a horizon, steep index gradients): the implicit solve fails, or converges to
+        a wrong root far off the light cone (|H - H0| > _OFF_SHELL (|H0| + |p|^2), where a
+        good step is orders of magnitude closer). Those rays redo the step as two steps of
+        h/2 (at most ``splits`` halvings deep); a ray captured at the midpoint stops there
+        (the capture test ends it). Rays already inside the horizon are not checked.
         """
         method = self.method
         new, ok = method.step(K, state, h)
-        if splits == 0 or ok.all():
+        if splits == 0:
+            return new, ok
+        Q, P = method.qp(new)
+        with np.errstate(all="ignore"):  # failed rays may hold anything
+            off = np.abs(self.model.value_soa(Q, P) - K.H0) > \
+                _OFF_SHELL * (np.abs(K.H0) + np.einsum("ij,ij->j", P, P))
+            if self.captured is not None:
+                off &= ~self.captured(Q)
+        ok &= ~off
+        if ok.all():
             return new, ok
         bad = np.flatnonzero(~ok)
         K_bad = K.subset(bad)
         mid, ok_mid = self._step(K_bad, tuple(a[..., bad] for a in state), 0.5 * h, splits - 1)
         go = ok_mid.copy()
         if self.captured is not None:
-            go &= ~self.captured(method.qp(mid)[0])
+            with np.errstate(all="ignore"):
+                go &= ~self.captured(method.qp(mid)[0])
         end, ok_end = mid, ok_mid
         if go.any():
             g = np.flatnonzero(go)
@@ -355,18 +368,22 @@ class Tracer:
     def _to_world(self, local):
         return local @ self.rotation.T + self.scene.center
 
-    def _cast(self, a, b, mask=None):
-        """Nearest surface hits of segments a -> b, querying only segments near geometry."""
+    def _cast(self, a, b):
+        """Nearest surface hits of segments a -> b, querying only segments near geometry.
+
+        When most segments are near, all of them go (an intersector answers misses for the
+        others; cheaper than gathering the near ones and scattering their hits back).
+        """
         from .intersect import Hits
 
-        hits = Hits.miss(a.shape[0])
         lo, hi = self.objects.bounds
         if np.any(lo > hi):  # an empty group; infinite planes have infinite bounds
-            return hits
+            return Hits.miss(a.shape[0])
         near = segment_overlaps(a, b, lo, hi)
-        if mask is not None:
-            near &= mask
         rows = np.flatnonzero(near)
+        if rows.size > 0.5 * a.shape[0]:
+            return self.objects.intersect(a, b)
+        hits = Hits.miss(a.shape[0])
         if rows.size:
             hits.merge(rows, self.objects.intersect(a[rows], b[rows]))
         return hits

@@ -41,7 +41,7 @@ import csv
 import math
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -64,6 +64,13 @@ QUICK_POINCARE = ("gauss4", "yoshida4", "rk4")
 # ----------------------------------------------------------------------------------
 # problems
 
+PROBLEM_INFO = {  # name: (error measure, accuracy levels of the verdict)
+    "volterra": ("|(q, p) - ref|", (1e-3, 1e-6, 1e-9)),
+    "schwarzschild": ("|phi - phi_exact(r)| (rad)", (1e-3, 1e-6, 1e-9)),
+    "kerr": ("angle on the sky at r (rad)", (1e-3, 1e-6, 1e-9)),
+    "mirage": ("|position - ref| (m)", (1e-4, 1e-7, 1e-10)),
+}
+
 
 @dataclass
 class Problem:
@@ -80,7 +87,6 @@ class Problem:
     tols: tuple                        # dopri5 tolerances tried
     unit: str = ""
     levels: tuple = (1e-3, 1e-6, 1e-9)
-    notes: dict = field(default_factory=dict)
 
 
 def _dop853(rhs, y0, t_end, rtol):
@@ -115,7 +121,7 @@ def volterra(n: int, t_end: float, quick: bool) -> Problem:
     return Problem("volterra", hm.from_expression("p*q*(p + q - 1)", q=["q"], p=["p"]), q0, p0,
                    np.full(n, t_end), None, error, steps,
                    (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
-                   unit="|(q, p) - ref|")
+                   *PROBLEM_INFO["volterra"])
 
 
 def _schwarzschild_integrals(b: float, r0: float):
@@ -170,7 +176,7 @@ def schwarzschild(n: int, quick: bool, r0: float = 30.0) -> Problem:
     steps = tuple(64 * 2**k for k in range(0, 8 if quick else 11))
     return Problem("schwarzschild", hm.schwarzschild(rg=RG), q0, p0, S, T, error, steps,
                    (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
-                   unit="|phi - phi_exact(r)| (rad)", notes={"b/b_c - 1": "1e-4 .. 1e-2"})
+                   *PROBLEM_INFO["schwarzschild"])
 
 
 def _kerr_rays(n: int, a: float, r0: float):
@@ -228,7 +234,7 @@ def kerr(n: int, quick: bool, a: float = 0.499, r0: float = 30.0) -> Problem:
     steps = tuple(128 * 2**k for k in range(0, 7 if quick else 10))
     return Problem("kerr", H, q0, p0, S, T, error, steps,
                    (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
-                   unit="angle on the sky at r (rad)", notes={"a/M": 2 * a / RG})
+                   *PROBLEM_INFO["kerr"])
 
 
 def _last_crossing(sol, i: int, n: int, r0: float) -> float:
@@ -273,7 +279,7 @@ def mirage(n: int, quick: bool, x_end: float = 20.0) -> Problem:
     steps = tuple(25 * 2**k for k in range(0, 7 if quick else 10))
     return Problem("mirage", H, q0, p0, S, None, error, steps,
                    (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
-                   unit="|position - ref| (m)", levels=(1e-4, 1e-7, 1e-10))
+                   *PROBLEM_INFO["mirage"])
 
 
 def _crossing_x(sol, i: int, x_end: float) -> float:
@@ -368,11 +374,11 @@ def throughput(prob: Problem, methods, batch: int = 4096, steps: int = 20) -> di
     return out
 
 
-def cheapest(runs: list[Run], level: float):
+def cheapest(runs: list[Run], level: float, key: str = "error_max"):
     """{label: seconds} to reach error <= level, log-log interpolated along each curve."""
     best = {}
     for label in dict.fromkeys(r.label for r in runs):
-        pts = sorted((r.seconds, r.error_max) for r in runs if r.label == label)
+        pts = sorted((r.seconds, getattr(r, key)) for r in runs if r.label == label)
         prev = None
         for t, e in pts:
             if e <= level:
@@ -385,19 +391,21 @@ def cheapest(runs: list[Run], level: float):
     return best
 
 
-def verdict(prob: Problem, runs: list[Run]) -> list[str]:
+def verdict(name: str, runs: list[Run], key: str = "error_max") -> list[str]:
     """Lines naming the cheapest method at each accuracy level (and the best of each kind)."""
     lines = []
     symplectic = {m for m, obj in core.METHODS.items() if obj.symplectic}
-    for level in prob.levels:
-        best = cheapest(runs, level)
+    what = "max" if key == "error_max" else "median"
+    for level in PROBLEM_INFO[name][1]:
+        best = cheapest(runs, level, key)
+        head = f"  {name}: {what} error <= {level:g}:"
         if not best:
-            lines.append(f"  {prob.name}: error <= {level:g}: reached by no method in budget")
+            lines.append(f"{head} reached by no method within the budget")
             continue
         ranked = sorted(best.items(), key=lambda kv: kv[1])
         sym = [kv for kv in ranked if kv[0].split("/")[0] in symplectic]
         non = [kv for kv in ranked if kv[0].split("/")[0] not in symplectic]
-        text = f"  {prob.name}: error <= {level:g}: cheapest {ranked[0][0]} {ranked[0][1]:.3g} s"
+        text = f"{head} cheapest {ranked[0][0]} {ranked[0][1]:.3g} s"
         if sym and non:
             s, n = sym[0], non[0]
             who = "symplectic wins" if s[1] < n[1] else "symplectic does NOT win"
@@ -411,22 +419,24 @@ def verdict(prob: Problem, runs: list[Run]) -> list[str]:
     return lines
 
 
-def plot_problem(prob: Problem, runs: list[Run], path: str) -> None:
-    """Log-log error against wall time, one line per method/mode."""
+def plot_problem(name: str, runs: list[Run], path: str) -> None:
+    """Log-log error (max and median over the rays) against wall time, a line per method."""
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(8.5, 6))
-    for k, label in enumerate(dict.fromkeys(r.label for r in runs)):
-        pts = [(r.seconds, r.error_max) for r in runs if r.label == label]
-        pts = [(t, min(e, 10.0)) for t, e in pts]
-        style = "--" if "/" in label else ("-." if label == "dopri5" else "-")
-        ax.loglog(*zip(*pts, strict=True), style, marker="o", ms=3, color=f"C{k % 10}",
-                  label=label)
-    ax.set(xlabel="wall time (s)", ylabel=f"max error over {runs[0].rays} rays: {prob.unit}",
-           title=f"work-precision: {prob.name} (failed runs and errors > 10 drawn at 10)")
-    _plain_ticks(ax)
-    ax.grid(True, which="major", alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
+    fig, axes = plt.subplots(1, 2, figsize=(15, 6), sharex=True, sharey=True)
+    for ax, key, what in zip(axes, ("error_max", "error_median"), ("max", "median"),
+                             strict=True):
+        for k, label in enumerate(dict.fromkeys(r.label for r in runs)):
+            pts = [(r.seconds, min(getattr(r, key), 10.0)) for r in runs if r.label == label]
+            style = "--" if "/" in label else ("-." if label == "dopri5" else "-")
+            ax.loglog(*zip(*pts, strict=True), style, marker="o", ms=3,
+                      color=plt.get_cmap("tab20")(k % 20), label=label)
+        ax.set(xlabel="wall time (s)",
+               ylabel=f"{what} error over {runs[0].rays} rays: {PROBLEM_INFO[name][0]}",
+               title=f"{name}: {what} over the rays (failed or > 10: drawn at 10)")
+        _plain_ticks(ax)
+        ax.grid(True, which="major", alpha=0.3)
+    axes[0].legend(fontsize=7, ncol=2)
+    fig.savefig(path, dpi=100, bbox_inches="tight")
     plt.close(fig)
 
 
@@ -680,8 +690,12 @@ def main(argv: list[str] | None = None) -> None:
                         help="seconds per method curve (default 3 quick, 25 full)")
     parser.add_argument("--image-size", type=int, default=None)
     parser.add_argument("--out", default=OUT)
+    parser.add_argument("--from-csv", action="store_true",
+                        help="only redraw the plots and verdicts from the CSVs in --out")
     args = parser.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
+    if args.from_csv:
+        return replot(args.out)
     names = [n for n in args.only.split(",") if n]
     budget = args.budget or (3.0 if args.quick else 25.0)
     mode = "QUICK mode: 16 rays, fewer methods and steps, 64x64 image" if args.quick else \
@@ -693,8 +707,8 @@ def main(argv: list[str] | None = None) -> None:
         print(f"{prob.name}: {len(prob.S)} rays, S = {prob.S.min():.4g} .. {prob.S.max():.4g}")
         runs = run_problem(prob, args.quick, budget)
         all_runs += runs
-        plot_problem(prob, runs, os.path.join(args.out, f"wp_{prob.name}.png"))
-        verdicts += verdict(prob, runs)
+        plot_problem(prob.name, runs, os.path.join(args.out, f"wp_{prob.name}.png"))
+        verdicts += verdict(prob.name, runs) + verdict(prob.name, runs, "error_median")
         methods = (QUICK_METHODS if args.quick else ALL_METHODS) + ("dopri5",)
         for m, ns in throughput(prob, methods, batch=1024 if args.quick else 4096).items():
             tput.append(dict(problem=prob.name, method=m, ns_per_ray_step=round(ns, 1)))
@@ -715,10 +729,41 @@ def main(argv: list[str] | None = None) -> None:
     print(f"done in {time.perf_counter() - start:.0f} s; results in {args.out}/")
 
 
+def replot(out: str) -> None:
+    """Plots, tables and verdicts again from work_precision.csv, throughput.csv and
+    image_error.csv in `out` (no integration)."""
+    verdicts = []
+    path = os.path.join(out, "work_precision.csv")
+    if os.path.exists(path):
+        names = [f.name for f in fields(Run)]
+        with open(path) as f:
+            runs = [Run(**{k: (v if k in ("problem", "method", "mode") else
+                               int(v) if k in ("rays", "failed") else float(v))
+                           for k, v in row.items() if k in names})
+                    for row in csv.DictReader(f)]
+        for name in dict.fromkeys(r.problem for r in runs):
+            mine = [r for r in runs if r.problem == name]
+            plot_problem(name, mine, os.path.join(out, f"wp_{name}.png"))
+            verdicts += verdict(name, mine) + verdict(name, mine, "error_median")
+    path = os.path.join(out, "throughput.csv")
+    if os.path.exists(path):
+        with open(path) as f:
+            _print_throughput(list(csv.DictReader(f)))
+    path = os.path.join(out, "image_error.csv")
+    if os.path.exists(path):
+        with open(path) as f:
+            rows = [{k: (v if k in ("method", "region_rg") else float(v)) for k, v in r.items()}
+                    for r in csv.DictReader(f)]
+        _plot_image(rows, int(rows[0]["size"]), os.path.join(out, "image_error.png"))
+        verdicts += _image_verdict(rows)
+    print("verdict (cheapest method at each accuracy):")
+    print("\n".join(verdicts))
+
+
 def _print_throughput(rows) -> None:
     problems = list(dict.fromkeys(r["problem"] for r in rows))
     methods = list(dict.fromkeys(r["method"] for r in rows))
-    table = {(r["problem"], r["method"]): r["ns_per_ray_step"] for r in rows}
+    table = {(r["problem"], r["method"]): float(r["ns_per_ray_step"]) for r in rows}
     print("ns per ray-step (batch of 4096 rays; 1024 in quick mode):")
     print(f"  {'method':18s}" + "".join(f"{p:>15s}" for p in problems))
     for m in methods:

@@ -43,9 +43,16 @@ class BVHIntersector:
         self.names = list(names)
         self.bounds = (self.vertices.min(axis=0), self.vertices.max(axis=0))
         tri = self.vertices[self.triangles]
-        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+        normal = np.cross(e1, e2)
         norm = np.linalg.norm(normal, axis=1, keepdims=True)
         self.face_normals = normal / np.where(norm > 0.0, norm, 1.0)  # as ray_cast reports
+        # per face: barycentric weights w1, w2 of a point p are rows of _bary @ (p - v0)
+        d11, d12, d22 = (np.einsum("ij,ij->i", u, v) for u, v in ((e1, e1), (e1, e2), (e2, e2)))
+        den = d11 * d22 - d12 * d12
+        den = np.where(den == 0.0, 1.0, den)[:, None]
+        self._bary = np.stack([(d22[:, None] * e1 - d12[:, None] * e2) / den,
+                               (d11[:, None] * e2 - d12[:, None] * e1) / den], axis=1)
         self._tree = BVHTree.FromPolygons(self.vertices.tolist(), self.triangles.tolist(),
                                           all_triangles=True, epsilon=0.0)
 
@@ -98,21 +105,11 @@ class BVHIntersector:
 
     def _uv_at(self, face: np.ndarray, point: np.ndarray) -> np.ndarray:
         """UVs at points on triangles ``face``, by barycentric interpolation."""
-        tri = self.vertices[self.triangles[face]]  # (M, 3, 3)
-        e1, e2, r = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0], point - tri[:, 0]
-        d11 = np.einsum("ij,ij->i", e1, e1)
-        d12 = np.einsum("ij,ij->i", e1, e2)
-        d22 = np.einsum("ij,ij->i", e2, e2)
-        r1 = np.einsum("ij,ij->i", r, e1)
-        r2 = np.einsum("ij,ij->i", r, e2)
-        den = d11 * d22 - d12 * d12
-        den = np.where(den == 0.0, 1.0, den)
-        w1 = (d22 * r1 - d12 * r2) / den
-        w2 = (d11 * r2 - d12 * r1) / den
-        w0 = 1.0 - w1 - w2
+        r = point - self.vertices[self.triangles[face, 0]]
+        w = np.einsum("mkj,mj->mk", self._bary[face], r)  # (M, 2): w1, w2
         corners = self.tri_uv[face]  # (M, 3, 2)
-        return w0[:, None] * corners[:, 0] + w1[:, None] * corners[:, 1] + \
-            w2[:, None] * corners[:, 2]
+        return corners[:, 0] + w[:, :1] * (corners[:, 1] - corners[:, 0]) + \
+            w[:, 1:] * (corners[:, 2] - corners[:, 0])
 
     def _color(self, face: np.ndarray, uv: np.ndarray) -> np.ndarray:
         """Material colours (M, 4) at the given hits."""
