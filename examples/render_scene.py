@@ -44,7 +44,7 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument("--height", type=int, default=120)
     parser.add_argument("--spin", type=float, default=0.0, help="a/M; nonzero = Kerr")
     parser.add_argument("--tolerance", type=float, default=1e-5)
-    parser.add_argument("--method", default="yoshida4")
+    parser.add_argument("--method", default="gauss4")
     return parser.parse_args(argv)
 
 

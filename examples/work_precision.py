@@ -4,8 +4,10 @@
 
 (`make bench` runs it in full, `make bench QUICK=1` or `make bench-quick` with --quick.)
 
-Problems (a batch of distinct rays each; error = max over the rays against a tight
-reference, wall time of ``core.integrate``):
+Problems (a batch of 128 distinct rays each, 16 in quick mode; error = max and median over
+the rays against a tight reference, wall time of ``core.integrate``; full mode integrates 8
+copies of the batch at once, 1024 rays, so that per-call overhead weighs as in a render's
+chunks):
 
 - ``volterra``: H = pq(p + q - 1) to t = 1000 (about 88 periods); reference: scipy DOP853,
   rtol = atol = 1e-13, on the hand-written equations. Error: |(q, p) - reference|.
@@ -320,35 +322,44 @@ class Run:
         return 1e9 * self.seconds / max(self.rays * self.steps_per_ray, 1)
 
 
-def run_one(prob: Problem, method: str, mode: str, param) -> Run:
-    """Integrate the problem's batch once and measure error and time."""
+def run_one(prob: Problem, method: str, mode: str, param, copies: int = 1) -> Run:
+    """Integrate `copies` copies of the problem's batch at once; measure error and time.
+
+    Copies make the batch as wide as a render's chunk (per-call overhead then weighs as it
+    does there); every copy is checked against the reference.
+    """
+    n = len(prob.S)
     kw = dict(energy_every=0)
+    S, T = np.tile(prob.S, copies), None if prob.T is None else np.tile(prob.T, copies)
     if mode == "tol":
-        kw.update(step=prob.S, steps=1, tol=param, max_steps=2_000_000)
+        kw.update(step=S, steps=1, tol=param, max_steps=2_000_000)
     elif mode == "poincare":
-        kw.update(step=prob.T / param, steps=int(param), adaptive=True)
+        kw.update(step=T / param, steps=int(param), adaptive=True)
     else:
-        kw.update(step=prob.S / param, steps=int(param))
+        kw.update(step=S / param, steps=int(param))
+    q0, p0 = np.tile(prob.q0, (copies, 1)), np.tile(prob.p0, (copies, 1))
     start = time.perf_counter()
     with np.errstate(all="ignore"):
-        res = core.integrate(prob.H, prob.q0, prob.p0, method=method, **kw)
+        res = core.integrate(prob.H, q0, p0, method=method, **kw)
     seconds = time.perf_counter() - start
     with np.errstate(all="ignore"):
-        err = prob.error(res.q, res.p)
+        err = np.concatenate([prob.error(res.q[k * n:(k + 1) * n], res.p[k * n:(k + 1) * n])
+                              for k in range(copies)])
     err = np.where(np.asarray(res.failed) | ~np.isfinite(err), np.inf, err)
     return Run(prob.name, method, mode, float(param), len(err), float(np.mean(res.steps)),
                seconds, float(np.max(err)), float(np.median(err)),
                float(np.nanmax(res.energy_error)), int(np.sum(res.failed)))
 
 
-def curve(prob: Problem, method: str, mode: str, budget: float, floor: float = 1e-13):
+def curve(prob: Problem, method: str, mode: str, budget: float, copies: int = 1,
+          floor: float = 1e-13):
     """Runs of one method/mode over the problem's steps (or tolerances) within a time budget."""
     params = prob.tols if mode == "tol" else prob.steps
     runs, spent = [], 0.0
     for param in params:
         if runs and runs[-1].seconds * (2.2 if mode != "tol" else 3.0) > budget - spent:
             break
-        run = run_one(prob, method, mode, param)
+        run = run_one(prob, method, mode, param, copies)
         runs.append(run)
         spent += run.seconds
         print(f"  {prob.name:13s} {run.label:24s} {mode:8s} {param:>9g}: error {run.error_max:9.2e}"
@@ -364,7 +375,7 @@ def throughput(prob: Problem, methods, batch: int = 4096, steps: int = 20) -> di
     problem's rays (the cost of a step hardly depends on where a ray is)."""
     reps = -(-batch // len(prob.S))
     q0, p0 = np.tile(prob.q0, (reps, 1))[:batch], np.tile(prob.p0, (reps, 1))[:batch]
-    h = np.tile(prob.S, reps)[:batch] / 1000.0
+    h = np.tile(prob.S, reps)[:batch] / prob.steps[len(prob.steps) // 2]  # mid-curve step
     out = {}
     for m in methods:
         start = time.perf_counter()
@@ -431,7 +442,7 @@ def plot_problem(name: str, runs: list[Run], path: str) -> None:
             ax.loglog(*zip(*pts, strict=True), style, marker="o", ms=3,
                       color=plt.get_cmap("tab20")(k % 20), label=label)
         ax.set(xlabel="wall time (s)",
-               ylabel=f"{what} error over {runs[0].rays} rays: {PROBLEM_INFO[name][0]}",
+               ylabel=f"{what} error over the rays: {PROBLEM_INFO[name][0]}",
                title=f"{name}: {what} over the rays (failed or > 10: drawn at 10)")
         _plain_ticks(ax)
         ax.grid(True, which="major", alpha=0.3)
@@ -667,16 +678,16 @@ def build_problems(names, quick: bool):
     return [makers[name]() for name in names if name in makers]
 
 
-def run_problem(prob: Problem, quick: bool, budget: float) -> list[Run]:
+def run_problem(prob: Problem, quick: bool, budget: float, copies: int) -> list[Run]:
     """All method/mode curves of one problem."""
     methods = QUICK_METHODS if quick else ALL_METHODS
     runs = []
     for m in methods:
-        runs += curve(prob, m, "fixed", budget)
-    runs += curve(prob, "dopri5", "tol", budget)
+        runs += curve(prob, m, "fixed", budget, copies)
+    runs += curve(prob, "dopri5", "tol", budget, copies)
     if prob.T is not None:
         for m in QUICK_POINCARE if quick else POINCARE_METHODS:
-            runs += curve(prob, m, "poincare", budget)
+            runs += curve(prob, m, "poincare", budget, copies)
     return runs
 
 
@@ -689,6 +700,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--budget", type=float, default=None,
                         help="seconds per method curve (default 3 quick, 25 full)")
     parser.add_argument("--image-size", type=int, default=None)
+    parser.add_argument("--copies", type=int, default=None,
+                        help="copies of each problem's rays per timed batch (default 1 "
+                             "quick, 8 full: 1024 rays, a render chunk's regime)")
     parser.add_argument("--out", default=OUT)
     parser.add_argument("--from-csv", action="store_true",
                         help="only redraw the plots and verdicts from the CSVs in --out")
@@ -698,14 +712,15 @@ def main(argv: list[str] | None = None) -> None:
         return replot(args.out)
     names = [n for n in args.only.split(",") if n]
     budget = args.budget or (3.0 if args.quick else 25.0)
+    copies = args.copies or (1 if args.quick else 8)
     mode = "QUICK mode: 16 rays, fewer methods and steps, 64x64 image" if args.quick else \
-        "full mode: 128 rays, every method, 256x256 image"
+        f"full mode: 128 rays x {copies} copies, every method, 256x256 image"
     print(f"work-precision ({mode}; budget {budget:g} s per curve)")
     start = time.perf_counter()
     all_runs, verdicts, tput = [], [], []
     for prob in build_problems(names, args.quick):
         print(f"{prob.name}: {len(prob.S)} rays, S = {prob.S.min():.4g} .. {prob.S.max():.4g}")
-        runs = run_problem(prob, args.quick, budget)
+        runs = run_problem(prob, args.quick, budget, copies)
         all_runs += runs
         plot_problem(prob.name, runs, os.path.join(args.out, f"wp_{prob.name}.png"))
         verdicts += verdict(prob.name, runs) + verdict(prob.name, runs, "error_median")

@@ -146,7 +146,7 @@ class SymRaySettings(bpy.types.PropertyGroup):
     hamiltonian_error: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Hamiltonian Error", default="")
     method: bpy.props.EnumProperty(  # type: ignore[valid-type]
-        name="Method", items=METHOD_ITEMS, default="yoshida4",
+        name="Method", items=METHOD_ITEMS, default="gauss4",
         description="Integrator for Hamilton's equations")
     tolerance: bpy.props.FloatProperty(  # type: ignore[valid-type]
         name="Tolerance", default=1e-6, min=1e-14, max=0.1, precision=6, step=0.0001,
