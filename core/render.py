@@ -172,7 +172,9 @@ class _Buffers:
             "steps": int(self.steps.sum()), "failed": counts["failed"],
             "error_median": float(np.median(errs)) if errs.size and self.with_error else 0.0,
             "error_max": float(errs.max()) if errs.size and self.with_error else 0.0,
-            "energy_error_max": float(np.max(self.energy[traced], initial=0.0)),
+            # |H - H0| at the end of the rays that colour a pixel (a captured ray's last
+            # step inside the horizon says nothing about the image)
+            "energy_error_max": float(np.max(self.energy[finite], initial=0.0)),
             "endings": counts, "step": getattr(tracer, "step", None),
             "region_radius": getattr(getattr(tracer, "region", None), "radius", None),
             "method": tracer.options.method if tracer.curved else "straight",

@@ -119,7 +119,7 @@ def volterra(n: int, t_end: float, quick: bool) -> Problem:
     def error(q, p):
         return np.hypot(q[:, 0] - qr, p[:, 0] - pr)
 
-    steps = tuple(500 * 2**k for k in range(0, 6 if quick else 9))
+    steps = tuple(2000 * 2**k for k in range(0, 4 if quick else 7))  # h = 0.5 (Fig. 4) down
     return Problem("volterra", hm.from_expression("p*q*(p + q - 1)", q=["q"], p=["p"]), q0, p0,
                    np.full(n, t_end), None, error, steps,
                    (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
@@ -389,7 +389,9 @@ def cheapest(runs: list[Run], level: float, key: str = "error_max"):
     """{label: seconds} to reach error <= level, log-log interpolated along each curve."""
     best = {}
     for label in dict.fromkeys(r.label for r in runs):
-        pts = sorted((r.seconds, getattr(r, key)) for r in runs if r.label == label)
+        # a run with failed rays reaches no level (their energy is NaN, not counted in the drift)
+        pts = sorted((r.seconds, getattr(r, key) if not r.failed else math.inf)
+                     for r in runs if r.label == label)
         prev = None
         for t, e in pts:
             if e <= level:
@@ -402,14 +404,27 @@ def cheapest(runs: list[Run], level: float, key: str = "error_max"):
     return best
 
 
-def verdict(name: str, runs: list[Run], key: str = "error_max") -> list[str]:
+ENERGY_LEVELS = {"volterra": (1e-6, 1e-9, 1e-12)}
+"""|H - H0| levels of the energy verdict (the seed's claim for long runs: bounded H)."""
+_WHAT = {"error_max": "max error", "error_median": "median error",
+         "energy_drift": "max |H - H0|"}
+
+
+def verdicts(name: str, runs: list[Run]) -> list[str]:
+    """The verdicts of one problem: max and median error, and energy where it is judged."""
+    out = verdict(name, runs) + verdict(name, runs, "error_median")
+    if name in ENERGY_LEVELS:
+        out += verdict(name, runs, "energy_drift", ENERGY_LEVELS[name])
+    return out
+
+
+def verdict(name: str, runs: list[Run], key: str = "error_max", levels=None) -> list[str]:
     """Lines naming the cheapest method at each accuracy level (and the best of each kind)."""
     lines = []
     symplectic = {m for m, obj in core.METHODS.items() if obj.symplectic}
-    what = "max" if key == "error_max" else "median"
-    for level in PROBLEM_INFO[name][1]:
+    for level in levels or PROBLEM_INFO[name][1]:
         best = cheapest(runs, level, key)
-        head = f"  {name}: {what} error <= {level:g}:"
+        head = f"  {name}: {_WHAT[key]} <= {level:g}:"
         if not best:
             lines.append(f"{head} reached by no method within the budget")
             continue
@@ -660,6 +675,14 @@ def _image_verdict(rows) -> list[str]:
 # main
 
 
+def _kept_rows(path: str, rerun: set) -> list[dict]:
+    """Rows of an existing CSV whose problem is not in `rerun` (an --only run keeps them)."""
+    if not os.path.exists(path):
+        return []
+    with open(path) as f:
+        return [row for row in csv.DictReader(f) if row["problem"] not in rerun]
+
+
 def _write_csv(path: str, rows: list[dict]) -> None:
     if not rows:
         return
@@ -717,20 +740,23 @@ def main(argv: list[str] | None = None) -> None:
         f"full mode: 128 rays x {copies} copies, every method, 256x256 image"
     print(f"work-precision ({mode}; budget {budget:g} s per curve)")
     start = time.perf_counter()
-    all_runs, verdicts, tput = [], [], []
+    all_runs, found, tput = [], [], []
     for prob in build_problems(names, args.quick):
         print(f"{prob.name}: {len(prob.S)} rays, S = {prob.S.min():.4g} .. {prob.S.max():.4g}")
         runs = run_problem(prob, args.quick, budget, copies)
         all_runs += runs
         plot_problem(prob.name, runs, os.path.join(args.out, f"wp_{prob.name}.png"))
-        verdicts += verdict(prob.name, runs) + verdict(prob.name, runs, "error_median")
+        found += verdicts(prob.name, runs)
         methods = (QUICK_METHODS if args.quick else ALL_METHODS) + ("dopri5",)
         for m, ns in throughput(prob, methods, batch=1024 if args.quick else 4096).items():
             tput.append(dict(problem=prob.name, method=m, ns_per_ray_step=round(ns, 1)))
     if all_runs:
+        rerun = {r.problem for r in all_runs}  # other problems' rows in the CSVs are kept
         _write_csv(os.path.join(args.out, "work_precision.csv"),
+                   _kept_rows(os.path.join(args.out, "work_precision.csv"), rerun) +
                    [dict(vars(r), label=r.label, ns_per_ray_step=round(r.ns_per_ray_step, 1))
                     for r in all_runs])
+        tput = _kept_rows(os.path.join(args.out, "throughput.csv"), rerun) + tput
         _write_csv(os.path.join(args.out, "throughput.csv"), tput)
         _print_throughput(tput)
     if "image" in names:
@@ -738,16 +764,16 @@ def main(argv: list[str] | None = None) -> None:
         print(f"image: Kerr scene {size}x{size}" + (" (QUICK mode: 64x64, fewer methods and "
                                                     "tolerances)" if args.quick else ""))
         rows, _ = image_level(size, args.quick, args.out)
-        verdicts += _image_verdict(rows)
+        found += _image_verdict(rows)
     print("verdict (cheapest method at each accuracy):")
-    print("\n".join(verdicts))
+    print("\n".join(found))
     print(f"done in {time.perf_counter() - start:.0f} s; results in {args.out}/")
 
 
 def replot(out: str) -> None:
     """Plots, tables and verdicts again from work_precision.csv, throughput.csv and
     image_error.csv in `out` (no integration)."""
-    verdicts = []
+    found = []
     path = os.path.join(out, "work_precision.csv")
     if os.path.exists(path):
         names = [f.name for f in fields(Run)]
@@ -759,7 +785,7 @@ def replot(out: str) -> None:
         for name in dict.fromkeys(r.problem for r in runs):
             mine = [r for r in runs if r.problem == name]
             plot_problem(name, mine, os.path.join(out, f"wp_{name}.png"))
-            verdicts += verdict(name, mine) + verdict(name, mine, "error_median")
+            found += verdicts(name, mine)
     path = os.path.join(out, "throughput.csv")
     if os.path.exists(path):
         with open(path) as f:
@@ -770,9 +796,9 @@ def replot(out: str) -> None:
             rows = [{k: (v if k in ("method", "region_rg") else float(v)) for k, v in r.items()}
                     for r in csv.DictReader(f)]
         _plot_image(rows, int(rows[0]["size"]), os.path.join(out, "image_error.png"))
-        verdicts += _image_verdict(rows)
+        found += _image_verdict(rows)
     print("verdict (cheapest method at each accuracy):")
-    print("\n".join(verdicts))
+    print("\n".join(found))
 
 
 def _print_throughput(rows) -> None:
