@@ -261,9 +261,10 @@ def bench_cores(size: int, method: str | None) -> None:
     line("1 thread", f"{t1:8.1f} s", f"cores busy {busy1:.2f}")
     line("2 threads", f"{t2:8.1f} s", f"cores busy {busy2:.2f}")
     line("speed-up 1 -> 2 cores", f"{t1 / t2:8.2f} x", "both cores used", t1 / t2 > 1.5)
-    if busy2 < 1.5:
-        print("  (cores busy < 1.5 with two threads: is something else running on this machine?"
-              f" load average {os.getloadavg()[0]:.1f})")
+    if t1 / t2 < 1.5:
+        print("  (threads queue for the GIL: about 40 % of a chunk's tracing holds it, see "
+              "docs/architecture.md, Threads;\n   two processes run 2x. Load average "
+              f"{os.getloadavg()[0]:.1f}: above ~1 other work is running too)")
 
 
 # ------------------------------------------------------------------------------------
