@@ -199,13 +199,5 @@ class SYMRAY_OT_render(bpy.types.Operator):
 CLASSES = (SYMRAY_OT_render,)
 
 
-def register() -> None:
-    """Register the render operator."""
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    """Unregister the render operator."""
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)
+"""Register / unregister the render operator (in order, and in reverse)."""

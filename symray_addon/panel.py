@@ -134,13 +134,5 @@ class RENDER_PT_symray_output(SymRayPanelMixin, bpy.types.Panel):
 CLASSES = (RENDER_PT_symray, RENDER_PT_symray_integration, RENDER_PT_symray_output)
 
 
-def register() -> None:
-    """Register the panels."""
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    """Unregister the panels."""
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)
+"""Register / unregister the panels (in order, and in reverse)."""

@@ -92,13 +92,5 @@ class SYMRAY_MT_presets(bpy.types.Menu):
 CLASSES = (SYMRAY_OT_apply_preset, SYMRAY_MT_presets)
 
 
-def register() -> None:
-    """Register the preset operator and menu."""
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister() -> None:
-    """Unregister the preset operator and menu."""
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)
+"""Register / unregister the preset operator and menu (in order, and in reverse)."""
