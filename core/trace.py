@@ -31,6 +31,12 @@ longer steps; see ERROR_CONSTANTS and examples/bench_perf.py)."""
 _FAR = 1e12  # length of the straight segment cast after a ray leaves the model's region
 _SPLITS = 3  # a failed step is retried as 2, then 4, then 8 shorter steps
 _OFF_SHELL = 1e-3  # |H - H0| / (|H0| + |p|^2) after one step that marks it failed
+_DRIFT, _DRIFT_STEPS = 1e-2, 16
+"""Spacetimes: a ray whose |H - H0| stays above _DRIFT p_t^2 for _DRIFT_STEPS steps in a
+row has stopped being light (a bound massive orbit, m^2/E^2 ~ 2 |H|/p_t^2, can circle a
+near-extremal horizon until max_steps) and is flagged failed. |p|^2 cannot tell: near the
+horizon it grows without bound while p_t stays fixed; and a ray falling in may be that far
+off for a step or two before the capture test ends it."""
 
 
 @dataclass
@@ -197,12 +203,16 @@ class Tracer:
         idx = rows.copy()
         X_prev = X
         step = 0
+        streak = np.zeros(idx.size, dtype=np.int64)  # steps in a row off the light cone
         for step in range(1, self.options.max_steps + 1):
             if cancel is not None and step % 32 == 0 and cancel():
                 step -= 1
                 break
             state, ok = self._step(K, state, h, _SPLITS)
             Q, P = method.qp(state)
+            if self.spacetime:
+                streak = np.where(self._drifting(Q, P, H0), streak + 1, 0)
+                ok &= streak < _DRIFT_STEPS
             S = Q[off:]
             X = chart.to_cartesian(S)
             ok &= np.isfinite(X).all(axis=0)
@@ -233,7 +243,7 @@ class Tracer:
                 idx, X = idx[keep], X[:, keep]
                 state = tuple(a[..., keep] for a in state)
                 K = K.subset(keep)
-                H0 = H0[keep]
+                H0, streak = H0[keep], streak[keep]
             X_prev = X
         out.ending[idx] = ENDING["max_steps"]
         out.steps[idx] = step
@@ -249,19 +259,13 @@ class Tracer:
         a wrong root far off the light cone (|H - H0| > _OFF_SHELL (|H0| + |p|^2), where a
         good step is orders of magnitude closer). Those rays redo the step as two steps of
         h/2 (at most ``splits`` halvings deep); a ray captured at the midpoint stops there
-        (the capture test ends it). Rays already inside the horizon are not checked.
+        (the capture test ends it). Rays inside the horizon are not checked.
         """
         method = self.method
         new, ok = method.step(K, state, h)
         if splits == 0:
             return new, ok
-        Q, P = method.qp(new)
-        with np.errstate(all="ignore"):  # failed rays may hold anything
-            off = np.abs(self.model.value_soa(Q, P) - K.H0) > \
-                _OFF_SHELL * (np.abs(K.H0) + np.einsum("ij,ij->j", P, P))
-            if self.captured is not None:
-                off &= ~self.captured(Q)
-        ok &= ~off
+        ok &= ~self._off_shell(K, new)
         if ok.all():
             return new, ok
         bad = np.flatnonzero(~ok)
@@ -312,6 +316,22 @@ class Tracer:
         out.position[rows[h]] = hits.position[h]
         out.surface[rows[h]] = hits.color[h]
         return h
+
+    def _off_shell(self, K, state) -> np.ndarray:
+        """(M,) rays a step left far off the light cone, |H - H0| > _OFF_SHELL (|H0| + |p|^2);
+        rays inside the horizon are not judged."""
+        Q, P = self.method.qp(state)
+        with np.errstate(all="ignore"):  # failed rays may hold anything
+            off = np.abs(self.model.value_soa(Q, P) - K.H0) > \
+                _OFF_SHELL * (np.abs(K.H0) + np.einsum("ij,ij->j", P, P))
+            if self.captured is not None:
+                off &= ~self.captured(Q)
+        return off
+
+    def _drifting(self, Q, P, H0) -> np.ndarray:
+        """(M,) rays of a spacetime with |H - H0| > _DRIFT p_t^2 (see _DRIFT)."""
+        with np.errstate(all="ignore"):
+            return np.abs(self.model.value_soa(Q, P) - H0) > _DRIFT * P[0] * P[0]
 
     def _finish_energy(self, out, rows, Q, P, H0):
         with np.errstate(all="ignore"):

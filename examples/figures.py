@@ -512,8 +512,10 @@ def fig12(args) -> str:
     distance, fov = 200.0, 3.6
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.4))
     for ax, a in zip(axes, (0.0, 0.499), strict=True):
+        # at most 1e-7: rays skimming the near-extremal horizon on the prograde edge drift off
+        # the light cone at 1e-6 and are flagged failed (2 pixels at 128 px; none at 1e-7)
         out, pix = kerr_shadow(a, w, h, distance=distance, fov_deg=fov, method=args.method,
-                               tolerance=args.tolerance)
+                               tolerance=min(args.tolerance, 1e-7))
         half_w, half_h = 0.5 * w * pix * distance, 0.5 * h * pix * distance
         ax.imshow(np.clip(core.imageio.linear_to_srgb(out.rgba[..., :3]), 0, 1),
                   extent=(-half_w, half_w, -half_h, half_h))

@@ -138,3 +138,25 @@ def test_long_steps_into_the_horizon_are_split_not_failed():
         differ = (rays.ending == core.ENDING["captured"]).reshape(n, n) != captured
         assert np.all(edge[differ]), method
         assert differ.sum() < 0.02 * captured.size, method
+
+
+def test_rays_drifting_off_the_light_cone_are_flagged_failed():
+    """a/M = 0.998 seen edge-on from 200 rg, tolerance 1e-6: two rays skimming the horizon on
+    the prograde edge of the shadow drift to |H - H0| ~ 0.3 p_t^2 (no longer light: a bound
+    massive orbit that circles at r ~ 1.06 r+ until max_steps). They must end as failed,
+    quickly; their neighbours escape or are captured with H kept."""
+    import core
+    from core.trace import TraceOptions, Tracer
+
+    cam = core.Camera.perspective(position=(0, -200, 0), look_at=(0, 0, 0), up=(0, 0, 1),
+                                  fov_deg=3.6, width=128, height=96)
+    origins, directions = cam.rays()
+    rows = np.array([43 * 128 + 53, 52 * 128 + 53, 43 * 128 + 52, 52 * 128 + 54])
+    scene = core.Scene(model=hm.kerr(1.0, 0.499, chart="kerr_schild"))
+    rays = Tracer(scene, TraceOptions(method="gauss4", tolerance=1e-6, max_steps=3000),
+                  200.0).trace(origins[rows], directions[rows])
+    failed, escaped, captured = (core.ENDING[k] for k in ("failed", "escaped", "captured"))
+    assert rays.ending[:2].tolist() == [failed, failed], rays.ending
+    assert (rays.steps[:2] < 300).all(), rays.steps           # measured 110
+    assert set(rays.ending[2:].tolist()) <= {escaped, captured}, rays.ending
+    assert (rays.energy_error[2:] < 1e-2).all(), rays.energy_error
