@@ -30,7 +30,7 @@ escape accuracy at about a third of yoshida4's cost (smaller error constant, so 
 longer steps; see ERROR_CONSTANTS and examples/bench_perf.py)."""
 _FAR = 1e12  # length of the straight segment cast after a ray leaves the model's region
 _SPLITS = 3  # a failed step is retried as 2, then 4, then 8 shorter steps
-_OFF_SHELL = 1e-3  # |H - H0| / (|H0| + |p|^2) after one step that marks it failed
+_OFF_SHELL = 1e-3  # |H - H0| / (|H0| + |p|^2) after one step that has it retried in halves
 _DRIFT, _DRIFT_STEPS = 1e-2, 16
 """Spacetimes: a ray whose |H - H0| stays above _DRIFT p_t^2 for _DRIFT_STEPS steps in a
 row has stopped being light (a bound massive orbit, m^2/E^2 ~ 2 |H|/p_t^2, can circle a
@@ -208,10 +208,11 @@ class Tracer:
             if cancel is not None and step % 32 == 0 and cancel():
                 step -= 1
                 break
-            state, ok = self._step(K, state, h, _SPLITS)
+            state, ok, drift = self._step(K, state, h, _SPLITS)
             Q, P = method.qp(state)
             if self.spacetime:
-                streak = np.where(self._drifting(Q, P, H0), streak + 1, 0)
+                with np.errstate(invalid="ignore"):
+                    streak = np.where(drift > _DRIFT * P[0] * P[0], streak + 1, 0)
                 ok &= streak < _DRIFT_STEPS
             S = Q[off:]
             X = chart.to_cartesian(S)
@@ -254,6 +255,8 @@ class Tracer:
     def _step(self, K, state, h, splits: int):
         """One step of every ray; rays whose step fails are retried as two half steps.
 
+        -> (state, ok, |H - H0| of the state) per ray.
+
         A fixed step can be too long where K is stiff (the last steps of a ray falling
         into a horizon, steep index gradients): the implicit solve fails, or converges to
         a wrong root far off the light cone (|H - H0| > _OFF_SHELL (|H0| + |p|^2), where a
@@ -263,30 +266,32 @@ class Tracer:
         """
         method = self.method
         new, ok = method.step(K, state, h)
+        drift = self._drift(K, new)
         if splits == 0:
-            return new, ok
-        ok &= ~self._off_shell(K, new)
+            return new, ok, drift
+        ok &= ~self._off_shell(new, drift, K.H0)
         if ok.all():
-            return new, ok
+            return new, ok, drift
         bad = np.flatnonzero(~ok)
         K_bad = K.subset(bad)
-        mid, ok_mid = self._step(K_bad, tuple(a[..., bad] for a in state), 0.5 * h, splits - 1)
+        mid, ok_mid, drift_mid = self._step(K_bad, tuple(a[..., bad] for a in state), 0.5 * h,
+                                            splits - 1)
         go = ok_mid.copy()
         if self.captured is not None:
             with np.errstate(all="ignore"):
                 go &= ~self.captured(method.qp(mid)[0])
-        end, ok_end = mid, ok_mid
+        end, ok_end, drift_end = mid, ok_mid, drift_mid
         if go.any():
             g = np.flatnonzero(go)
-            e2, o2 = self._step(K_bad.subset(g), tuple(a[..., g] for a in mid), 0.5 * h,
-                                splits - 1)
+            e2, o2, d2 = self._step(K_bad.subset(g), tuple(a[..., g] for a in mid), 0.5 * h,
+                                    splits - 1)
             for a, b in zip(end, e2, strict=True):
                 a[..., g] = b
-            ok_end[g] = o2
+            ok_end[g], drift_end[g] = o2, d2
         for a, b in zip(new, end, strict=True):
             a[..., bad] = b
-        ok[bad] = ok_end
-        return new, ok
+        ok[bad], drift[bad] = ok_end, drift_end
+        return new, ok, drift
 
     def _segments(self, idx, X_prev, X, ok, out: RayResults) -> np.ndarray:
         """Surface hits and volume emission along the segments X_prev -> X near geometry.
@@ -317,21 +322,21 @@ class Tracer:
         out.surface[rows[h]] = hits.color[h]
         return h
 
-    def _off_shell(self, K, state) -> np.ndarray:
+    def _drift(self, K, state) -> np.ndarray:
+        """(M,) |H - H0| of each ray's state (NaN where a failed ray holds anything)."""
+        Q, P = self.method.qp(state)
+        with np.errstate(all="ignore"):
+            return np.abs(self.model.value_soa(Q, P) - K.H0)
+
+    def _off_shell(self, state, drift, H0) -> np.ndarray:
         """(M,) rays a step left far off the light cone, |H - H0| > _OFF_SHELL (|H0| + |p|^2);
         rays inside the horizon are not judged."""
         Q, P = self.method.qp(state)
-        with np.errstate(all="ignore"):  # failed rays may hold anything
-            off = np.abs(self.model.value_soa(Q, P) - K.H0) > \
-                _OFF_SHELL * (np.abs(K.H0) + np.einsum("ij,ij->j", P, P))
+        with np.errstate(all="ignore"):
+            off = drift > _OFF_SHELL * (np.abs(H0) + np.einsum("ij,ij->j", P, P))
             if self.captured is not None:
                 off &= ~self.captured(Q)
         return off
-
-    def _drifting(self, Q, P, H0) -> np.ndarray:
-        """(M,) rays of a spacetime with |H - H0| > _DRIFT p_t^2 (see _DRIFT)."""
-        with np.errstate(all="ignore"):
-            return np.abs(self.model.value_soa(Q, P) - H0) > _DRIFT * P[0] * P[0]
 
     def _finish_energy(self, out, rows, Q, P, H0):
         with np.errstate(all="ignore"):
