@@ -86,9 +86,8 @@ class Problem:
     T: np.ndarray | None
     error: object                      # (q, p) final states -> per-ray error
     steps: tuple                       # step counts tried, ascending
-    tols: tuple                        # dopri5 tolerances tried
-    unit: str = ""
-    levels: tuple = (1e-3, 1e-6, 1e-9)
+    tols: tuple                        # dopri5 tolerances tried (error measure, levels:
+                                       # PROBLEM_INFO)
 
 
 def _dop853(rhs, y0, t_end, rtol):
@@ -122,8 +121,7 @@ def volterra(n: int, t_end: float, quick: bool) -> Problem:
     steps = tuple(2000 * 2**k for k in range(0, 4 if quick else 7))  # h = 0.5 (Fig. 4) down
     return Problem("volterra", hm.from_expression("p*q*(p + q - 1)", q=["q"], p=["p"]), q0, p0,
                    np.full(n, t_end), None, error, steps,
-                   (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
-                   *PROBLEM_INFO["volterra"])
+                   (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11))
 
 
 def _schwarzschild_integrals(b: float, r0: float):
@@ -177,8 +175,7 @@ def schwarzschild(n: int, quick: bool, r0: float = 30.0) -> Problem:
 
     steps = tuple(64 * 2**k for k in range(0, 8 if quick else 11))
     return Problem("schwarzschild", hm.schwarzschild(rg=RG), q0, p0, S, T, error, steps,
-                   (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
-                   *PROBLEM_INFO["schwarzschild"])
+                   (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11))
 
 
 def _kerr_rays(n: int, a: float, r0: float):
@@ -235,8 +232,7 @@ def kerr(n: int, quick: bool, a: float = 0.499, r0: float = 30.0) -> Problem:
 
     steps = tuple(128 * 2**k for k in range(0, 7 if quick else 10))
     return Problem("kerr", H, q0, p0, S, T, error, steps,
-                   (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
-                   *PROBLEM_INFO["kerr"])
+                   (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11))
 
 
 def _last_crossing(sol, i: int, n: int, r0: float) -> float:
@@ -280,8 +276,7 @@ def mirage(n: int, quick: bool, x_end: float = 20.0) -> Problem:
 
     steps = tuple(25 * 2**k for k in range(0, 7 if quick else 10))
     return Problem("mirage", H, q0, p0, S, None, error, steps,
-                   (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
-                   *PROBLEM_INFO["mirage"])
+                   (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11))
 
 
 def _crossing_x(sol, i: int, x_end: float) -> float:
