@@ -9,15 +9,13 @@ that ran out of steps in ``MAX_STEPS_COLOR``, never as a plausible colour.
 
 from __future__ import annotations
 
-import os
-import threading
 import time
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import workers as workers_module
 from .imageio import FAILED_COLOR
 from .sky import Background
 from .trace import DEFAULT_METHOD, ENDING, RayResults, Scene, TraceOptions, Tracer
@@ -41,10 +39,16 @@ class RenderResult:
 def render(scene: Scene, camera, *, method: str = DEFAULT_METHOD, tolerance: float = 1e-8,
            step: float | None = None, max_steps: int = 20_000,
            passes: Sequence[str] = ALL_PASSES, chunk_size: int = 16_384,
-           threads: int | None = None,
+           workers: int | None = None, parallel: str = "auto",
            progress: Callable[[int, int], None] | None = None,
            should_cancel: Callable[[], bool] | None = None) -> RenderResult:
-    """Render ``scene`` seen by ``camera`` (DESIGN.md "Rendering in the core")."""
+    """Render ``scene`` seen by ``camera`` (DESIGN.md "Rendering in the core").
+
+    The image is traced in chunks of at most ``chunk_size`` rays by ``workers`` forked
+    processes or threads (``parallel``: "auto", "processes", "threads"; see
+    core.workers); ``progress(done, total)`` and ``should_cancel()`` are called from the
+    caller's thread, or from the worker threads when there are threads.
+    """
     passes = tuple(passes)
     unknown = set(passes) - set(ALL_PASSES)
     if unknown:
@@ -56,47 +60,35 @@ def render(scene: Scene, camera, *, method: str = DEFAULT_METHOD, tolerance: flo
     background = scene.background if isinstance(scene.background, Background) else \
         Background(scene.background)
     n = camera.n_pixels
+    kind, count = workers_module.choose(parallel, workers, n)
     with_error = "error" in passes and tracer.curved
     image = _Buffers(n, with_error)
-    workers = threads or min(2, os.cpu_count() or 1)
     # at least two chunks per worker (a small image still keeps every core busy), but not
     # below _MIN_CHUNK rays: per-step work is Python overhead on small batches
-    size = max(_MIN_CHUNK, min(chunk_size, -(-n // (2 * workers))))
+    size = max(_MIN_CHUNK, min(chunk_size, -(-n // (2 * count))))
     chunks = [(s, min(s + size, n)) for s in range(0, n, size)]
-    cancel_event = threading.Event()
+    cancelled = workers_module.CancelLatch(should_cancel)
 
-    lock = threading.Lock()
-
-    def cancelled() -> bool:
-        """Poll the caller's should_cancel (serialised: it may touch the UI) and latch."""
-        if not cancel_event.is_set() and should_cancel is not None:
-            with lock:
-                if should_cancel():
-                    cancel_event.set()
-        return cancel_event.is_set()
-
-    def work(span):
-        if cancelled():
-            return span, None
-        a, b = span
-        origins, directions = camera.rays(a, b)
-        chunk = _trace_chunk(tracer, origins, directions, with_error, cancelled)
-        return span, (None if cancelled() else chunk)
+    def work(span, cancel):
+        if cancel():
+            return None
+        origins, directions = camera.rays(*span)
+        chunk = _trace_chunk(tracer, origins, directions, with_error, cancel)
+        return None if cancel() else chunk
 
     done = 0
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        for span, chunk in pool.map(work, chunks):
-            if chunk is None:
-                continue
-            image.store(span, chunk, background)
-            done += span[1] - span[0]
-            if progress is not None:
-                progress(done, n)
-            if cancelled():
-                break
-    was_cancelled = done < n or cancel_event.is_set()
-    return image.result(camera, passes, time.perf_counter() - start_time, was_cancelled,
-                        tracer)
+    for span, chunk in workers_module.run_chunks(work, chunks, kind, count, cancelled):
+        if chunk is None:
+            continue
+        image.store(span, chunk, background)
+        done += span[1] - span[0]
+        if progress is not None:
+            progress(done, n)
+    was_cancelled = done < n or cancelled()
+    result = image.result(camera, passes, time.perf_counter() - start_time, was_cancelled,
+                          tracer)
+    result.summary["parallel"] = f"{count} {kind}" if kind != "inline" else "inline"
+    return result
 
 
 def _trace_chunk(tracer: Tracer, origins, directions, with_error: bool, cancel):

@@ -179,7 +179,7 @@ def render_kerr(width: int, height: int, method: str | None, threads: int | None
     tol = 0.1 * pixel_angle(width, height)
     kwargs = {} if method is None else {"method": method}
     cpu, start = time.process_time(), time.perf_counter()
-    out = core.render(kerr_scene(), cam, tolerance=tol, threads=threads, passes=passes,
+    out = core.render(kerr_scene(), cam, tolerance=tol, workers=threads, passes=passes,
                       **kwargs)
     wall = time.perf_counter() - start
     return out, wall, (time.process_time() - cpu) / wall, cam, tol

@@ -1,0 +1,204 @@
+"""core.workers: where an image's chunks run — forked worker processes, or threads.
+
+Threads share one GIL. A chunk's tracing is thousands of numpy operations of a few
+microseconds each on 16384-ray arrays, with Python in between, so two threads mostly
+take turns (1.1-1.3x on two cores, docs/architecture.md "Parallel chunks"). Processes
+do not share a GIL: forked workers inherit the tracer as it is (no pickling of models,
+textures or Blender's BVH trees), trace the chunks they are handed and send the results
+back through a pipe (1.9x on two cores).
+
+``fork`` exists on Linux (and is unsafe on macOS, absent on Windows); elsewhere, or when
+a pool cannot be started (no /dev/shm, say), the chunks run in threads.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import itertools
+import multiprocessing
+import os
+import sys
+import threading
+import warnings
+from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import (
+    FIRST_COMPLETED,
+    Future,
+    ProcessPoolExecutor,
+    ThreadPoolExecutor,
+    wait,
+)
+from typing import Any, TypeVar
+
+PARALLEL = ("auto", "processes", "threads")
+"""How chunks run: "auto" = processes where fork exists and the image is big enough."""
+PROCESS_MIN_RAYS = 65_536
+"""Under "auto", smaller images run in threads: forking costs tens of milliseconds."""
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameters (malloc.h)
+_POLL_S = 0.1  # how often the parent polls for cancellation while processes work
+
+Span = tuple[int, int]
+Cancel = Callable[[], bool]
+T = TypeVar("T")
+
+_JOBS: dict[int, tuple[Callable[[Span, Cancel], Any], Any]] = {}
+"""The jobs of running process pools by token: set before the pool forks, so that its
+workers inherit them (only the token and a span go through the pipe)."""
+_TOKENS = itertools.count()
+
+
+def available_cores() -> int:
+    """The cores this process may run on (its affinity mask where the OS tells it)."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return max(1, os.cpu_count() or 1)
+
+
+def can_fork() -> bool:
+    """Whether worker processes can be forked here (Linux, in the main interpreter)."""
+    return sys.platform.startswith("linux") and \
+        "fork" in multiprocessing.get_all_start_methods()
+
+
+def choose(parallel: str, workers: int | None, n_rays: int) -> tuple[str, int]:
+    """-> ("processes" | "threads" | "inline", worker count) for an image of n_rays.
+
+    Default worker count: every available core for processes, two threads (more threads
+    only queue for the GIL).
+    """
+    if parallel not in PARALLEL:
+        raise ValueError(f"unknown parallel mode {parallel!r}; choose from {PARALLEL}")
+    if workers is not None and workers < 1:
+        raise ValueError(f"workers must be at least 1, not {workers}")
+    cores = available_cores()
+    use_processes = can_fork() and (
+        parallel == "processes" or (parallel == "auto" and n_rays >= PROCESS_MIN_RAYS))
+    kind = "processes" if use_processes else "threads"
+    count = workers or (cores if use_processes else min(2, cores))
+    if count == 1 and parallel == "auto":
+        kind = "inline"  # one worker: no pool at all
+    return kind, count
+
+
+class CancelLatch:
+    """Polls a caller's ``should_cancel`` (serialised: it may touch a UI) and stays true
+    once it has said so."""
+
+    def __init__(self, should_cancel: Cancel | None) -> None:
+        self._poll = should_cancel
+        self._event = threading.Event()
+        self._lock = threading.Lock()
+
+    def __call__(self) -> bool:
+        if not self._event.is_set() and self._poll is not None:
+            with self._lock:
+                if self._poll():
+                    self._event.set()
+        return self._event.is_set()
+
+
+def run_chunks(job: Callable[[Span, Cancel], T], spans: Iterable[Span], kind: str,
+               workers: int, cancelled: CancelLatch) -> Iterator[tuple[Span, T]]:
+    """Run job(span, cancel) for every span; yield (span, result) as each one finishes.
+
+    ``kind`` and ``workers`` come from ``choose``. Threads and inline jobs poll
+    ``cancelled`` themselves; worker processes get a shared event that the caller's
+    thread sets once ``cancelled`` turns true. Stops yielding once cancelled (a job may
+    return early when its cancel turns true); closing the iterator early stops the jobs.
+    """
+    spans = list(spans)
+    if kind == "inline":
+        for span in spans:
+            if cancelled():
+                return
+            yield span, job(span, cancelled)
+        return
+    if kind == "processes":
+        try:
+            pool, futures, stop = _start_processes(job, spans, workers)
+        except _PoolUnavailable:
+            pass  # no process pool here: threads
+        else:
+            with pool:
+                yield from _as_completed(futures, cancelled, stop.set)
+            return
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        futures = {pool.submit(job, span, cancelled): span for span in spans}
+        yield from _as_completed(futures, cancelled, lambda: None)
+
+
+class _PoolUnavailable(Exception):
+    """A process pool cannot be started here (no semaphores, no fork)."""
+
+
+def _start_processes(job, spans, workers):
+    """Fork the workers (they inherit ``job``) and hand them every span.
+
+    -> (pool, {future: span}, the event that stops the workers' jobs).
+    """
+    context = multiprocessing.get_context("fork")
+    token = next(_TOKENS)
+    pool = None
+    try:
+        stop = context.Event()
+        _JOBS[token] = (job, stop)
+        pool = ProcessPoolExecutor(max_workers=min(workers, len(spans)), mp_context=context,
+                                   initializer=_keep_freed_memory)
+        with warnings.catch_warnings():
+            # Python >= 3.12 warns when a process with threads forks: a lock another
+            # thread holds at that moment stays locked in the child. The workers only
+            # run numpy and the tracer (no such lock) and leave with os._exit.
+            warnings.filterwarnings("ignore", message=r".*fork\(\) may lead to deadlocks",
+                                    category=DeprecationWarning)
+            first = pool.submit(_run_job, token, spans[0])  # forks every worker
+    except (OSError, NotImplementedError) as exc:  # e.g. no /dev/shm for semaphores
+        if pool is not None:
+            pool.shutdown(wait=False, cancel_futures=True)
+        raise _PoolUnavailable(str(exc)) from exc
+    finally:
+        _JOBS.pop(token, None)  # the workers have their copy; the parent needs none
+    futures = {first: spans[0]}
+    futures.update({pool.submit(_run_job, token, span): span for span in spans[1:]})
+    return pool, futures, stop
+
+
+def _keep_freed_memory() -> None:
+    """In a worker process: let glibc's malloc keep freed memory for the next array.
+
+    By default it returns the top of its heap to the OS once 2x its (adaptive) mmap
+    threshold is free, and a chunk's numpy temporaries come and go in megabytes: the
+    next ones are page-faulted in afresh (about a million faults for a 512x512 frame;
+    two workers 12.0 s -> 10.1 s without). Only the worker is tuned, never the
+    process that forked it (Blender); the worker exits when the image is done.
+    """
+    try:
+        mallopt = ctypes.CDLL(None).mallopt  # glibc (musl has a no-op one)
+    except (OSError, AttributeError):
+        return
+    mallopt(_M_MMAP_THRESHOLD, 32 << 20)  # glibc's largest; arrays below it use the heap
+    mallopt(_M_TRIM_THRESHOLD, 256 << 20)
+
+
+def _run_job(token: int, span: Span):
+    """In a worker process: run the inherited job on one span."""
+    job, stop = _JOBS[token]
+    return job(span, stop.is_set)
+
+
+def _as_completed(futures: dict[Future, Span], cancelled: Cancel,
+                  stop: Callable[[], None]) -> Iterator[tuple[Span, Any]]:
+    """Yield finished futures' (span, result), polling ``cancelled`` in between. On
+    cancellation, an error or an early close: call ``stop`` and drop what has not begun."""
+    pending = set(futures)
+    try:
+        while pending:
+            done, pending = wait(pending, timeout=_POLL_S, return_when=FIRST_COMPLETED)
+            for future in done:
+                yield futures[future], future.result()
+            if cancelled():
+                return
+    finally:
+        if pending:
+            stop()
+            for future in pending:
+                future.cancel()

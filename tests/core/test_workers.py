@@ -1,0 +1,121 @@
+"""Chunks in forked processes and in threads: the same image, progress, cancellation,
+errors and the fallback (core.workers)."""
+
+import threading
+
+import numpy as np
+import pytest
+
+import core
+from core import hamiltonians as hm
+from core import workers
+
+needs_fork = pytest.mark.skipif(not workers.can_fork(), reason="worker processes need fork")
+
+
+def mirage_scene():
+    """A custom medium from text (its model is a closure over parsed expressions: it
+    cannot be pickled, so processes must inherit it) with a textured object."""
+    model = hm.medium("1 + 0.4*exp(-(x**2 + y**2 + z**2)/4)", bounds=((-6,) * 3, (6,) * 3))
+    board = core.Plane(point=(0, 6, 0), normal=(0, -1, 0), u_axis=(1, 0, 0),
+                       color=core.checker(8, 8))
+    return core.Scene(model=model, objects=[board], background="procedural")
+
+
+def camera(size=64):
+    return core.Camera.perspective(position=(0, -12, 1), look_at=(0, 0, 0), up=(0, 0, 1),
+                                   fov_deg=50, width=size, height=size)
+
+
+@needs_fork
+def test_processes_threads_and_inline_give_the_same_image():
+    scene, cam = mirage_scene(), camera()
+    options = dict(method="rk4", tolerance=1e-4)  # 2 chunks (2048 + 2048 rays)
+    inline = core.render(scene, cam, workers=1, **options)
+    assert inline.summary["parallel"] == "inline"
+    assert inline.summary["steps"] > 10 * cam.n_pixels  # the rays were integrated
+    for parallel in ("processes", "threads"):
+        out = core.render(scene, cam, workers=2, parallel=parallel, **options)
+        assert out.summary["parallel"] == f"2 {parallel}"
+        np.testing.assert_array_equal(out.rgba, inline.rgba)
+        for name in ("steps", "ending", "error"):
+            np.testing.assert_array_equal(out.passes[name], inline.passes[name])
+        assert out.summary["steps"] == inline.summary["steps"]
+
+
+@needs_fork
+def test_processes_report_progress_of_every_ray_and_cancel():
+    scene, cam = mirage_scene(), camera(128)  # 8 chunks of 2048 rays
+    seen = []
+    out = core.render(scene, cam, workers=2, parallel="processes", method="rk4", tolerance=1e-4,
+                      chunk_size=2048,
+                      passes=("steps",), progress=lambda done, total: seen.append((done, total)))
+    assert not out.cancelled
+    assert [t for _, t in seen] == [cam.n_pixels] * 8
+    assert [d for d, _ in seen] == sorted(d for d, _ in seen) and seen[-1][0] == cam.n_pixels
+    caller = threading.get_ident()
+    polled_from = set()
+
+    def cancel_after_first_chunk():
+        polled_from.add(threading.get_ident())
+        return len(seen) > 8
+
+    out = core.render(scene, cam, workers=2, parallel="processes", method="rk4", tolerance=1e-4,
+                      chunk_size=2048,
+                      passes=("steps", "ending"), should_cancel=cancel_after_first_chunk,
+                      progress=lambda done, total: seen.append((done, total)))
+    assert out.cancelled
+    assert polled_from == {caller}  # never from a worker process (it may touch a UI)
+    traced = out.passes["ending"] >= 0
+    assert 0 < traced.sum() < cam.n_pixels  # what finished is kept, the rest never traced
+    assert np.all(out.passes["steps"][~traced] == 0)
+
+
+@needs_fork
+def test_an_error_in_a_worker_process_reaches_the_caller():
+    def job(span, cancel):
+        if span[0] == 2:
+            raise ValueError(f"bad span {span}")
+        return span[0]
+
+    latch = workers.CancelLatch(None)
+    with pytest.raises(ValueError, match=r"bad span \(2, 3\)"):
+        list(workers.run_chunks(job, [(0, 1), (1, 2), (2, 3), (3, 4)], "processes", 2, latch))
+    results = dict(workers.run_chunks(job, [(0, 1), (1, 2)], "processes", 2, latch))
+    assert results == {(0, 1): 0, (1, 2): 1}
+
+
+@needs_fork
+def test_without_a_process_pool_the_chunks_run_in_threads(monkeypatch):
+    """No working semaphores (a container without /dev/shm): threads, same results."""
+    def no_pool(*args):
+        raise workers._PoolUnavailable("no semaphores")
+
+    monkeypatch.setattr(workers, "_start_processes", no_pool)
+    where = set()
+
+    def job(span, cancel):
+        where.add(threading.current_thread().name)
+        return span[1] - span[0]
+
+    spans = [(0, 3), (3, 5), (5, 9)]
+    out = dict(workers.run_chunks(job, spans, "processes", 2, workers.CancelLatch(None)))
+    assert out == {(0, 3): 3, (3, 5): 2, (5, 9): 4}
+    assert where and threading.main_thread().name not in where
+
+
+def test_choose_picks_processes_for_big_images_where_fork_exists(monkeypatch):
+    monkeypatch.setattr(workers, "available_cores", lambda: 8)
+    big, small = workers.PROCESS_MIN_RAYS, workers.PROCESS_MIN_RAYS - 1
+    if workers.can_fork():
+        assert workers.choose("auto", None, big) == ("processes", 8)  # every core
+    assert workers.choose("auto", None, small) == ("threads", 2)  # threads: at most two
+    assert workers.choose("threads", None, big) == ("threads", 2)
+    assert workers.choose("threads", 5, big) == ("threads", 5)
+    assert workers.choose("auto", 1, big) == ("inline", 1)
+    monkeypatch.setattr(workers, "can_fork", lambda: False)
+    assert workers.choose("processes", 3, big) == ("threads", 3)
+    with pytest.raises(ValueError, match="parallel"):
+        workers.choose("gpu", None, big)
+    with pytest.raises(ValueError, match="workers"):
+        workers.choose("auto", 0, big)
