@@ -4,7 +4,18 @@ The contract (DESIGN.md): ``core.integrate``, ``core.hamiltonians``, ``core.Came
 ``core.Scene``, ``core.render``, ``core.ENDING`` and the intersectors.
 """
 
-from . import camera, dual, expressions, hamiltonians, imageio, integrators, intersect, presets, sky
+from . import (
+    camera,
+    dual,
+    expressions,
+    hamiltonians,
+    imageio,
+    integrators,
+    intersect,
+    presets,
+    sky,
+    workers,
+)
 from .camera import Camera, Frame
 from .expressions import ExpressionError
 from .imageio import FAILED_COLOR, ImageWriteError, read_png, write_exr, write_png
@@ -17,7 +28,8 @@ from .trace import ENDING, Scene
 
 __all__ = [
     "camera", "dual", "expressions", "hamiltonians", "imageio", "integrators", "intersect",
-    "presets", "sky", "Camera", "Frame", "ExpressionError", "FAILED_COLOR", "MAX_STEPS_COLOR",
+    "presets", "sky", "workers", "Camera", "Frame", "ExpressionError", "FAILED_COLOR",
+    "MAX_STEPS_COLOR",
     "ImageWriteError", "read_png", "write_exr", "write_png",
     "METHODS", "IntegrationResult", "PoincareTransformed", "get_method", "integrate",
     "Disk", "Group", "Hits", "Plane", "Sphere", "TriangleMesh", "Volume", "checker", "colormap",

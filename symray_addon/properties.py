@@ -43,6 +43,15 @@ BACKGROUND_ITEMS = [
     ("PROCEDURAL", "Procedural Sky", "SymRay's procedural star field and grid"),
 ]
 
+PARALLEL_ITEMS = [
+    ("AUTO", "Auto", "Worker processes where the OS can fork them (Linux) and the image "
+     "is at least 256x256; threads otherwise"),
+    ("PROCESSES", "Processes", "Forked worker processes: every core works (Linux; "
+     "threads elsewhere)"),
+    ("THREADS", "Threads", "Threads in Blender's process: they share Python's lock, so "
+     "two cores give about 1.2x"),
+]
+
 # Each expression property -> (validator, name of its error property).
 _EXPRESSIONS = {
     "refractive_index": (
@@ -154,6 +163,13 @@ class SymRaySettings(bpy.types.PropertyGroup):
     max_steps: bpy.props.IntProperty(  # type: ignore[valid-type]
         name="Max Steps", default=20000, min=1, max=100_000_000,
         description="Steps after which a ray is given up (ending 'max_steps')")
+    parallel: bpy.props.EnumProperty(  # type: ignore[valid-type]
+        name="Parallel", items=PARALLEL_ITEMS, default="AUTO",
+        description="How the image's chunks share the cores")
+    workers: bpy.props.IntProperty(  # type: ignore[valid-type]
+        name="Workers", default=0, min=0, max=256,
+        description="Worker processes or threads (0 = automatic: every core for "
+                    "processes, two threads)")
     pass_error: bpy.props.BoolProperty(  # type: ignore[valid-type]
         name="Error", default=True, update=_update_passes,
         description="Per-pixel error estimate (radians): 'SymRay Error' pass")

@@ -82,6 +82,8 @@ def prepare(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, use_border: 
         "tolerance": float(settings.tolerance),
         "max_steps": int(settings.max_steps),
         "passes": passes,
+        "parallel": settings.parallel.lower(),
+        "workers": int(settings.workers) or None,
     }
     return RenderJob(core_scene, camera, options, camera.width, camera.height, transparent)
 

@@ -207,6 +207,26 @@ def test_schwarzschild_lenses_the_board(addon, scene, helpers):
     assert curved[mid, w // 2] == addon.core.ENDING["captured"]
 
 
+def test_worker_processes_render_blender_meshes_as_threads_do(addon, scene, helpers):
+    """Forked workers inherit the scene as built in Blender (the mesh's BVH tree from
+    mathutils, the model, the world): the same image as threads, pixel for pixel."""
+    if not addon.core.workers.can_fork():
+        pytest.skip("worker processes need fork")
+    _hole_scene(scene, helpers)
+    board = helpers.solid_material("Board", (0.9, 0.2, 0.1, 1.0))
+    helpers.add_quad(scene, "Board", half=8.0, y=12.0, material=board)
+    scene.symray.workers = 2
+    results = {}
+    for parallel in ("PROCESSES", "THREADS"):
+        scene.symray.parallel = parallel
+        results[parallel] = _render_with_ending(addon, scene)
+        assert results[parallel].summary["parallel"] == f"2 {parallel.lower()}"
+    ending = results["PROCESSES"].passes["ending"]
+    assert (ending == addon.core.ENDING["hit"]).sum() > 100  # the board is in the picture
+    np.testing.assert_array_equal(ending, results["THREADS"].passes["ending"])
+    np.testing.assert_array_equal(results["PROCESSES"].rgba, results["THREADS"].rgba)
+
+
 def test_kerr_renders(addon, scene, helpers):
     _hole_scene(scene, helpers, model="KERR")
     scene.symray.spin = 0.9
