@@ -42,8 +42,8 @@ Cancel = Callable[[], bool]
 T = TypeVar("T")
 
 _JOBS: dict[int, tuple[Callable[[Span, Cancel], Any], Any]] = {}
-"""The jobs of running process pools by token: set before the pool forks, so that its
-workers inherit them (only the token and a span go through the pipe)."""
+"""The jobs of running process pools by token, from before their workers are forked
+(they inherit them: only a token and a span go through the pipe) until they are done."""
 _TOKENS = itertools.count()
 
 
@@ -114,13 +114,17 @@ def run_chunks(job: Callable[[Span, Cancel], T], spans: Iterable[Span], kind: st
             yield span, job(span, cancelled)
         return
     if kind == "processes":
+        token = next(_TOKENS)
         try:
-            pool, futures, stop = _start_processes(job, spans, workers)
+            pool, futures, stop = _start_processes(token, job, spans, workers)
         except _PoolUnavailable:
             pass  # no process pool here: threads
         else:
-            with pool:
-                yield from _as_completed(futures, cancelled, stop.set)
+            try:
+                with pool:
+                    yield from _as_completed(futures, cancelled, stop.set)
+            finally:
+                _JOBS.pop(token, None)
             return
     with ThreadPoolExecutor(max_workers=workers) as pool:
         futures = {pool.submit(job, span, cancelled): span for span in spans}
@@ -131,13 +135,12 @@ class _PoolUnavailable(Exception):
     """A process pool cannot be started here (no semaphores, no fork)."""
 
 
-def _start_processes(job, spans, workers):
-    """Fork the workers (they inherit ``job``) and hand them every span.
+def _start_processes(token: int, job, spans, workers):
+    """Fork the workers (they inherit ``job`` as _JOBS[token]) and hand them every span.
 
     -> (pool, {future: span}, the event that stops the workers' jobs).
     """
     context = multiprocessing.get_context("fork")
-    token = next(_TOKENS)
     pool = None
     try:
         stop = context.Event()
@@ -152,11 +155,10 @@ def _start_processes(job, spans, workers):
                                     category=DeprecationWarning)
             first = pool.submit(_run_job, token, spans[0])  # forks every worker
     except (OSError, NotImplementedError) as exc:  # e.g. no /dev/shm for semaphores
+        _JOBS.pop(token, None)
         if pool is not None:
             pool.shutdown(wait=False, cancel_futures=True)
         raise _PoolUnavailable(str(exc)) from exc
-    finally:
-        _JOBS.pop(token, None)  # the workers have their copy; the parent needs none
     futures = {first: spans[0]}
     futures.update({pool.submit(_run_job, token, span): span for span in spans[1:]})
     return pool, futures, stop

@@ -1,6 +1,7 @@
 """Chunks in forked processes and in threads: the same image, progress, cancellation,
 errors and the fallback (core.workers)."""
 
+import multiprocessing
 import threading
 
 import numpy as np
@@ -41,6 +42,7 @@ def test_processes_threads_and_inline_give_the_same_image():
         for name in ("steps", "ending", "error"):
             np.testing.assert_array_equal(out.passes[name], inline.passes[name])
         assert out.summary["steps"] == inline.summary["steps"]
+    assert not workers._JOBS and not multiprocessing.active_children()  # nothing left over
 
 
 @needs_fork
