@@ -227,6 +227,26 @@ def test_worker_processes_render_blender_meshes_as_threads_do(addon, scene, help
     np.testing.assert_array_equal(results["PROCESSES"].rgba, results["THREADS"].rgba)
 
 
+def test_worker_processes_forked_from_the_operators_thread(addon, scene, helpers):
+    """The modal operator traces in a Python thread of Blender's process: workers forked
+    from there finish, report progress to that thread and give the threads' image."""
+    if not addon.core.workers.can_fork():
+        pytest.skip("worker processes need fork")
+    _hole_scene(scene, helpers)
+    operator = addon.module("symray_addon.operator")
+    job = addon.module("symray_addon.render_job")
+    images = {}
+    for parallel in ("PROCESSES", "THREADS"):
+        scene.symray.parallel = parallel
+        task = operator.RenderTask(job.prepare(scene, bpy.context.evaluated_depsgraph_get()))
+        task.start()
+        task.join(120)
+        result = task.collect()
+        assert task.fraction == 1.0 and result.summary["parallel"].endswith(parallel.lower())
+        images[parallel] = result.rgba
+    np.testing.assert_array_equal(images["PROCESSES"], images["THREADS"])
+
+
 def test_kerr_renders(addon, scene, helpers):
     _hole_scene(scene, helpers, model="KERR")
     scene.symray.spin = 0.9
