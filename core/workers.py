@@ -55,7 +55,7 @@ def available_cores() -> int:
 
 
 def can_fork() -> bool:
-    """Whether worker processes can be forked here (Linux, in the main interpreter)."""
+    """Whether worker processes can be forked here (Linux; fork is unsafe on macOS)."""
     return sys.platform.startswith("linux") and \
         "fork" in multiprocessing.get_all_start_methods()
 
@@ -195,8 +195,11 @@ def _as_completed(futures: dict[Future, Span], cancelled: Cancel,
     try:
         while pending:
             done, pending = wait(pending, timeout=_POLL_S, return_when=FIRST_COMPLETED)
-            for future in done:
-                yield futures[future], future.result()
+            while done:  # a finished future holds its chunk: keep no reference to it
+                future = done.pop()
+                span, result = futures.pop(future), future.result()
+                del future
+                yield span, result
             if cancelled():
                 return
     finally:

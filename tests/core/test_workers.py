@@ -3,6 +3,7 @@ errors and the fallback (core.workers)."""
 
 import multiprocessing
 import threading
+import weakref
 
 import numpy as np
 import pytest
@@ -104,6 +105,24 @@ def test_without_a_process_pool_the_chunks_run_in_threads(monkeypatch):
     out = dict(workers.run_chunks(job, spans, "processes", 2, workers.CancelLatch(None)))
     assert out == {(0, 3): 3, (3, 5): 2, (5, 9): 4}
     assert where and threading.main_thread().name not in where
+
+
+def _chunk_of_rays(span, cancel):
+    return np.zeros((span[1] - span[0], 16))
+
+
+@pytest.mark.parametrize("kind", ["threads", pytest.param("processes", marks=needs_fork)])
+def test_finished_chunks_are_not_kept_by_the_pool(kind):
+    """Memory stays bounded by the chunks in flight: once the caller has stored a chunk,
+    nothing in the pool holds it (a 1080p frame's results are 260 MB)."""
+    spans = [(s, s + 1000) for s in range(0, 8000, 1000)]
+    alive = []
+    for _span, result in workers.run_chunks(_chunk_of_rays, spans, kind, 2,
+                                            workers.CancelLatch(None)):
+        assert result.shape == (1000, 16)
+        alive.append(weakref.ref(result))
+        del result
+        assert sum(ref() is not None for ref in alive[:-2]) == 0
 
 
 def test_choose_picks_processes_for_big_images_where_fork_exists(monkeypatch):
