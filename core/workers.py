@@ -2,10 +2,10 @@
 
 Threads share one GIL. A chunk's tracing is thousands of numpy operations of a few
 microseconds each on 16384-ray arrays, with Python in between, so two threads mostly
-take turns (1.1-1.3x on two cores, docs/architecture.md "Parallel chunks"). Processes
+take turns (1.0-1.3x on two cores, docs/architecture.md "Parallel chunks"). Processes
 do not share a GIL: forked workers inherit the tracer as it is (no pickling of models,
 textures or Blender's BVH trees), trace the chunks they are handed and send the results
-back through a pipe (1.9x on two cores).
+back through a pipe (1.6-2.0x on two cores).
 
 ``fork`` exists on Linux (and is unsafe on macOS, absent on Windows); elsewhere, or when
 a pool cannot be started (no /dev/shm, say), the chunks run in threads.
