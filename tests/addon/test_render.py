@@ -269,8 +269,12 @@ def _engine_exr(scene, tmp_path, name="frame") -> str:
     return str(tmp_path / f"{name}.exr")
 
 
-def test_f12_writes_exr_with_error_pass(addon, scene, helpers, tmp_path):
+@pytest.mark.parametrize("parallel", ["AUTO", "PROCESSES"])
+def test_f12_writes_exr_with_error_pass(addon, scene, helpers, tmp_path, parallel):
+    if parallel == "PROCESSES" and not addon.core.workers.can_fork():
+        pytest.skip("worker processes need fork")
     _hole_scene(scene, helpers)
+    scene.symray.parallel = parallel  # PROCESSES: forked from Blender's render thread
     scene.symray.center.location = (1.5, 0.0, 2.0)  # off-centre: a flipped pass would show
     bpy.context.view_layer.update()
     scene.render.resolution_x, scene.render.resolution_y = 32, 24
