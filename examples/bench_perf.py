@@ -9,8 +9,9 @@ Sections (``--only``):
 - ``eval``: one Kerr (a/M = 0.9) Hamiltonian value-and-gradient evaluation, Boyer–Lindquist
   and Kerr–Schild, ns per ray on one core, at 1e4 and 1e5 rays (target <= 300 ns).
 - ``steps``: ns per ray-step of every method on the Poincaré-transformed Kerr–Schild
-  Hamiltonian (what the tracer integrates), 1e4 rays near the hole, at the step the
-  render takes for 0.1 pixel at 512x512, and per unit of fictitious time.
+  Hamiltonian (what the tracer integrates), 1e4 rays near the hole, at the step (and
+  implicit-solve tolerance) the render takes for 0.1 pixel at 512x512, and per unit of
+  fictitious time.
 - ``image``: a 512x512 Kerr image (camera at 30 rg, tolerance = the angle of 0.1 pixel)
   with two workers (target <= 60 s), its escape directions checked against an accurate
   reference on a sample of pixels (target: <= 0.1 pixel, counted as the equivalent error
@@ -144,8 +145,9 @@ def bench_steps(n: int = 10_000, tolerance: float = 1.36e-4) -> None:
           f"core, at the render's step h for tolerance {tolerance:g} (0.1 pixel at 512x512);\n"
           "  per unit of fictitious time (ns / h): the cost of a ray at that accuracy")
     for name in METHODS:
-        method = get_method(name)
-        h = Tracer(core.Scene(model=H), TraceOptions(method=name, tolerance=tolerance)).step
+        # the render's own method object: implicit solves to the tolerance's precision
+        tracer = Tracer(core.Scene(model=H), TraceOptions(method=name, tolerance=tolerance))
+        method, h = tracer.method, tracer.step
         state, _ = method.step(K, method.init(K, Q, P), h)  # a method may carry history
 
         def run(method=method, state=state, h=h):
