@@ -44,8 +44,8 @@ BACKGROUND_ITEMS = [
 ]
 
 PARALLEL_ITEMS = [
-    ("AUTO", "Auto", "Worker processes where the OS can fork them (Linux) and the image "
-     "is at least 256x256; threads otherwise"),
+    ("AUTO", "Auto", "Worker processes where the OS can fork them (Linux), threads "
+     "elsewhere and for the smallest images"),
     ("PROCESSES", "Processes", "Forked worker processes: every core works (Linux; "
      "threads elsewhere)"),
     ("THREADS", "Threads", "Threads in Blender's process: they share Python's lock, so "
