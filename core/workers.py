@@ -156,9 +156,12 @@ def _start_processes(token: int, job, spans, workers):
             warnings.filterwarnings("ignore", message=r".*fork\(\) may lead to deadlocks",
                                     category=DeprecationWarning)
             first = pool.submit(_run_job, token, spans[0])  # forks every worker
-    except (OSError, NotImplementedError) as exc:  # e.g. no /dev/shm for semaphores
+    except (OSError, NotImplementedError) as exc:  # no /dev/shm for semaphores, fork: ENOMEM
         _JOBS.pop(token, None)
         if pool is not None:
+            # workers forked before the failure wait for work that never comes
+            for process in list((getattr(pool, "_processes", None) or {}).values()):
+                process.terminate()
             pool.shutdown(wait=False, cancel_futures=True)
         raise _PoolUnavailable(str(exc)) from exc
     futures = {first: spans[0]}

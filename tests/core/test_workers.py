@@ -1,7 +1,9 @@
 """Chunks in forked processes and in threads: the same image, progress, cancellation,
 errors and the fallback (core.workers)."""
 
+import errno
 import multiprocessing
+import os
 import threading
 import weakref
 
@@ -105,6 +107,29 @@ def test_without_a_process_pool_the_chunks_run_in_threads(monkeypatch):
     out = dict(workers.run_chunks(job, spans, "processes", 2, workers.CancelLatch(None)))
     assert out == {(0, 3): 3, (3, 5): 2, (5, 9): 4}
     assert where and threading.main_thread().name not in where
+
+
+@needs_fork
+def test_a_fork_that_fails_falls_back_to_threads(monkeypatch):
+    """fork() can fail (ENOMEM under strict overcommit, say): the second worker does not
+    start, the first is stopped, the chunks run in threads."""
+    real_fork, forks = os.fork, []
+
+    def fork_once():
+        if forks:
+            raise OSError(errno.ENOMEM, "Cannot allocate memory")
+        forks.append(1)
+        return real_fork()
+
+    monkeypatch.setattr(os, "fork", fork_once)
+    spans = [(0, 3), (3, 5), (5, 9)]
+    out = dict(workers.run_chunks(lambda span, cancel: span[1] - span[0], spans, "processes",
+                                  2, workers.CancelLatch(None)))
+    assert out == {(0, 3): 3, (3, 5): 2, (5, 9): 4} and forks == [1]
+    monkeypatch.undo()
+    for child in multiprocessing.active_children():
+        child.join(5)
+    assert not multiprocessing.active_children() and not workers._JOBS
 
 
 def _chunk_of_rays(span, cancel):
