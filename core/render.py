@@ -39,14 +39,15 @@ class RenderResult:
 def render(scene: Scene, camera, *, method: str = DEFAULT_METHOD, tolerance: float = 1e-8,
            step: float | None = None, max_steps: int = 20_000,
            passes: Sequence[str] = ALL_PASSES, chunk_size: int = 16_384,
-           workers: int | None = None, parallel: str = "auto",
+           workers: int | None = None, parallel: str = "auto", cores: int | None = None,
            progress: Callable[[int, int], None] | None = None,
            should_cancel: Callable[[], bool] | None = None) -> RenderResult:
     """Render ``scene`` seen by ``camera`` (DESIGN.md "Rendering in the core").
 
     The image is traced in chunks of at most ``chunk_size`` rays by ``workers`` forked
     processes or threads (``parallel``: "auto", "processes", "threads"; see
-    core.workers); ``progress(done, total)`` and ``should_cancel()`` are called from the
+    core.workers); without ``workers``, one process per core (at most ``cores``) or two
+    threads. ``progress(done, total)`` and ``should_cancel()`` are called from the
     caller's thread, or from the worker threads when there are threads.
     """
     passes = tuple(passes)
@@ -60,7 +61,7 @@ def render(scene: Scene, camera, *, method: str = DEFAULT_METHOD, tolerance: flo
     background = scene.background if isinstance(scene.background, Background) else \
         Background(scene.background)
     n = camera.n_pixels
-    kind, count = workers_module.choose(parallel, workers, n)
+    kind, count = workers_module.choose(parallel, workers, n, cores)
     with_error = "error" in passes and tracer.curved
     image = _Buffers(n, with_error)
     # at least two chunks per worker (a small image still keeps every core busy), but not

@@ -62,17 +62,20 @@ def can_fork() -> bool:
         "fork" in multiprocessing.get_all_start_methods()
 
 
-def choose(parallel: str, workers: int | None, n_rays: int) -> tuple[str, int]:
+def choose(parallel: str, workers: int | None, n_rays: int,
+           cores: int | None = None) -> tuple[str, int]:
     """-> ("processes" | "threads" | "inline", worker count) for an image of n_rays.
 
-    Default worker count: every available core for processes, two threads (more threads
-    only queue for the GIL).
+    Default worker count: one process per core (``cores``, default: the available ones),
+    or two threads (more threads only queue for the GIL).
     """
     if parallel not in PARALLEL:
         raise ValueError(f"unknown parallel mode {parallel!r}; choose from {PARALLEL}")
     if workers is not None and workers < 1:
         raise ValueError(f"workers must be at least 1, not {workers}")
-    cores = available_cores()
+    if cores is not None and cores < 1:
+        raise ValueError(f"cores must be at least 1, not {cores}")
+    cores = cores or available_cores()
     use_processes = can_fork() and (
         parallel == "processes" or (parallel == "auto" and n_rays >= PROCESS_MIN_RAYS))
     kind = "processes" if use_processes else "threads"

@@ -168,8 +168,8 @@ class SymRaySettings(bpy.types.PropertyGroup):
         description="How the image's chunks share the cores")
     workers: bpy.props.IntProperty(  # type: ignore[valid-type]
         name="Workers", default=0, min=0, max=256,
-        description="Worker processes or threads (0 = automatic: every core for "
-                    "processes, two threads)")
+        description="Worker processes or threads (0 = automatic: one process per "
+                    "thread Blender renders with, or two threads)")
     pass_error: bpy.props.BoolProperty(  # type: ignore[valid-type]
         name="Error", default=True, update=_update_passes,
         description="Per-pixel error estimate (radians): 'SymRay Error' pass")

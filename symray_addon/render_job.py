@@ -84,6 +84,9 @@ def prepare(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, use_border: 
         "passes": passes,
         "parallel": settings.parallel.lower(),
         "workers": int(settings.workers) or None,
+        # Blender's own thread count (-t N on the command line, or Performance › Threads)
+        # bounds the automatic one worker per core
+        "cores": int(scene.render.threads),
     }
     return RenderJob(core_scene, camera, options, camera.width, camera.height, transparent)
 

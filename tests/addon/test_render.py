@@ -247,6 +247,26 @@ def test_worker_processes_forked_from_the_operators_thread(addon, scene, helpers
     np.testing.assert_array_equal(images["PROCESSES"], images["THREADS"])
 
 
+def test_blenders_thread_count_bounds_the_worker_processes(addon, scene, helpers):
+    """`blender -b -t N` (or Performance › Threads: Fixed) caps the automatic worker
+    count, as it caps Cycles: a farm sharing a node between jobs keeps its promise."""
+    if not addon.core.workers.can_fork():
+        pytest.skip("worker processes need fork")
+    _hole_scene(scene, helpers)
+    scene.render.resolution_x, scene.render.resolution_y = 128, 64  # 4 chunks of 2048
+    scene.render.threads_mode = "FIXED"
+    runs = {}
+    for threads, workers in ((1, 0), (3, 0), (1, 2)):
+        scene.render.threads, scene.symray.workers = threads, workers
+        result = _render_with_ending(addon, scene)
+        runs[(threads, workers)] = result
+    assert runs[(1, 0)].summary["parallel"] == "inline"
+    assert runs[(3, 0)].summary["parallel"] == "3 processes"
+    assert runs[(1, 2)].summary["parallel"] == "2 processes"  # Workers set: taken as given
+    for result in runs.values():
+        np.testing.assert_array_equal(result.rgba, runs[(1, 0)].rgba)
+
+
 def test_kerr_renders(addon, scene, helpers):
     _hole_scene(scene, helpers, model="KERR")
     scene.symray.spin = 0.9

@@ -159,9 +159,15 @@ def test_choose_picks_processes_for_big_images_where_fork_exists(monkeypatch):
     assert workers.choose("threads", None, big) == ("threads", 2)
     assert workers.choose("threads", 5, big) == ("threads", 5)
     assert workers.choose("auto", 1, big) == ("inline", 1)
+    if workers.can_fork():
+        assert workers.choose("auto", None, big, cores=3) == ("processes", 3)  # e.g. -t 3
+    assert workers.choose("auto", None, big, cores=1) == ("inline", 1)
+    assert workers.choose("threads", None, big, cores=1) == ("threads", 1)
     monkeypatch.setattr(workers, "can_fork", lambda: False)
     assert workers.choose("processes", 3, big) == ("threads", 3)
     with pytest.raises(ValueError, match="parallel"):
         workers.choose("gpu", None, big)
     with pytest.raises(ValueError, match="workers"):
         workers.choose("auto", 0, big)
+    with pytest.raises(ValueError, match="cores"):
+        workers.choose("auto", None, big, cores=0)
