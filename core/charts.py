@@ -8,7 +8,12 @@ positions (3, N), directions (3, N).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+if TYPE_CHECKING:
+    from .models import Hamiltonian
 
 
 class CartesianChart:
@@ -105,11 +110,10 @@ class SpheroidalChart:
         return np.stack([z, z, np.ones_like(z)])
 
 
-def chart_for(model) -> CartesianChart | SpheroidalChart:
+def chart_for(model: Hamiltonian) -> CartesianChart | SpheroidalChart:
     """The chart a model's coordinates are written in."""
-    chart = getattr(model, "chart", None)
-    if chart == "spherical":
-        return SpheroidalChart(getattr(model, "a", 0.0))
+    if model.chart == "spherical":
+        return SpheroidalChart(model.a)
     if model.kind == "spacetime":
         if model.dim != 4:
             raise ValueError(f"a spacetime model needs 4 coordinates (t, x, y, z), got {model.dim}")

@@ -16,13 +16,15 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import workers as workers_module
+from .geometry import Intersector
 from .imageio import FAILED_COLOR
 from .sky import Background
-from .trace import DEFAULT_METHOD, ENDING, RayResults, Scene, TraceOptions, Tracer
+from .tracing import DEFAULT_METHOD, ENDING, RayResults, Scene, TraceOptions, Tracer
 
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
 ALL_PASSES = ("error", "steps", "ending")
+"""The passes, in their one order (the add-on's render passes and EXR channels follow it)."""
 _MIN_CHUNK = 2048
 
 
@@ -168,8 +170,8 @@ class _Buffers:
             # |H - H0| at the end of the rays that colour a pixel (a captured ray's last
             # step inside the horizon says nothing about the image)
             "energy_error_max": float(np.max(self.energy[finite], initial=0.0)),
-            "endings": counts, "step": getattr(tracer, "step", None),
-            "region_radius": getattr(getattr(tracer, "region", None), "radius", None),
+            "endings": counts, "step": tracer.step,
+            "region_radius": None if tracer.region is None else tracer.region.radius,
             "method": tracer.options.method if tracer.curved else "straight",
         }
 
@@ -194,7 +196,8 @@ def _scene_extent(scene: Scene, camera) -> float:
     """Largest distance from the model's centre to the camera or to any object's bounds."""
     far = np.linalg.norm(camera.frame.position - scene.center)
     objects = scene.objects
-    bounds = [objects.bounds] if hasattr(objects, "bounds") else [o.bounds for o in objects]
+    bounds = [objects.bounds] if isinstance(objects, Intersector) else \
+        [o.bounds for o in objects]
     bounds += [(v.lo, v.hi) for v in scene.volumes]
     for lo, hi in bounds:
         corners = np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T

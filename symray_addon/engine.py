@@ -15,11 +15,11 @@ from typing import Any
 import bpy
 import numpy as np
 
+from ..core.render import ALL_PASSES
 from . import render_job
 
-PASSES = (("error", "SymRay Error", "pass_error"), ("steps", "SymRay Steps", "pass_steps"),
-          ("ending", "SymRay Ending", "pass_ending"))
-"""(core pass, Blender pass name, scene.symray toggle)."""
+PASSES = tuple((name, f"SymRay {name.capitalize()}", f"pass_{name}") for name in ALL_PASSES)
+"""(core pass, Blender pass name, scene.symray toggle), in core.render.ALL_PASSES order."""
 
 last_summary: dict[str, Any] = {}
 """Summary of the last frame the engine rendered (for scripts and tests)."""

@@ -92,34 +92,16 @@ def build_model(settings: Any, metric_source: str) -> Any | None:
     raise ValueError(f"Unknown SymRay model '{model}'")
 
 
-def horizon_radius(settings: Any) -> float:
-    """Outer horizon radius r+ of the black-hole models (0 for the others)."""
-    if settings.model == "SCHWARZSCHILD":
-        return float(settings.rg)
-    if settings.model == "KERR":
-        m = float(settings.rg) / 2.0
-        a = min(abs(float(settings.spin)), 1.0) * m
-        return m + math.sqrt(max(m * m - a * a, 0.0))
-    return 0.0
+def check_observer(model: Any | None, where: Placement, camera_position: np.ndarray) -> None:
+    """ValueError if the camera sits inside (or on) a black hole's horizon.
 
-
-def kerr_schild_radius(local: np.ndarray, a: float) -> float:
-    """Kerr–Schild r of a point (x, y, z) in the hole's frame (spin length a)."""
-    x, y, z = (float(v) for v in local)
-    rho2 = x * x + y * y + z * z - a * a
-    return math.sqrt(0.5 * (rho2 + math.sqrt(rho2 * rho2 + 4.0 * a * a * z * z)))
-
-
-def check_observer(settings: Any, where: Placement, camera_position: np.ndarray) -> None:
-    """ValueError if the camera sits inside (or on) a black hole's horizon."""
-    r_plus = horizon_radius(settings)
-    if r_plus <= 0.0:
+    The horizon radius r+ and the radial coordinate it is measured in (Kerr–Schild or
+    Boyer–Lindquist r) are the core model's (``horizon``, ``radius_at``)."""
+    if model is None or model.horizon <= 0.0:
         return
+    r_plus = float(model.horizon)
     local = where.rotation.T @ (np.asarray(camera_position, dtype=np.float64) - where.center)
-    a = 0.0
-    if settings.model == "KERR":
-        a = min(abs(float(settings.spin)), 1.0) * float(settings.rg) / 2.0
-    r = kerr_schild_radius(local, a)
+    r = float(model.radius_at(local.reshape(3, 1))[0])
     if r <= r_plus * (1.0 + 1e-9):
         raise ValueError(f"The camera is inside the black hole's horizon (r = {r:.4g} <= "
                          f"r+ = {r_plus:.4g}): move it further from the centre object")

@@ -22,7 +22,9 @@ from contextlib import contextmanager
 import bpy
 import numpy as np
 
-PASS_CHANNELS = ("error", "steps", "ending")
+from ..core.render import ALL_PASSES
+
+PASS_CHANNELS = ALL_PASSES
 """Order of the passes in the R, G, B channels of the operator's passes EXR."""
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
+from ..core.render import ALL_PASSES
 from . import presets, validation
 
 MODEL_ITEMS = [
@@ -190,10 +191,9 @@ class SymRaySettings(bpy.types.PropertyGroup):
         description="Also write the operator's result as OpenEXR here (empty = no EXR)")
 
     def passes(self) -> tuple[str, ...]:
-        """Names of the core passes to compute ("error", "steps", "ending")."""
-        names = (("error", self.pass_error), ("steps", self.pass_steps),
-                 ("ending", self.pass_ending))
-        return tuple(name for name, wanted in names if wanted)
+        """Names of the core passes to compute (core.render.ALL_PASSES switched on here:
+        each has a toggle pass_<name> above)."""
+        return tuple(name for name in ALL_PASSES if getattr(self, f"pass_{name}"))
 
 
 @persistent

@@ -59,7 +59,7 @@ def prepare(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, use_border: 
         center_matrix = _evaluated(settings.center, depsgraph).matrix_world
     where = models.placement(center_matrix)
     model = models.build_model(settings, properties.metric_source(settings))
-    models.check_observer(settings, where, np.array(kwargs["matrix_world"])[:3, 3])
+    models.check_observer(model, where, np.array(kwargs["matrix_world"])[:3, 3])
 
     intersector = export_meshes.build_intersector(depsgraph)
     if intersector is None and model is None:

@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from .system import FrozenQ, System, as_system
+
 State = tuple[np.ndarray, ...]
 
 
@@ -18,11 +20,13 @@ def take(a: Any, idx: np.ndarray | None) -> Any:
 
 
 def restrict(H: Any, idx: np.ndarray | None) -> Any:
-    """H for the rays idx: H.subset(idx) where H carries per-ray data, otherwise H itself."""
+    """H (a system or a FrozenQ) for the rays idx: H.subset(idx) (H itself where it
+    carries no per-ray data)."""
     if idx is None:
         return H
-    subset = getattr(H, "subset", None)
-    return H if subset is None else subset(idx)
+    if isinstance(H, FrozenQ):
+        return H.subset(idx)
+    return as_system(H).subset(idx)
 
 
 class PerRay:
@@ -63,7 +67,7 @@ def as_soa(a: Any) -> np.ndarray:
     return np.array(a, dtype=np.float64, order="C")
 
 
-def flow(H: Any, Z: np.ndarray) -> np.ndarray:
+def flow(H: System, Z: np.ndarray) -> np.ndarray:
     """Hamilton's vector field (dH/dp, -dH/dq) of the stacked state Z = (q; p), shape (2n, N)."""
     n = Z.shape[0] // 2
     dq, dp = H.gradient_soa(Z[:n], Z[n:])
@@ -84,12 +88,32 @@ def quiet(fn):
     return wrapper
 
 
+Pattern = tuple[tuple[str, float], ...]
+"""A splitting: the exact sub-flows (kind, coefficient) of one step, in order."""
+
+
 class Method:
-    """Base of the one-step rules: name, order, symplectic, init/step/qp, with_options."""
+    """Base of the one-step rules (what the drivers and the tracer rely on).
+
+    Every method has a ``name``, an ``order``, ``symplectic``, ``explicit`` (no implicit
+    solve for any H) and ``error_constant`` (C in err = C h^order around a mass, see
+    core.tracing.steps; None where it was not calibrated), and
+
+        init(H, Q, P) -> state; step(H, state, h) -> (state, ok); qp(state) -> (Q, P)
+        steps(H, state, hs)        # consecutive steps of sizes hs (default: one by one)
+        accepts(option) / with_options(**options)
+
+    Splittings also give ``pattern(H)`` (their sub-flows for this H, else None) and
+    ``apply``; methods with an embedded error estimate (``adaptive``) give ``attempt``
+    and ``factor`` for per-ray step sizes.
+    """
 
     name: str = ""
     order: int = 0
     symplectic: bool = False
+    explicit: bool = False
+    error_constant: float | None = None
+    adaptive: bool = False
 
     def __init__(self, **options: Any) -> None:
         self.options = dict(options)
@@ -98,9 +122,38 @@ class Method:
         """Initial state (Q, P) (copies, float64) for the rays in the columns of Q and P."""
         return as_soa(Q), as_soa(P)
 
+    def step(self, H: Any, state: State, h: Any) -> tuple[State, np.ndarray]:
+        """One step of size h (float or (N,)); -> (new state, ok (N,))."""
+        raise NotImplementedError
+
+    def steps(self, H: Any, state: State, hs: Any) -> tuple[State, np.ndarray]:
+        """Consecutive steps of sizes hs (a composition's substeps); ok of all of them."""
+        ok = None
+        for h in hs:
+            state, okh = self.step(H, state, h)
+            ok = okh if ok is None else ok & okh
+        assert ok is not None, "steps needs at least one step size"
+        return state, ok
+
     def qp(self, state: State) -> tuple[np.ndarray, np.ndarray]:
         """Positions and momenta (each (n, N)) of a state."""
         return state[0], state[1]
+
+    def pattern(self, H: Any) -> Pattern | None:
+        """A splitting's sub-flows for H (compositions merge neighbours); None: not one."""
+        return None
+
+    def apply(self, kind: str, H: Any, state: State, ch: Any) -> None:
+        """Advance state in place by the exact sub-flow ``kind`` over ch (splittings)."""
+        raise NotImplementedError(f"{self.name} is not a splitting")
+
+    def attempt(self, H: Any, state: State, h: Any) -> tuple[State, np.ndarray, np.ndarray]:
+        """Trial step with an error norm per ray (``adaptive`` methods)."""
+        raise NotImplementedError(f"{self.name} has no embedded error estimate")
+
+    def factor(self, err: np.ndarray) -> np.ndarray:
+        """Step-size factor from the error norm (``adaptive`` methods)."""
+        raise NotImplementedError(f"{self.name} has no embedded error estimate")
 
     def accepts(self, option: str) -> bool:
         """Whether with_options takes this option."""

@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from ._common import Method, State, quiet
-from .implicit import ImplicitMidpoint, Pattern, StormerVerlet, run_splitting
+from ._common import Method, Pattern, State, quiet
+from .implicit import ImplicitMidpoint, StormerVerlet, run_splitting
 from .tao import Tao2
 
 _CBRT2 = 2.0 ** (1.0 / 3.0)
@@ -76,10 +76,12 @@ class Composition(Method):
     """Symmetric composition of a symmetric 2nd-order base step (default Störmer–Verlet)."""
 
     def __init__(self, name: str, weights: tuple[float, ...], order: int,
-                 base: str | Method = "stormer_verlet") -> None:
+                 base: str | Method = "stormer_verlet",
+                 error_constant: float | None = None) -> None:
         self.base = resolve_base(base)
         super().__init__(base=self.base)
         self.name, self.order = name, order
+        self.error_constant = error_constant
         self.weights = tuple(float(w) for w in weights)
         self._merged: dict[Pattern, Pattern] = {}
 
@@ -87,6 +89,11 @@ class Composition(Method):
     def symplectic(self) -> bool:  # type: ignore[override]
         """Symplectic when the base is."""
         return self.base.symplectic
+
+    @property
+    def explicit(self) -> bool:  # type: ignore[override]
+        """Explicit when the base is."""
+        return self.base.explicit
 
     def init(self, H: Any, Q: np.ndarray, P: np.ndarray) -> State:
         """The base method's initial state."""
@@ -105,7 +112,7 @@ class Composition(Method):
         new_base = self.base if base is None else resolve_base(base)
         if options:
             new_base = new_base.with_options(**options)
-        return Composition(self.name, self.weights, self.order, new_base)
+        return Composition(self.name, self.weights, self.order, new_base, self.error_constant)
 
     def __repr__(self) -> str:
         return f"Composition({self.name!r}, order={self.order}, base={self.base!r})"
@@ -113,47 +120,40 @@ class Composition(Method):
     @quiet
     def step(self, H: Any, state: State, h: Any) -> tuple[State, np.ndarray]:
         """One composed step (merged splitting when the base is one for this H)."""
-        pattern = getattr(self.base, "pattern", None)
-        pat = pattern(H) if pattern is not None else None
+        pat = self.base.pattern(H)
         if pat is not None:
             seq = self._merged.get(pat)
             if seq is None:
                 seq = self._merged[pat] = merge_pattern(pat, self.weights)
             return run_splitting(self.base, H, state, seq, h)
-        chain = getattr(self.base, "steps", None)
-        if chain is not None:  # the base runs its substeps itself, sharing work between them
-            return chain(H, state, [w * h for w in self.weights])
-        ok = None
-        for w in self.weights:
-            state, okw = self.base.step(H, state, w * h)
-            ok = okw if ok is None else ok & okw
-        return state, ok
+        # the base runs its substeps (Störmer–Verlet shares work between them)
+        return self.base.steps(H, state, [w * h for w in self.weights])
 
 
 def yoshida4(base: str | Method = "stormer_verlet") -> Composition:
     """Triple jump, order 4."""
     w1, w0 = YOSHIDA4
-    return Composition("yoshida4", symmetric_weights(w0, (w1,)), 4, base)
+    return Composition("yoshida4", symmetric_weights(w0, (w1,)), 4, base, error_constant=1.0)
 
 
 def yoshida6(base: str | Method = "stormer_verlet") -> Composition:
     """Yoshida's solution A, 7 base steps, order 6."""
-    return Composition("yoshida6", yoshida_weights(YOSHIDA6_W), 6, base)
+    return Composition("yoshida6", yoshida_weights(YOSHIDA6_W), 6, base, error_constant=0.9)
 
 
 def yoshida8(base: str | Method = "stormer_verlet") -> Composition:
     """Yoshida's solution D, 15 base steps, order 8."""
-    return Composition("yoshida8", yoshida_weights(YOSHIDA8_W), 8, base)
+    return Composition("yoshida8", yoshida_weights(YOSHIDA8_W), 8, base, error_constant=350.0)
 
 
 def suzuki4(base: str | Method = "stormer_verlet") -> Composition:
     """Suzuki's fractal, 5 base steps, order 4."""
-    return Composition("suzuki4", suzuki_weights(4), 4, base)
+    return Composition("suzuki4", suzuki_weights(4), 4, base, error_constant=0.013)
 
 
 def suzuki6(base: str | Method = "stormer_verlet") -> Composition:
     """Suzuki's fractal, 25 base steps, order 6."""
-    return Composition("suzuki6", suzuki_weights(6), 6, base)
+    return Composition("suzuki6", suzuki_weights(6), 6, base, error_constant=5e-3)
 
 
 def tao4(omega: float = 5.0) -> Composition:

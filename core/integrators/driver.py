@@ -10,6 +10,7 @@ import numpy as np
 from ._common import Method, restrict
 from .poincare import Clocked, PoincareTransformed
 from .registry import get_method
+from .system import CaptureTest, System, as_system
 
 
 @dataclass
@@ -189,9 +190,9 @@ def _run_adaptive(run: _Run, s_end: np.ndarray, max_steps: int, energy_every: in
     run.retire(np.ones(run.act.size, dtype=bool), failed=True)  # out of steps
 
 
-def capture_test(H: Any) -> Any:
-    """Q (n, N) -> (N,) bool: inside the model's horizon (H.captured_soa); None if none."""
-    return getattr(H, "captured_soa", None)
+def capture_test(H: Any) -> CaptureTest | None:
+    """Q (n, N) -> (N,) bool: inside the model's horizon; None if it has none."""
+    return as_system(H).capture_test()
 
 
 def _to_soa(q0: Any, p0: Any, dim: int | None) -> tuple[np.ndarray, np.ndarray, bool]:
@@ -226,17 +227,18 @@ def integrate(H: Any, q0: Any, p0: Any, step: float | np.ndarray = 0.01, steps: 
     (get_method), e.g. base="implicit_midpoint", omega=20.0, max_iter=20.
     """
     meth = get_method(method, **options)
-    is_rk_adaptive = hasattr(meth, "attempt")
+    H = as_system(H)
+    is_rk_adaptive = meth.adaptive
     if tol is not None and is_rk_adaptive:
         meth = meth.with_options(rtol=tol, **({} if "atol" in options else {"atol": tol}))
-    elif tol is not None and getattr(meth, "accepts", lambda _: False)("tol"):
+    elif tol is not None and meth.accepts("tol"):
         meth = meth.with_options(tol=tol)
-    Q, P, single = _to_soa(q0, p0, getattr(H, "dim", None))
+    Q, P, single = _to_soa(q0, p0, H.dim)
     n, N = Q.shape
     with np.errstate(all="ignore"):
         E0 = H.value_soa(Q, P)
     mode = "adaptive" if is_rk_adaptive else "clock" if adaptive else "fixed"
-    Hk = H
+    Hk: System = H
     if mode == "clock":
         Hk = PoincareTransformed(Clocked(H), 0.0)
         Q = np.concatenate((Q, np.zeros((1, N))))

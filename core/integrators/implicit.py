@@ -11,10 +11,20 @@ from typing import Any
 
 import numpy as np
 
-from ._common import Method, PerRay, State, as_soa, finite_rays, flow, quiet, restrict, take
+from ._common import (
+    Method,
+    Pattern,
+    PerRay,
+    State,
+    as_soa,
+    finite_rays,
+    flow,
+    quiet,
+    restrict,
+    take,
+)
 from ._solve import SolverOptions, solve
-
-Pattern = tuple[tuple[str, float], ...]
+from .system import FrozenQ, as_system
 
 
 class _Implicit(Method):
@@ -30,7 +40,7 @@ class _KickDrift(_Implicit):
 
     def pattern(self, H: Any) -> Pattern | None:
         """The splitting as (flow, coefficient) pairs when H is separable, else None."""
-        return self._pattern if getattr(H, "separable", False) else None
+        return self._pattern if H.separable else None
 
     def apply(self, kind: str, H: Any, state: State, ch: Any) -> None:
         """Advance state in place by the exact flow `kind` over the step ch."""
@@ -43,7 +53,7 @@ class _KickDrift(_Implicit):
             Q += ch * dp
 
 
-def run_splitting(method: Any, H: Any, state: State, seq: Pattern,
+def run_splitting(method: Method, H: Any, state: State, seq: Pattern,
                   h: Any) -> tuple[State, np.ndarray]:
     """Apply the exact sub-flows seq = ((kind, c), ...) with steps c*h to a copy of state."""
     state = tuple(a.copy() for a in state)
@@ -85,10 +95,9 @@ def implicit_momentum(H: Any, Q: np.ndarray, P: np.ndarray, h: Any, opts: Solver
     return P + W, ok
 
 
-def frozen_q(H: Any, Q: np.ndarray) -> Any:
+def frozen_q(H: Any, Q: np.ndarray) -> FrozenQ | None:
     """H's FrozenQ at Q (dH/dq for any momenta at fixed Q), or None if H has none."""
-    make = getattr(H, "frozen_q", None)
-    return None if make is None else make(Q)
+    return as_system(H).frozen_q(Q)
 
 
 def implicit_position(H: Any, Q: np.ndarray, P: np.ndarray, h: Any,
@@ -112,12 +121,13 @@ class SymplecticEuler(_KickDrift):
     """Symplectic Euler (seed Eq. 11): p1 = p - h H_q(q, p1), q1 = q + h H_p(q, p1). Order 1."""
 
     name, order, symplectic = "symplectic_euler", 1, True
+    error_constant = 0.3
     _pattern: Pattern = (("K", 1.0), ("D", 1.0))
 
     @quiet
     def step(self, H: Any, state: State, h: Any) -> tuple[State, np.ndarray]:
         """One step; explicit when H is separable."""
-        if getattr(H, "separable", False):
+        if H.separable:
             return run_splitting(self, H, state, self._pattern, h)
         Q, P = state
         P1, ok = implicit_momentum(H, Q, P, h, self.solver)
@@ -130,12 +140,13 @@ class StormerVerlet(_KickDrift):
     """Störmer–Verlet; generalized (implicit) Störmer–Verlet for non-separable H. Order 2."""
 
     name, order, symplectic = "stormer_verlet", 2, True
+    error_constant = 0.11
     _pattern: Pattern = (("K", 0.5), ("D", 1.0), ("K", 0.5))
 
     @quiet
     def step(self, H: Any, state: State, h: Any) -> tuple[State, np.ndarray]:
         """One step: kick-drift-kick when H is separable, else the generalized scheme."""
-        if getattr(H, "separable", False):
+        if H.separable:
             return run_splitting(self, H, state, self._pattern, h)
         return self.steps(H, state, (h,))
 
@@ -164,6 +175,7 @@ class ImplicitMidpoint(_Implicit):
     """Implicit midpoint rule z1 = z0 + h f((z0 + z1)/2). Order 2, symmetric, symplectic."""
 
     name, order, symplectic = "implicit_midpoint", 2, True
+    error_constant = 0.07
 
     @quiet
     def step(self, H: Any, state: State, h: Any) -> tuple[State, np.ndarray]:
@@ -204,6 +216,7 @@ class Gauss4(_Implicit):
     """
 
     name, order, symplectic = "gauss4", 4, True
+    error_constant = 0.01
 
     def init(self, H: Any, Q: np.ndarray, P: np.ndarray) -> State:
         """(q, p, Y) with no polynomial yet (Y NaN)."""

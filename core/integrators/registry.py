@@ -37,6 +37,6 @@ def get_method(method: str | Method, **options: Any) -> Method:
         if method not in METHODS:
             raise ValueError(f"unknown method {method!r}; choose from {sorted(METHODS)}")
         method = METHODS[method]
-    elif not all(hasattr(method, a) for a in ("init", "step", "qp")):
-        raise TypeError(f"not an integration method: {method!r}")
+    elif not isinstance(method, Method):
+        raise TypeError(f"not an integration method (a core.integrators.Method): {method!r}")
     return method.with_options(**options) if options else method

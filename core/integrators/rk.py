@@ -29,7 +29,8 @@ class _Stacked(Method):
 class RK4(_Stacked):
     """Classical 4th-order Runge–Kutta."""
 
-    name, order, symplectic = "rk4", 4, False
+    name, order, symplectic, explicit = "rk4", 4, False, True
+    error_constant = 0.125
 
     def __init__(self) -> None:
         super().__init__()
@@ -74,7 +75,9 @@ class Dopri5(_Stacked):
     ray; a step is accepted when err <= 1. `step` takes a fixed step (order 5).
     """
 
-    name, order, symplectic = "dopri5", 5, False
+    name, order, symplectic, explicit = "dopri5", 5, False, True
+    error_constant = 0.1
+    adaptive = True
 
     def __init__(self, rtol: float = 1e-8, atol: float | None = None, safety: float = 0.9,
                  min_factor: float = 0.2, max_factor: float = 5.0) -> None:

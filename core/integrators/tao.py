@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from ._common import Method, State, as_soa, quiet
-from .implicit import Pattern, run_splitting
+from ._common import Method, Pattern, State, as_soa, quiet
+from .implicit import run_splitting
 
 
 class Tao2(Method):
@@ -23,7 +23,8 @@ class Tao2(Method):
     with omega h, so keep omega h below ~0.3 (a larger omega binds better over long runs).
     """
 
-    name, order, symplectic = "tao2", 2, True
+    name, order, symplectic, explicit = "tao2", 2, True, True
+    error_constant = None  # with the default binding it does not follow rays around a mass
     _pattern: Pattern = (("A", 0.5), ("B", 0.5), ("C", 1.0), ("B", 0.5), ("A", 0.5))
 
     def __init__(self, omega: float = 5.0) -> None:

@@ -1,0 +1,27 @@
+"""What rays can hit and pass through: hits, primitives, meshes, groups, textures, volumes.
+
+``core.intersect`` is the public name of this package's contents (the core/Blender seam:
+an intersector has ``bounds`` and ``intersect(a, b) -> Hits``, see hits.py).
+"""
+
+from .group import Group
+from .hits import Hits, Intersector, segment_overlaps
+from .mesh import TriangleMesh
+from .primitives import Disk, Plane, Sphere
+from .textures import Texture, checker, colormap
+from .volumes import Volume
+
+__all__ = [
+    "Disk",
+    "Group",
+    "Hits",
+    "Intersector",
+    "Plane",
+    "Sphere",
+    "Texture",
+    "TriangleMesh",
+    "Volume",
+    "checker",
+    "colormap",
+    "segment_overlaps",
+]

@@ -1,0 +1,40 @@
+"""Groups of intersectors: the nearest hit over the members."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from .hits import _INF, Hits, _segments, segment_overlaps
+
+
+class Group:
+    """The nearest hit over member intersectors, each sent only the segments near its bounds.
+
+    Object ids: member k reports ``ids[k]`` (default: k, its position in the list).
+    """
+
+    def __init__(self, objects: Sequence[Any], ids: Sequence[int] | None = None) -> None:
+        """Group of intersectors (anything with ``bounds`` and ``intersect``)."""
+        self.objects = list(objects)
+        self.ids = list(range(len(self.objects))) if ids is None else [int(i) for i in ids]
+        if len(self.ids) != len(self.objects):
+            raise ValueError("ids must have one entry per object")
+        if self.objects:
+            lo = np.min([np.asarray(o.bounds[0], np.float64) for o in self.objects], axis=0)
+            hi = np.max([np.asarray(o.bounds[1], np.float64) for o in self.objects], axis=0)
+        else:
+            lo, hi = np.full(3, _INF), np.full(3, -_INF)
+        self.bounds = (lo, hi)
+
+    def intersect(self, a: np.ndarray, b: np.ndarray) -> Hits:
+        """Nearest hit of each segment a -> b (N, 3) over all members."""
+        a, b = _segments(a, b)
+        out = Hits.miss(a.shape[0])
+        for obj, oid in zip(self.objects, self.ids, strict=True):
+            rows = np.flatnonzero(segment_overlaps(a, b, *obj.bounds))
+            if rows.size:
+                out.merge(rows, obj.intersect(a[rows], b[rows]), oid)
+        return out

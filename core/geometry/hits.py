@@ -1,0 +1,91 @@
+"""Hits of straight segments and the intersector interface (the core/Blender seam).
+
+Every intersector has ``bounds`` (lo (3,), hi (3,), world AABB; infinite where unbounded)
+and ``intersect(a, b) -> Hits`` for segment ends a, b of shape (N, 3). Hits report the
+nearest hit along each segment; where ``hit`` is False, ``t`` is +inf, ``object_id`` is -1
+and the other fields are 0. Normals are the geometric, outward (sphere) or user-given
+(plane, disk, mesh winding) unit normals, not flipped towards the ray.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+_INF = np.inf
+
+
+@dataclass
+class Hits:
+    """Nearest hits of N segments (see the module docstring for the miss convention)."""
+
+    hit: np.ndarray  # (N,) bool
+    t: np.ndarray  # (N,) in [0, 1] along a -> b; +inf where no hit
+    object_id: np.ndarray  # (N,) int32; -1 where no hit
+    position: np.ndarray  # (N, 3)
+    normal: np.ndarray  # (N, 3)
+    uv: np.ndarray  # (N, 2)
+    color: np.ndarray  # (N, 4) float64
+
+    @classmethod
+    def miss(cls, n: int) -> Hits:
+        """N segments that hit nothing."""
+        return cls(
+            np.zeros(n, dtype=bool), np.full(n, _INF), np.full(n, -1, dtype=np.int32),
+            np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2)), np.zeros((n, 4)),
+        )  # fmt: skip
+
+    def __len__(self) -> int:
+        return self.hit.shape[0]
+
+    def merge(self, rows: np.ndarray, other: Hits, object_id: int | None = None) -> None:
+        """Take other's hits where nearer, in place; ``rows``: integer indices of other's rows.
+
+        ``object_id``, if given, replaces the ids reported by ``other``.
+        """
+        nearer = other.hit & (other.t < self.t[rows])
+        r = rows[nearer]
+        self.hit[r] = True
+        self.t[r] = other.t[nearer]
+        self.object_id[r] = other.object_id[nearer] if object_id is None else object_id
+        self.position[r] = other.position[nearer]
+        self.normal[r] = other.normal[nearer]
+        self.uv[r] = other.uv[nearer]
+        self.color[r] = other.color[nearer]
+
+
+@runtime_checkable
+class Intersector(Protocol):
+    """What the tracer needs from a scene: world bounds and segment intersection."""
+
+    bounds: tuple[np.ndarray, np.ndarray]
+
+    def intersect(self, a: np.ndarray, b: np.ndarray) -> Hits: ...
+
+
+def _segments(a: Any, b: Any) -> tuple[np.ndarray, np.ndarray]:
+    a = np.asarray(a, dtype=np.float64).reshape(-1, 3)
+    b = np.asarray(b, dtype=np.float64).reshape(-1, 3)
+    if a.shape != b.shape:
+        raise ValueError(f"segment ends must have equal shapes, got {a.shape} and {b.shape}")
+    return a, b
+
+
+def segment_overlaps(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    """(N,) bool: the AABB of each segment a -> b overlaps the box [lo, hi]."""
+    return np.all((np.minimum(a, b) <= hi) & (np.maximum(a, b) >= lo), axis=1)
+
+
+def _fill(n: int, rows: np.ndarray, t, p, nrm, uv, color, object_id: int) -> Hits:
+    """Hits for n segments of which ``rows`` hit with the given per-hit data."""
+    h = Hits.miss(n)
+    h.hit[rows] = True
+    h.t[rows] = t
+    h.object_id[rows] = object_id
+    h.position[rows] = p
+    h.normal[rows] = nrm
+    h.uv[rows] = uv
+    h.color[rows] = color
+    return h

@@ -1,0 +1,215 @@
+"""Analytic primitives: Sphere, Plane (infinite or a rectangle) and Disk (an annulus).
+
+Each has ``bounds`` and ``intersect(a, b) -> Hits`` (see core.geometry.hits) and a colour
+(core.geometry.textures); ``_Primitive`` holds the shared plumbing.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .hits import _INF, Hits, _fill, _segments
+from .textures import Texture, _rgba, _shade
+
+
+def _vec(v: Any, name: str) -> np.ndarray:
+    v = np.asarray(v, dtype=np.float64).reshape(3)
+    if not np.all(np.isfinite(v)):
+        raise ValueError(f"{name} must be a finite 3-vector, got {v.tolist()}")
+    return v
+
+
+def _unit(v: Any, name: str) -> np.ndarray:
+    v = _vec(v, name)
+    n = float(np.linalg.norm(v))
+    if n == 0.0:
+        raise ValueError(f"{name} must be non-zero")
+    return v / n
+
+
+def _tangent(normal: np.ndarray, u_axis: Any = None) -> np.ndarray:
+    """Unit vector perpendicular to normal: u_axis projected, or a stable default."""
+    if u_axis is None:
+        helper = np.eye(3)[int(np.argmin(np.abs(normal)))]
+    else:
+        helper = _vec(u_axis, "u_axis")
+    u = helper - (helper @ normal) * normal
+    if np.linalg.norm(u) < 1e-12:
+        raise ValueError("u_axis must not be parallel to the normal")
+    return u / np.linalg.norm(u)
+
+
+class _Primitive:
+    """Shared plumbing: colour and object id; subclasses implement ``_hit``."""
+
+    color: np.ndarray | Texture
+    object_id: int
+    bounds: tuple[np.ndarray, np.ndarray]
+
+    def intersect(self, a: np.ndarray, b: np.ndarray) -> Hits:
+        """Nearest hit of each segment a -> b (N, 3) with this object."""
+        a, b = _segments(a, b)
+        rows, t, p, n, uv = self._hit(a, b)
+        c = _shade(self.color, uv, p, n)
+        return _fill(a.shape[0], rows, t, p, n, uv, c, self.object_id)
+
+    def _hit(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
+        raise NotImplementedError
+
+
+# -- analytic primitives ---------------------------------------------------------------------
+
+
+class Sphere(_Primitive):
+    """Sphere; uv = (longitude around +Z from +X, latitude), each in [0, 1]."""
+
+    def __init__(
+        self, center: Any, radius: float, color: Any = (1, 1, 1, 1), object_id: int = 0
+    ) -> None:
+        """Sphere of the given centre and radius (> 0)."""
+        self.center = _vec(center, "center")
+        if not radius > 0:
+            raise ValueError(f"radius must be positive, got {radius}")
+        self.radius = float(radius)
+        self.color = _rgba(color)
+        self.object_id = int(object_id)
+        self.bounds = (self.center - radius, self.center + radius)
+
+    def _hit(self, a, b):
+        d = b - a
+        m = a - self.center
+        qa = np.einsum("ij,ij->i", d, d)
+        qb = np.einsum("ij,ij->i", d, m)  # half of the linear coefficient
+        qc = np.einsum("ij,ij->i", m, m) - self.radius**2
+        disc = qb * qb - qa * qc
+        ok = (disc >= 0) & (qa > 0)
+        sq = np.sqrt(np.where(ok, disc, 0.0))
+        q = -(qb + np.copysign(sq, qb))  # stable roots: q / qa and qc / q
+        with np.errstate(divide="ignore", invalid="ignore"):
+            r1, r2 = q / qa, qc / q
+        t0, t1 = np.fmin(r1, r2), np.fmax(r1, r2)
+        t = np.where((t0 >= 0) & (t0 <= 1), t0, np.where((t1 >= 0) & (t1 <= 1), t1, np.nan))
+        rows = np.flatnonzero(ok & np.isfinite(t))
+        t = t[rows]
+        p = a[rows] + t[:, None] * d[rows]
+        n = (p - self.center) / self.radius
+        n /= np.linalg.norm(n, axis=1, keepdims=True)
+        uv = np.stack([
+            0.5 + np.arctan2(n[:, 1], n[:, 0]) / (2 * np.pi),
+            0.5 + np.arcsin(np.clip(n[:, 2], -1, 1)) / np.pi,
+        ], axis=1)  # fmt: skip
+        return rows, t, p, n, uv
+
+
+class Plane(_Primitive):
+    """Infinite plane, or a finite rectangle of size ``extent`` = (size_u, size_v) centred at point.
+
+    uv: in [0, 1] across a finite rectangle (u along ``u_axis``, v along normal x u_axis);
+    on an infinite plane, the fractional part of (local coordinates / ``tile`` + 0.5).
+    """
+
+    def __init__(
+        self,
+        point: Any,
+        normal: Any,
+        color: Any = (1, 1, 1, 1),
+        *,
+        u_axis: Any = None,
+        extent: tuple[float, float] | None = None,
+        tile: float = 1.0,
+        object_id: int = 0,
+    ) -> None:
+        """Plane through point with the given normal; finite if extent is given."""
+        self.point = _vec(point, "point")
+        self.normal = _unit(normal, "normal")
+        self.u_axis = _tangent(self.normal, u_axis)
+        self.v_axis = np.cross(self.normal, self.u_axis)
+        self.extent = None if extent is None else (float(extent[0]), float(extent[1]))
+        if self.extent is not None and min(self.extent) <= 0:
+            raise ValueError(f"extent must be positive, got {extent}")
+        self.tile = float(tile)
+        self.color = _rgba(color)
+        self.object_id = int(object_id)
+        self.bounds = self._bounds()
+
+    def _bounds(self):
+        if self.extent is None:
+            lo, hi = np.full(3, -_INF), np.full(3, _INF)
+            axis = np.flatnonzero(np.abs(self.normal) == 1.0)
+            lo[axis] = hi[axis] = self.point[axis]
+            return lo, hi
+        hu, hv = 0.5 * self.extent[0] * self.u_axis, 0.5 * self.extent[1] * self.v_axis
+        corners = self.point + np.array([hu + hv, hu - hv, -hu + hv, -hu - hv])
+        return corners.min(axis=0), corners.max(axis=0)
+
+    def _hit(self, a, b):
+        d = b - a
+        den = d @ self.normal
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = ((self.point - a) @ self.normal) / den
+        ok = (den != 0) & (t >= 0) & (t <= 1)
+        rows = np.flatnonzero(ok)
+        t = t[rows]
+        p = a[rows] + t[:, None] * d[rows]
+        local = p - self.point
+        lu, lv = local @ self.u_axis, local @ self.v_axis
+        if self.extent is None:
+            uv = np.stack([lu, lv], axis=1) / self.tile + 0.5
+            uv -= np.floor(uv)
+        else:
+            uv = np.stack([lu / self.extent[0], lv / self.extent[1]], axis=1) + 0.5
+            inside = np.all((uv >= 0) & (uv <= 1), axis=1)
+            rows, t, p, uv = rows[inside], t[inside], p[inside], uv[inside]
+        n = np.broadcast_to(self.normal, p.shape).copy()
+        return rows, t, p, n, uv
+
+
+class Disk(_Primitive):
+    """Flat annulus r_in <= r <= r_out; uv = ((r - r_in)/(r_out - r_in), angle / 2 pi).
+
+    The angle is measured from ``u_axis`` towards normal x u_axis, in [0, 1).
+    """
+
+    def __init__(
+        self,
+        center: Any,
+        normal: Any,
+        r_in: float,
+        r_out: float,
+        color: Any = (1, 1, 1, 1),
+        *,
+        u_axis: Any = None,
+        object_id: int = 0,
+    ) -> None:
+        """Annulus (a full disk when r_in = 0) around center in the plane of normal."""
+        if not 0 <= r_in < r_out:
+            raise ValueError(f"need 0 <= r_in < r_out, got r_in={r_in}, r_out={r_out}")
+        self.center = _vec(center, "center")
+        self.normal = _unit(normal, "normal")
+        self.u_axis = _tangent(self.normal, u_axis)
+        self.v_axis = np.cross(self.normal, self.u_axis)
+        self.r_in, self.r_out = float(r_in), float(r_out)
+        self.color = _rgba(color)
+        self.object_id = int(object_id)
+        half = self.r_out * np.sqrt(np.clip(1 - self.normal**2, 0, 1))
+        self.bounds = (self.center - half, self.center + half)
+
+    def _hit(self, a, b):
+        d = b - a
+        den = d @ self.normal
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = ((self.center - a) @ self.normal) / den
+        rows = np.flatnonzero((den != 0) & (t >= 0) & (t <= 1))
+        t = t[rows]
+        p = a[rows] + t[:, None] * d[rows]
+        local = p - self.center
+        x, y = local @ self.u_axis, local @ self.v_axis
+        r = np.hypot(x, y)
+        inside = (r >= self.r_in) & (r <= self.r_out)
+        rows, t, p, r, x, y = rows[inside], t[inside], p[inside], r[inside], x[inside], y[inside]
+        ang = np.arctan2(y, x) / (2 * np.pi)
+        uv = np.stack([(r - self.r_in) / (self.r_out - self.r_in), ang - np.floor(ang)], axis=1)
+        n = np.broadcast_to(self.normal, p.shape).copy()
+        return rows, t, p, n, uv

@@ -1,0 +1,45 @@
+"""Hamiltonian models: user expressions, metrics (seed Eq. 10), black holes and media.
+
+Every model is a :class:`Hamiltonian` (base.py), which is also an integration
+:class:`~core.integrators.System`. One kind per module: ``expression`` (H as text),
+``metric`` (H = 1/2 g^ij p_i p_j), ``spacetimes`` (Minkowski, Schwarzschild, Kerr),
+``kerr_schild`` (Kerr in Kerr–Schild form, evaluated by hand) and ``medium`` (optics).
+``core.hamiltonians`` is the public name of this package's contents.
+
+Signature (-, +, +, +) throughout; photons have H = 1/2 g^ij p_i p_j = 0.
+"""
+
+from ..integrators.system import FrozenQ
+from .base import BLOCK, Hamiltonian, blocked
+from .expression import ExpressionHamiltonian, from_expression
+from .kerr_schild import KerrSchild
+from .medium import Medium, medium
+from .metric import MetricHamiltonian, metric
+from .spacetimes import (
+    Minkowski,
+    SphericalSpacetime,
+    kerr,
+    kerr_horizon,
+    minkowski,
+    schwarzschild,
+)
+
+__all__ = [
+    "BLOCK",
+    "ExpressionHamiltonian",
+    "FrozenQ",
+    "Hamiltonian",
+    "KerrSchild",
+    "Medium",
+    "MetricHamiltonian",
+    "Minkowski",
+    "SphericalSpacetime",
+    "blocked",
+    "from_expression",
+    "kerr",
+    "kerr_horizon",
+    "medium",
+    "metric",
+    "minkowski",
+    "schwarzschild",
+]

@@ -1,0 +1,213 @@
+"""The model base class: :class:`Hamiltonian` and the block-by-block evaluation of big batches.
+
+Internally arrays are structure-of-arrays with rays on the last axis (``Q``, ``P`` of
+shape ``(n, N)``); the public ``value`` and ``gradient`` take the contract's ``(N, n)`` or
+``(n,)`` arrays. Partial derivatives come from :mod:`core.dual`.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from .. import expressions as ex
+from ..dual import Dual
+from ..integrators.system import System
+
+BLOCK = 8192
+"""Evaluations of more rays than 2 * BLOCK go block by block: the temporaries of one block
+stay small (numpy temporaries of a few hundred kB are allocated fresh, page by page, and
+cost more than the arithmetic on them), and the outputs are filled in place."""
+
+
+def blocked(method):
+    """Run a model's SoA evaluation (self, Q, *per-ray args) in blocks of BLOCK rays.
+
+    Arguments that are arrays with rays on the last axis are cut into blocks; the results
+    (an array, or a tuple of arrays and Nones) are assembled along the last axis.
+    """
+
+    @functools.wraps(method)
+    def wrapper(self, Q, *args, **kwargs):
+        n_rays = Q.shape[-1]
+        if n_rays <= 2 * BLOCK:
+            return method(self, Q, *args, **kwargs)
+        out = None
+        for start in range(0, n_rays, BLOCK):
+            cut = slice(start, min(start + BLOCK, n_rays))
+            part = method(self, Q[..., cut], *(
+                a[..., cut] if isinstance(a, np.ndarray) and a.ndim and a.shape[-1] == n_rays
+                else a for a in args), **kwargs)
+            single = not isinstance(part, tuple)
+            parts = (part,) if single else part
+            if out is None:
+                out = tuple(None if x is None else np.empty(np.shape(x)[:-1] + (n_rays,))
+                            for x in parts)
+            for o, x in zip(out, parts, strict=True):
+                if o is not None:
+                    o[..., cut] = x
+        return out[0] if single else out
+
+    return wrapper
+
+
+
+class Hamiltonian(System):
+    """H(q, p) with value and gradient on ray batches; see docs/architecture.md.
+
+    What the integrators need is :class:`core.integrators.System`; what the tracer reads
+    of a model is below (class defaults: no mass, no horizon, unbounded, no split).
+    """
+
+    kind = "custom"
+    """"spacetime" (coordinate 0 is time), "medium" (x, y, z optics) or "custom"."""
+    chart: str | None = None
+    """The coordinates: "cartesian", "spherical" (Boyer–Lindquist-like, spin ``a``) or
+    "kerr_schild"; None: Cartesian (t, x, y, z) for a spacetime, (x, y, z) otherwise."""
+    flat = False
+    """True where nothing bends light: the tracer draws straight rays, no integration."""
+    rg = 0.0
+    """Schwarzschild radius 2M of the mass at the origin (0: none); sets the far field,
+    the region around the mass and the step rule."""
+    a = 0.0
+    """Spin length J/M of the mass (the spheroidal chart's a)."""
+    horizon = 0.0
+    """Outer horizon radius r+ in the model's radial coordinate (0: none)."""
+    bounds: tuple[np.ndarray, np.ndarray] | None = None
+    """(lo, hi) of the box outside which the model is uniform (rays straight); None."""
+
+    def __init__(self, coords: Sequence[str], momenta: Sequence[str], separable: bool = False,
+                 parameters: Mapping[str, float] | None = None, time_scale: str | None = None):
+        _check_names(coords, momenta)
+        self.coords = tuple(coords)
+        self.momenta = tuple(momenta)
+        self.dim = len(self.coords)
+        self.separable = bool(separable)
+        self.parameters = dict(parameters or {})
+        self._time_scale: ex.Program | None = None
+        if time_scale is not None:
+            self._time_scale = ex.compile_program([time_scale], self.coords, self.parameters)
+
+    # --- to be provided by each model (SoA) ---
+    def value_soa(self, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
+        """H at each ray, (N,)."""
+        raise NotImplementedError
+
+    @blocked
+    def gradient_soa(self, Q, P, wrt: str = "qp"):
+        """(dH/dq, dH/dp), each (n, N); the half not in ``wrt`` is None."""
+        _, dq, dp = self._value_gradient(Q, P, wrt)
+        return dq, dp
+
+    @blocked
+    def value_gradient_soa(self, Q, P):
+        """(H, dH/dq, dH/dp) in one evaluation."""
+        return self._value_gradient(Q, P, "qp")
+
+    def _value_gradient(self, Q, P, wrt):
+        raise NotImplementedError
+
+    @property
+    def mass(self) -> float:
+        """M = rg / 2."""
+        return 0.5 * float(self.rg)
+
+    @property
+    def scales_time(self) -> bool:
+        """Whether the model has a Poincaré time scale g(q) other than 1."""
+        return self._time_scale is not None
+
+    def for_backward_tracing(self) -> Hamiltonian:
+        """The same light rays in the chart the tracer follows them in (regular where rays
+        followed into the past go); the model itself unless a better chart exists."""
+        return self
+
+    def radius_at(self, X: np.ndarray) -> np.ndarray:
+        """The radial coordinate that ``horizon`` is measured in, at local Cartesian
+        positions X (3, N): the distance from the centre unless a model says otherwise."""
+        return np.sqrt(np.einsum("ij,ij->j", X, X))
+
+    def split_parts(self) -> Any:
+        """The parts of an explicit splitting of this model for the integrators; None: no
+        split is offered (every model today; issue #14)."""
+        return None
+
+    def time_scale_soa(self, Q: np.ndarray):
+        """Poincaré time-transformation g(q) and dg/dq (docs/design.md); default g = 1."""
+        n_rays = Q.shape[-1]
+        if self._time_scale is None:
+            return np.ones(n_rays), np.zeros_like(Q)
+        env = {name: Dual.variable(Q[i], i) for i, name in enumerate(self.coords)}
+        (g,) = self._time_scale.evaluate(env)
+        return _value_and_partials(g, self.dim, n_rays, offset=0)
+
+    def invariants_soa(self, Q, P) -> dict[str, np.ndarray]:
+        """Known constants of motion besides H (name -> (N,)); none by default."""
+        return {}
+
+    # --- public (N, n) interface ---
+    def value(self, q, p) -> np.ndarray:
+        """H(q, p) for (N, n) or (n,) arrays: (N,) or a scalar."""
+        Q, P, single = self._soa(q, p)
+        h = self.value_soa(Q, P)
+        return h[0] if single else h
+
+    def gradient(self, q, p):
+        """(dH/dq, dH/dp) in the shape of q."""
+        Q, P, single = self._soa(q, p)
+        dq, dp = self.gradient_soa(Q, P)
+        if single:
+            return dq[:, 0].copy(), dp[:, 0].copy()
+        return dq.T.copy(), dp.T.copy()
+
+    def invariants(self, q, p) -> dict[str, np.ndarray]:
+        """Known constants of motion (besides H) for (N, n) or (n,) arrays."""
+        Q, P, single = self._soa(q, p)
+        inv = self.invariants_soa(Q, P)
+        return {k: (v[0] if single else v) for k, v in inv.items()}
+
+    def _soa(self, q, p):
+        q = np.asarray(q, dtype=np.float64)
+        p = np.asarray(p, dtype=np.float64)
+        if q.shape != p.shape or q.shape[-1] != self.dim or q.ndim not in (1, 2):
+            raise ValueError(f"q and p must both have shape (N, {self.dim}) or ({self.dim},); "
+                             f"got {q.shape} and {p.shape}")
+        single = q.ndim == 1
+        Q = np.ascontiguousarray(np.atleast_2d(q).T)
+        P = np.ascontiguousarray(np.atleast_2d(p).T)
+        return Q, P, single
+
+    def __repr__(self) -> str:
+        params = ", ".join(f"{k}={v:g}" for k, v in self.parameters.items())
+        return f"{type(self).__name__}({', '.join(self.coords)}; {params})"
+
+
+def _check_names(coords, momenta) -> None:
+    names = list(coords) + list(momenta)
+    if len(coords) != len(momenta) or not coords:
+        raise ValueError("need as many momenta as coordinates, at least one of each")
+    bad = [n for n in names if not isinstance(n, str) or not n.isidentifier()]
+    if bad:
+        raise ValueError(f"variable names must be identifiers: {bad}")
+    if len(set(names)) != len(names):
+        raise ValueError(f"variable names must be distinct: {names}")
+    clash = set(names) & (set(ex.CONSTANTS) | set(ex.dual.FUNCTIONS))
+    if clash:
+        raise ValueError(f"variable names clash with built-in names: {sorted(clash)}")
+
+
+def _value_and_partials(result, n: int, n_rays: int, offset: int):
+    """Split a Dual (or constant) into its value (N,) and partials rows offset..offset+n."""
+    if isinstance(result, Dual):
+        value, partials = result.v, result.d
+    else:
+        value, partials = result, {}
+    value = np.broadcast_to(np.asarray(value, dtype=np.float64), (n_rays,))
+    grad = np.zeros((n, n_rays))
+    for k, g in partials.items():
+        if offset <= k < offset + n:
+            grad[k - offset] = g
+    return value, grad

@@ -1,0 +1,58 @@
+"""Light in a medium of refractive index n(x, y, z): the optical Hamiltonian."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+from .. import expressions as ex
+from .expression import ExpressionHamiltonian
+
+
+class Medium(ExpressionHamiltonian):
+    """Light in a medium of refractive index n(x, y, z) (optical Hamiltonian)."""
+
+    kind = "medium"
+
+    def __init__(self, index: str, literal: bool, parameters=None, bounds=None):
+        coords, momenta = ("x", "y", "z"), ("p_x", "p_y", "p_z")
+        text = "0.5*n*(p_x**2 + p_y**2 + p_z**2)" if literal else \
+            "0.5*(p_x**2 + p_y**2 + p_z**2)/n**2"
+        super().__init__(text, coords, momenta, parameters, definitions=[("n", index)],
+                         positive=("n",))
+        self.index_text = index
+        self.literal = literal
+        self.bounds = None if bounds is None else (np.asarray(bounds[0], float),
+                                                   np.asarray(bounds[1], float))
+        self._index = ex.compile_expression(index, coords, parameters)
+
+    def index_soa(self, Q) -> np.ndarray:
+        """The refractive index (the user's n, or the seed's literal n) at positions (3, N)."""
+        n = self._index({"x": Q[0], "y": Q[1], "z": Q[2]})
+        return np.broadcast_to(np.asarray(n, dtype=np.float64), (Q.shape[-1],))
+
+    def check_index(self, points) -> None:
+        """Raise ValueError if n is not a positive finite number at the given (N, 3) points."""
+        pts = np.atleast_2d(np.asarray(points, dtype=np.float64))
+        with np.errstate(all="ignore"):
+            n = self.index_soa(pts.T)
+        bad = ~(np.isfinite(n) & (n > 0))
+        if bad.any():
+            where = pts[np.argmax(bad)]
+            raise ValueError(f"refractive index '{self.index_text}' is {n[np.argmax(bad)]:g} at "
+                             f"(x, y, z) = ({where[0]:g}, {where[1]:g}, {where[2]:g}); "
+                             "it must be positive")
+
+
+def medium(index: str, literal: bool = False, parameters: Mapping[str, float] | None = None,
+           bounds=None) -> Medium:
+    """Optical medium of refractive index n(x, y, z) given as text.
+
+    Default: the physical optical Hamiltonian H = |p|^2 / (2 n^2), whose rays obey
+    Eq. 4 (rays are geodesics of n^2 delta_ij). ``literal=True``: the seed's Eq. 8/16,
+    H = n |p|^2 / 2, which gives the same rays if its n is read as 1/n^2; use it to
+    reproduce the seed's Eq. 17/18 figures as printed. ``bounds`` = (lo, hi) corners of
+    the box outside which the medium is uniform (rays travel straight there).
+    """
+    return Medium(index, literal, parameters, bounds)

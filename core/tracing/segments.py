@@ -1,0 +1,118 @@
+"""The scene's geometry along straight segments: surface hits and volume light.
+
+Segments are cast in world space; only segments whose bounds meet the geometry's are
+sent to the intersector, and only the volumes a segment's bounds meet are integrated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..geometry import Hits, Intersector, segment_overlaps
+from .scene import ENDING
+
+
+@dataclass
+class RayResults:
+    """Per-ray outcome of a batch (rays on the first axis, world space)."""
+
+    ending: np.ndarray          # (N,) int8
+    direction: np.ndarray       # (N, 3) final direction (escape direction for escaped rays)
+    position: np.ndarray        # (N, 3) final position (hit point for hit rays)
+    surface: np.ndarray         # (N, 4) surface colour where hit
+    radiance: np.ndarray        # (N, 3) volume emission collected in front of the ending
+    transmittance: np.ndarray   # (N,) volume transmittance
+    steps: np.ndarray           # (N,) int32 integration steps
+    energy_error: np.ndarray    # (N,) |H - H0| at the end
+
+    @classmethod
+    def empty(cls, n: int, origins: np.ndarray, directions: np.ndarray) -> RayResults:
+        """N rays not ended yet (ending -1) at their origins, with nothing collected."""
+        return cls(
+            ending=np.full(n, -1, dtype=np.int8), direction=directions.copy(),
+            position=origins.copy(), surface=np.zeros((n, 4)), radiance=np.zeros((n, 3)),
+            transmittance=np.ones(n), steps=np.zeros(n, dtype=np.int32),
+            energy_error=np.zeros(n))
+
+    def accumulate(self, rows: np.ndarray, radiance: np.ndarray | None,
+                   trans: np.ndarray | None) -> None:
+        """Composite a segment's volume emission behind what the rays have collected."""
+        if radiance is None:  # no volumes in the scene
+            return
+        self.radiance[rows] += self.transmittance[rows, None] * radiance
+        self.transmittance[rows] *= trans
+
+
+class SceneGeometry:
+    """The objects (one intersector) and volumes of a scene, cast against world segments."""
+
+    def __init__(self, objects: Intersector, volumes: list[Any]) -> None:
+        self.objects = objects
+        self.volumes = volumes
+
+    def record(self, rows: np.ndarray, a: np.ndarray, b: np.ndarray,
+               out: RayResults) -> np.ndarray:
+        """Cast world segments a -> b of rays ``rows``: composite the volumes crossed and
+        record surface hits in ``out``. Returns which segments hit a surface (M,)."""
+        hits = self.cast(a, b)
+        rad, trans = self.volume_light(a, b, hits)
+        out.accumulate(rows, rad, trans)
+        h = hits.hit
+        out.ending[rows[h]] = ENDING["hit"]
+        out.position[rows[h]] = hits.position[h]
+        out.surface[rows[h]] = hits.color[h]
+        return h  # type: ignore[no-any-return]
+
+    def cast(self, a: np.ndarray, b: np.ndarray) -> Hits:
+        """Nearest surface hits of segments a -> b, querying only segments near geometry.
+
+        When most segments are near, all of them go (an intersector answers misses for the
+        others; cheaper than gathering the near ones and scattering their hits back).
+        """
+        lo, hi = self.objects.bounds
+        if np.any(lo > hi):  # an empty group; infinite planes have infinite bounds
+            return Hits.miss(a.shape[0])
+        near = segment_overlaps(a, b, lo, hi)
+        rows = np.flatnonzero(near)
+        if rows.size > 0.5 * a.shape[0]:
+            return self.objects.intersect(a, b)
+        hits = Hits.miss(a.shape[0])
+        if rows.size:
+            hits.merge(rows, self.objects.intersect(a[rows], b[rows]))
+        return hits
+
+    def volume_light(self, a: np.ndarray, b: np.ndarray,
+                     hits: Hits) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Emission and transmittance of every volume along a -> (b or the hit point)."""
+        if not self.volumes:
+            return None, None
+        n = a.shape[0]
+        radiance, trans = np.zeros((n, 3)), np.ones(n)
+        end = np.where(hits.hit[:, None], hits.position, b)
+        for vol in self.volumes:
+            rows = np.flatnonzero(segment_overlaps(a, end, vol.lo, vol.hi))
+            if rows.size:
+                r, t = vol.segment(a[rows], end[rows])
+                radiance[rows] += trans[rows, None] * r
+                trans[rows] *= t
+        return radiance, trans
+
+    def local_box(self, to_local: Any) -> tuple[np.ndarray, np.ndarray] | None:
+        """(lo, hi) in local coordinates (``to_local``: world (N, 3) -> local) around every
+        object and volume; None: nothing."""
+        boxes = [(np.asarray(v.lo, float), np.asarray(v.hi, float)) for v in self.volumes]
+        lo, hi = self.objects.bounds
+        if not np.any(np.asarray(lo) > np.asarray(hi)):
+            boxes.append((np.asarray(lo, float), np.asarray(hi, float)))
+        if not boxes:
+            return None
+        lo = np.min([b[0] for b in boxes], axis=0)
+        hi = np.max([b[1] for b in boxes], axis=0)
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            return np.full(3, -np.inf), np.full(3, np.inf)
+        corners = np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T
+        local = to_local(corners)
+        return local.min(axis=0), local.max(axis=0)

@@ -1,0 +1,66 @@
+"""How long the tracer's steps are: the default method, the step rule and the solve tolerance.
+
+The step in the Poincaré-transformed fictitious time comes from the method's error
+constant (``Method.error_constant``, C in err = C h^order) around a mass, otherwise from
+the size of the model's region; implicit stage equations are solved to a share of the
+image tolerance.
+"""
+
+from __future__ import annotations
+
+from types import MappingProxyType
+from typing import Any
+
+from ..integrators import METHODS
+
+DEFAULT_METHOD = "gauss4"
+"""The default integrator of images: around a black hole Gauss–Legendre 4 reaches a given
+escape accuracy at about a third of yoshida4's cost (smaller error constant, so fewer,
+longer steps; see ERROR_CONSTANTS and examples/bench_perf.py)."""
+SOLVE_SHARE = 1e-4
+"""Implicit stage equations are solved to tolerance x SOLVE_SHARE, within [1e-14, 1e-8]
+(solver_tolerance). Measured on the Kerr frame (3000 rays; tolerances 1e-4, 1e-6, 1e-8):
+the solve then moves escape directions by at most 0.06 % of the tolerance (counted, like
+the tolerance, as the equivalent error of the initial direction; 100x looser moves them
+by 6-24 %), while solving to 1e-14 regardless took 1.2-2.3x as long."""
+
+ERROR_CONSTANTS = MappingProxyType({
+    name: method.error_constant for name, method in METHODS.items()
+    if method.error_constant is not None})
+"""Read-only view of ``METHODS[name].error_constant``: C in err = C h^order, each method's
+escape-direction error around a mass, per step h of the Poincaré time (g = r). err is the
+*equivalent* error of the ray's initial direction (radians): the escape error over the
+lens's own magnification there, when that exceeds 1 (rays grazing the photon region have
+their forward error magnified without bound, like any perturbation of their starting
+direction). The largest of 3000 rays on Kerr a/M = 0.9 seen from 30 rg, times 1.5
+(``examples/bench_perf.py --only calibrate``). Tao's methods have none: with the default
+binding they do not follow these rays."""
+
+FAR_FIELD_CONSTANT = 30.0
+"""The first-order far field leaves a forward escape error of at most ~ C (M / R)^2 for a
+region of radius R (measured as above: 28.4)."""
+
+MAX_STEP = 0.25
+"""Largest default step in the Poincaré time (a step that the implicit solve cannot take
+near a horizon is split, see core.tracing.stepping)."""
+
+
+def solver_tolerance(tolerance: float) -> float:
+    """Tolerance of the implicit solves for an image of ``tolerance`` (see SOLVE_SHARE)."""
+    return min(1e-8, max(1e-14, float(tolerance) * SOLVE_SHARE))
+
+
+def default_step(method: Any, tolerance: float, length: float, scaled: bool = False) -> float:
+    """Fictitious-time step for ``method`` to reach ``tolerance`` (radians).
+
+    Around a mass (``scaled``: g(q) grows with the distance) from the method's error
+    constant, so that the integration error stays below tolerance / 2 (the far field gets
+    the other half, see core.tracing.regions). Otherwise (media, user models, methods
+    without a constant): h = 0.5 length tol^(1/order).
+    """
+    tol = min(max(float(tolerance), 1e-14), 1e-1)
+    order = max(int(method.order), 1)
+    constant = method.error_constant if scaled else None
+    if constant is None:
+        return length * min(MAX_STEP, 0.5 * tol ** (1.0 / order))
+    return float(min(MAX_STEP, (0.5 * tol / constant) ** (1.0 / order)))
