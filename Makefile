@@ -31,6 +31,7 @@ venv311: $(VENV311)/.stamp
 
 lint: venv
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy -p core
 
 test-main: venv
 	$(PY) -m pytest $(PYTEST_FLAGS) tests

@@ -12,6 +12,9 @@ one piece of model code evaluates either values or values with gradients.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from typing import Any
+
 import numpy as np
 
 Partials = dict[int, "float | np.ndarray"]
@@ -238,7 +241,7 @@ def arctan2(y, x):
     return Dual(value, _combine(dy, xv * inv_r2, dx, -yv * inv_r2))
 
 
-FUNCTIONS = {
+FUNCTIONS: dict[str, Callable[..., Any]] = {
     "sqrt": sqrt, "exp": exp, "log": log, "sin": sin, "cos": cos, "tan": tan,
     "arcsin": arcsin, "arccos": arccos, "arctan": arctan, "arctan2": arctan2,
     "asin": arcsin, "acos": arccos, "atan": arctan, "atan2": arctan2,

@@ -18,6 +18,7 @@ import ast
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -54,7 +55,7 @@ class ExpressionError(ValueError):
         super().__init__(f"{problem}{where}")
 
 
-Evaluator = Callable[[Mapping[str, object]], object]
+Evaluator = Callable[[Mapping[str, object]], Any]
 
 
 @dataclass(frozen=True)
@@ -123,6 +124,12 @@ class _Node:
     def is_constant(self) -> bool:
         return self.fn is None
 
+    @property
+    def number(self) -> float:
+        """The folded constant (only for is_constant nodes)."""
+        assert self.value is not None
+        return self.value
+
     def evaluator(self) -> Evaluator:
         if self.fn is not None:
             return self.fn
@@ -138,7 +145,9 @@ class _Builder:
         self.constants = constants
         self.used: set[str] = set()
 
-    def fail(self, node: ast.AST, problem: str):
+    def fail(self, node: ast.AST, problem: str) -> NoReturn:
+        # not every AST node has a position (ast.AST has no col_offset: only expressions
+        # and statements do); -1 + 1 = 0 means "no column"
         column = getattr(node, "col_offset", -1) + 1
         if isinstance(node, ast.Attribute) and node.end_col_offset is not None:
             column = node.end_col_offset - len(node.attr)  # the '.' before the name
@@ -187,8 +196,8 @@ class _Builder:
         if not isinstance(node.op, ast.USub):
             self.fail(node, f"operator {type(node.op).__name__} not allowed")
         if operand.is_constant:
-            return _Node(value=-operand.value)
-        fn = operand.fn
+            return _Node(value=-operand.number)
+        fn = operand.evaluator()
         return _Node(fn=lambda env: -fn(env))
 
     def binary(self, node: ast.BinOp) -> _Node:
@@ -196,10 +205,10 @@ class _Builder:
         if symbol is None:
             self.fail(node, f"operator {type(node.op).__name__} not allowed")
         left, right = self.build(node.left), self.build(node.right)
-        if symbol == "**" and right.is_constant and abs(right.value) > MAX_EXPONENT:
-            self.fail(node, f"exponent {right.value:g} too large (limit {MAX_EXPONENT:g})")
+        if symbol == "**" and right.is_constant and abs(right.number) > MAX_EXPONENT:
+            self.fail(node, f"exponent {right.number:g} too large (limit {MAX_EXPONENT:g})")
         if left.is_constant and right.is_constant:
-            return _Node(value=self.fold(node, symbol, left.value, right.value))
+            return _Node(value=self.fold(node, symbol, left.number, right.number))
         return _Node(fn=_binary_closure(symbol, left, right))
 
     def fold(self, node: ast.AST, symbol: str, a: float, b: float) -> float:

@@ -99,6 +99,7 @@ def _trace_chunk(tracer: Tracer, origins, directions, with_error: bool, cancel):
     coarse = tracer.trace(origins, directions, cancel=cancel)
     if not with_error:
         return coarse, None
+    assert tracer.step is not None  # with_error: the scene is curved
     fine = tracer.trace(origins, directions, step=0.5 * tracer.step, cancel=cancel)
     return fine, _doubling_error(coarse, fine, origins, tracer.method.order)
 

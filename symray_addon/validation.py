@@ -109,7 +109,9 @@ def _is_definition(piece: str) -> tuple[str, str, int] | None:
     return name, tail, len(head) + 1
 
 
-def parse_metric(text: str) -> MetricSpec:
+# noqa: C901 below: one pass over the text's lines, each kind of line (definition, row,
+# comment) with its own message at its own column; the checks read best in order
+def parse_metric(text: str) -> MetricSpec:  # noqa: C901
     """Parse and check an inverse-metric text (format: module docstring).
 
     Raises expressions.ExpressionError whose column counts from the start of ``text``.

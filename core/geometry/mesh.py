@@ -27,8 +27,9 @@ def _slab(a: np.ndarray, inv_d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> n
     with np.errstate(invalid="ignore", over="ignore"):
         t1, t2 = (lo - a) * inv_d, (hi - a) * inv_d
     # fmin/fmax skip the NaN of 0 * inf (a segment parallel to a slab, starting on its face)
-    enter = np.maximum(np.fmax.reduce(np.fmin(t1, t2), axis=1), 0.0)
-    leave = np.minimum(np.fmin.reduce(np.fmax(t1, t2), axis=1), 1.0)
+    # (numpy's stubs do not type ufunc.reduce of an array expression)
+    enter = np.maximum(np.fmax.reduce(np.fmin(t1, t2), axis=1), 0.0)  # type: ignore[call-overload]
+    leave = np.minimum(np.fmin.reduce(np.fmax(t1, t2), axis=1), 1.0)  # type: ignore[call-overload]
     return np.where(enter <= leave, enter, _INF)
 
 
@@ -83,7 +84,10 @@ class TriangleMesh(_Primitive):
 
     def _build_tree(self, block_lo: np.ndarray, block_hi: np.ndarray) -> None:
         """Binary tree over contiguous block ranges (Morton order keeps ranges compact)."""
-        lo, hi, kids, leaf = [], [], [], []
+        lo: list[np.ndarray] = []
+        hi: list[np.ndarray] = []
+        kids: list[tuple[int, int]] = []
+        leaf: list[int] = []
 
         def build(i: int, j: int) -> int:
             node = len(lo)

@@ -86,6 +86,7 @@ class Volume:
         if self.emission is not None:
             j = np.asarray(self.emission(pts), dtype=np.float64).reshape(-1, 3)
         else:
+            assert self.colormap is not None  # __init__ requires emission or colormap
             j = np.asarray(self.colormap(rho), dtype=np.float64).reshape(-1, 3)
         return self.absorption * rho, j
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -74,7 +75,7 @@ def solve(phi: Phi, W0: np.ndarray, scale: np.ndarray,
     newton_cost = 6.0 * (2 * k + 1)
     ok = np.zeros(N, dtype=bool)
     to_newton = np.zeros(N, dtype=bool)
-    W_all = None                       # every ray's iterate, once the batch was narrowed
+    W_all: Any = None                  # every ray's iterate, once the batch was narrowed
     ids, W, sc, prev = None, W0, scale, None
     active = np.ones(N, dtype=bool)    # rays of the current batch still iterating
     for _ in range(opts.max_iter):

@@ -38,6 +38,8 @@ class _Implicit(Method):
 class _KickDrift(_Implicit):
     """Exact flows of the two halves of a separable H: kick ("K", by V) and drift ("D", by T)."""
 
+    _pattern: Pattern
+
     def pattern(self, H: Any) -> Pattern | None:
         """The splitting as (flow, coefficient) pairs when H is separable, else None."""
         return self._pattern if H.separable else None

@@ -34,7 +34,7 @@ class PoincareTransformed(System):
     def value_soa(self, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
         """K(q, p), (N,)."""
         g, _ = self.H.time_scale_soa(Q)
-        return g * (self.H.value_soa(Q, P) - self.H0)  # type: ignore[no-any-return]
+        return g * (self.H.value_soa(Q, P) - self.H0)
 
     def value_gradient_soa(self, Q: np.ndarray, P: np.ndarray) -> ValueGradient:
         """(K, ∂K/∂q = ∇g (H − H0) + g ∂H/∂q, ∂K/∂p = g ∂H/∂p): the model's poincare_soa
@@ -75,7 +75,7 @@ class Clocked(System):
 
     def value_soa(self, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
         """H(q, p) + p_s."""
-        return self.H.value_soa(Q[:-1], P[:-1]) + P[-1]  # type: ignore[no-any-return]
+        return self.H.value_soa(Q[:-1], P[:-1]) + P[-1]
 
     def gradient_soa(self, Q: np.ndarray, P: np.ndarray, wrt: str = "qp") -> Gradient:
         """(∂/∂(q, s), ∂/∂(p, p_s)): a zero row for s, a row of ones for p_s."""

@@ -53,7 +53,7 @@ class FrozenQ:
 
     def grad_q(self, P: np.ndarray) -> np.ndarray:
         """dH/dq (or dK/dq) at the frozen Q for momenta P, (n, N)."""
-        return self.apply(self.form, P, "q", self.H0)[1]  # type: ignore[no-any-return]
+        return self.apply(self.form, P, "q", self.H0)[1]
 
     def subset(self, idx: np.ndarray) -> FrozenQ:
         """The same for the rays idx."""
@@ -126,13 +126,13 @@ class DuckSystem(System):
             "time_scale_soa", "poincare_soa", "frozen_q", "subset", "captured_soa")}
 
     def value_soa(self, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
-        return self.H.value_soa(Q, P)  # type: ignore[no-any-return]
+        return self.H.value_soa(Q, P)
 
     def gradient_soa(self, Q: np.ndarray, P: np.ndarray, wrt: str = "qp") -> Gradient:
-        return self.H.gradient_soa(Q, P, wrt=wrt)  # type: ignore[no-any-return]
+        return self.H.gradient_soa(Q, P, wrt=wrt)
 
     def value_gradient_soa(self, Q: np.ndarray, P: np.ndarray) -> ValueGradient:
-        return self.H.value_gradient_soa(Q, P)  # type: ignore[no-any-return]
+        return self.H.value_gradient_soa(Q, P)
 
     def time_scale_soa(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         own = self._optional["time_scale_soa"]
@@ -147,7 +147,7 @@ class DuckSystem(System):
         own = self._optional["frozen_q"]
         if own is None:
             return None
-        return own(Q) if H0 is None else own(Q, H0)  # type: ignore[no-any-return]
+        return own(Q) if H0 is None else own(Q, H0)
 
     def subset(self, idx: np.ndarray) -> System:
         own = self._optional["subset"]

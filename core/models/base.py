@@ -49,6 +49,7 @@ def blocked(method):
             for o, x in zip(out, parts, strict=True):
                 if o is not None:
                     o[..., cut] = x
+        assert out is not None
         return out[0] if single else out
 
     return wrapper
@@ -140,7 +141,8 @@ class Hamiltonian(System):
         n_rays = Q.shape[-1]
         if self._time_scale is None:
             return np.ones(n_rays), np.zeros_like(Q)
-        env = {name: Dual.variable(Q[i], i) for i, name in enumerate(self.coords)}
+        env: dict[str, object] = {name: Dual.variable(Q[i], i)
+                                  for i, name in enumerate(self.coords)}
         (g,) = self._time_scale.evaluate(env)
         return _value_and_partials(g, self.dim, n_rays, offset=0)
 

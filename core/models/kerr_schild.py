@@ -116,7 +116,9 @@ class KerrSchild(Hamiltonian):
         return [Dual(v, {1: d[0], 2: d[1], 3: d[2]})
                 for v, d in ((f, df), (kx, dkx), (ky, dky), (kz, dkz), (r, dr))]
 
-    def _apply(self, form, P, want: str, H0=None):
+    # noqa: C901 below: one fused pass for every combination of H, dH/dq, dH/dp and K
+    # (in place, the render's hot path); split up, it would evaluate the form's terms twice
+    def _apply(self, form, P, want: str, H0=None):  # noqa: C901
         """(H, dH/dq, dH/dp) from the form [f, k_x, k_y, k_z, r], each None unless wanted
         ("v", "q", "p" in want). With H0: K = r (H - H0) and its gradient instead."""
         need_q = "q" in want

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -61,7 +62,9 @@ class MetricHamiltonian(Hamiltonian):
             (scale,) = self._time_scale.evaluate(env)
         return [*entries, scale]
 
-    def _apply(self, form, P, want: str, H0=None):
+    # noqa: C901 below: one fused pass for every combination of H, dH/dq, dH/dp and K over
+    # the metric's entries (the render's hot path: each entry is read once)
+    def _apply(self, form, P, want: str, H0=None):  # noqa: C901
         """(H, dH/dq, dH/dp) from a form, each None unless wanted ("v", "q", "p" in want).
 
         With H0: K = g (H - H0) and its gradient instead (g: the form's time scale, or 1).
@@ -70,9 +73,10 @@ class MetricHamiltonian(Hamiltonian):
         n, n_rays = self.dim, P.shape[-1]
         need_q, need_p = "q" in want, "p" in want
         need_h = "v" in want or (need_q and H0 is not None and isinstance(scale, Dual))
-        h = np.zeros(n_rays) if need_h else None
-        dq = np.zeros((n, n_rays)) if need_q else None
-        dp = np.zeros((n, n_rays)) if need_p else None
+        # (Any: each is an array exactly where it is wanted, None elsewhere)
+        h: Any = np.zeros(n_rays) if need_h else None
+        dq: Any = np.zeros((n, n_rays)) if need_q else None
+        dp: Any = np.zeros((n, n_rays)) if need_p else None
         for (i, j), g in zip(self.pairs, entries, strict=True):
             w = 0.5 if i == j else 1.0
             gv = g.v if isinstance(g, Dual) else g
@@ -90,10 +94,10 @@ class MetricHamiltonian(Hamiltonian):
                     dq[k] += dg * wp
         if H0 is None:
             return h, dq, dp
-        dh = None if h is None else h - H0
+        dh: Any = None if h is None else h - H0
         if scale is None:
             return dh, dq, dp
-        sv = scale.v if isinstance(scale, Dual) else scale
+        sv: Any = scale.v if isinstance(scale, Dual) else scale
         if need_p:
             dp *= sv
         if need_q:

@@ -69,7 +69,7 @@ class SphericalSpacetime(MetricHamiltonian):
 
     def radius_at(self, X: np.ndarray) -> np.ndarray:
         """Boyer–Lindquist r at local Cartesian positions X (3, N)."""
-        return SpheroidalChart(self.a).to_coords(X)[0]  # type: ignore[no-any-return]
+        return SpheroidalChart(self.a).to_coords(X)[0]
 
     def capture_test(self):
         """Rays at r < 1.01 r+ (see captured_soa)."""

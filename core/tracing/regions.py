@@ -44,6 +44,8 @@ class Region:
 class SphereRegion(Region):
     """A ball of radius R about the model's centre."""
 
+    radius: float
+
     def __init__(self, radius: float, scale_time: bool) -> None:
         self.radius = radius
         self.scale_time = scale_time
@@ -70,7 +72,7 @@ class SphereRegion(Region):
         r2 = X[0] * X[0] + X[1] * X[1] + X[2] * X[2]
         away = X[0] * (X[0] - X_prev[0]) + X[1] * (X[1] - X_prev[1]) + \
             X[2] * (X[2] - X_prev[2])
-        return (r2 > self.radius ** 2) & (away > 0)  # type: ignore[no-any-return]
+        return (r2 > self.radius ** 2) & (away > 0)
 
 
 class BoxRegion(Region):
@@ -93,7 +95,7 @@ class BoxRegion(Region):
 
     def left_soa(self, X: np.ndarray, X_prev: np.ndarray) -> np.ndarray:
         """Outside the box."""
-        return ~np.all((X >= self.lo[:, None]) & (X <= self.hi[:, None]), axis=0)  # type: ignore[no-any-return]
+        return ~np.all((X >= self.lo[:, None]) & (X <= self.hi[:, None]), axis=0)
 
 
 def _start_points(X: np.ndarray, D: np.ndarray, inside: np.ndarray, enters: np.ndarray,

@@ -59,7 +59,7 @@ class Scene:
     def frame(self) -> np.ndarray:
         """3x3 matrix whose columns are the model's local x, y, z axes in the world."""
         if self.rotation is not None:
-            return self.rotation  # type: ignore[no-any-return]
+            return self.rotation
         z = self.axis
         helper = np.array([1.0, 0.0, 0.0]) if abs(z[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
         x = helper - z * (helper @ z)

@@ -64,7 +64,7 @@ class SceneGeometry:
         out.ending[rows[h]] = ENDING["hit"]
         out.position[rows[h]] = hits.position[h]
         out.surface[rows[h]] = hits.color[h]
-        return h  # type: ignore[no-any-return]
+        return h
 
     def cast(self, a: np.ndarray, b: np.ndarray) -> Hits:
         """Nearest surface hits of segments a -> b, querying only segments near geometry.

@@ -71,7 +71,7 @@ class Stepper:
         """(M,) |H - H0| of each ray's state (NaN where a failed ray holds anything)."""
         Q, P = self.method.qp(state)
         with np.errstate(all="ignore"):
-            return np.abs(self.model.value_soa(Q, P) - K.H0)  # type: ignore[no-any-return]
+            return np.abs(self.model.value_soa(Q, P) - K.H0)
 
     def _off_shell(self, state: State, drift: np.ndarray, H0: np.ndarray) -> np.ndarray:
         """(M,) rays a step left far off the light cone, |H - H0| > OFF_SHELL (|H0| + |p|^2);
@@ -81,4 +81,4 @@ class Stepper:
             off = drift > OFF_SHELL * (np.abs(H0) + np.einsum("ij,ij->j", P, P))
             if self.captured is not None:
                 off &= ~self.captured(Q)
-        return off  # type: ignore[no-any-return]
+        return off

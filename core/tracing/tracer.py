@@ -99,9 +99,10 @@ class Tracer:
         if outside.size:
             self._straight_to_region(outside, origins, directions, start, out)
         todo = np.flatnonzero(np.isfinite(start[:, 0]) & (out.ending < 0))
+        h = step or self.step
+        assert h is not None  # a curved scene's tracer has a step
         if todo.size:
-            self._integrate(todo, start[todo].T.copy(), D[todo].T.copy(), out,
-                            step or self.step, cancel)
+            self._integrate(todo, start[todo].T.copy(), D[todo].T.copy(), out, h, cancel)
         return out
 
     # --- straight parts --------------------------------------------------------------
