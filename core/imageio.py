@@ -251,6 +251,7 @@ def write_exr(
              "zips": "ZIPS_COMPRESSION", "rle": "RLE_COMPRESSION"}  # fmt: skip
     if compression not in modes:
         raise ValueError(f"EXR compression must be one of {sorted(modes)}, got {compression!r}")
+    # the compression constant by its name in the OpenEXR module (a lookup, not a probe)
     header = {"compression": getattr(exr, modes[compression]), "type": exr.scanlineimage}
 
     def write(tmp: str) -> None:

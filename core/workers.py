@@ -51,7 +51,7 @@ _TOKENS = itertools.count()
 
 def available_cores() -> int:
     """The cores this process may run on (its affinity mask where the OS tells it)."""
-    if hasattr(os, "sched_getaffinity"):
+    if hasattr(os, "sched_getaffinity"):  # a platform check: Linux has it, macOS does not
         return max(1, len(os.sched_getaffinity(0)))
     return max(1, os.cpu_count() or 1)
 
@@ -162,7 +162,8 @@ def _start_processes(token: int, job, spans, workers):
     except (OSError, NotImplementedError) as exc:  # no /dev/shm for semaphores, fork: ENOMEM
         _JOBS.pop(token, None)
         if pool is not None:
-            # workers forked before the failure wait for work that never comes
+            # workers forked before the failure wait for work that never comes; the pool's
+            # processes are private to concurrent.futures (and absent before the first fork)
             for process in list((getattr(pool, "_processes", None) or {}).values()):
                 process.terminate()
             pool.shutdown(wait=False, cancel_futures=True)
