@@ -59,9 +59,9 @@ render: extension
 	$(PY) examples/render_scene.py --out out/default.png --exr out/default.exr $(RENDER_ARGS)
 
 # The seed's figures (examples/figures.py) as PNGs in out/figures/; FIGURES_ARGS="--size 256"
-# for bigger images. Error against run time (examples/work_precision.py): `make bench` in
+# for bigger images. Error against run time (benchmarks/work_precision.py): `make bench` in
 # full, `make bench QUICK=1` or `make bench-quick` in minutes; results in out/bench/.
-# Stiff and extreme cases (examples/stress.py): `make stress`.
+# Stiff and extreme cases (benchmarks/stress.py): `make stress`.
 FIGURES_ARGS ?=
 BENCH_ARGS ?=
 STRESS_ARGS ?=
@@ -70,17 +70,17 @@ figures: venv
 	PYTHONPATH=. $(PY) examples/figures.py $(FIGURES_ARGS)
 
 bench: venv
-	PYTHONPATH=. $(PY) examples/work_precision.py $(if $(QUICK),--quick) $(BENCH_ARGS)
+	PYTHONPATH=. $(PY) benchmarks/work_precision.py $(if $(QUICK),--quick) $(BENCH_ARGS)
 
 bench-quick: venv
-	PYTHONPATH=. $(PY) examples/work_precision.py --quick $(BENCH_ARGS)
+	PYTHONPATH=. $(PY) benchmarks/work_precision.py --quick $(BENCH_ARGS)
 
 stress: venv
-	PYTHONPATH=. $(PY) examples/stress.py $(STRESS_ARGS)
+	PYTHONPATH=. $(PY) benchmarks/stress.py $(STRESS_ARGS)
 
-# Performance figures of issue #6 next to their targets (examples/bench_perf.py): quick in a
+# Performance figures of issue #6 next to their targets (benchmarks/bench_perf.py): quick in a
 # few minutes; `make bench-perf FULL=1` adds the 1920x1080 frame and the error constants.
 PERF_ARGS ?=
 
 bench-perf: venv
-	PYTHONPATH=. $(PY) examples/bench_perf.py $(if $(FULL),--full) $(PERF_ARGS)
+	PYTHONPATH=. $(PY) benchmarks/bench_perf.py $(if $(FULL),--full) $(PERF_ARGS)

@@ -16,7 +16,7 @@ from ..integrators import METHODS
 DEFAULT_METHOD = "gauss4"
 """The default integrator of images: around a black hole Gauss–Legendre 4 reaches a given
 escape accuracy at about a third of yoshida4's cost (smaller error constant, so fewer,
-longer steps; see ERROR_CONSTANTS and examples/bench_perf.py)."""
+longer steps; see ERROR_CONSTANTS and benchmarks/bench_perf.py)."""
 SOLVE_SHARE = 1e-4
 """Implicit stage equations are solved to tolerance x SOLVE_SHARE, within [1e-14, 1e-8]
 (solver_tolerance). Measured on the Kerr frame (3000 rays; tolerances 1e-4, 1e-6, 1e-8):
@@ -33,7 +33,7 @@ escape-direction error around a mass, per step h of the Poincaré time (g = r). 
 lens's own magnification there, when that exceeds 1 (rays grazing the photon region have
 their forward error magnified without bound, like any perturbation of their starting
 direction). The largest of 3000 rays on Kerr a/M = 0.9 seen from 30 rg, times 1.5
-(``examples/bench_perf.py --only calibrate``). Tao's methods have none: with the default
+(``benchmarks/bench_perf.py --only calibrate``). Tao's methods have none: with the default
 binding they do not follow these rays."""
 
 FAR_FIELD_CONSTANT = 30.0

@@ -1,4 +1,4 @@
-"""Fast versions of the important stiff and extreme cases of examples/stress.py.
+"""Fast versions of the important stiff and extreme cases of benchmarks/stress.py.
 
 Each checks the outcome a ray gets (completed, captured, flagged failed), the drift of
 its invariants, and, where it renders, that no NaN reaches the image and failed rays are
@@ -12,9 +12,9 @@ import sys
 
 import numpy as np
 
-EXAMPLES = pathlib.Path(__file__).resolve().parents[2] / "examples"
-sys.path.insert(0, str(EXAMPLES))
-_spec = importlib.util.spec_from_file_location("stress", EXAMPLES / "stress.py")
+BENCHMARKS = pathlib.Path(__file__).resolve().parents[2] / "benchmarks"
+sys.path.insert(0, str(BENCHMARKS))
+_spec = importlib.util.spec_from_file_location("stress", BENCHMARKS / "stress.py")
 stress = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(stress)
 

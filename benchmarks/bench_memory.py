@@ -1,6 +1,6 @@
 """Peak memory of a 1920x1080 Kerr render (a benchmark script, not a test).
 
-    PYTHONPATH=. python examples/bench_memory.py [--chunks 6] [--full]
+    PYTHONPATH=. python benchmarks/bench_memory.py [--chunks 6] [--full]
 
 The renderer works in independent chunks of pixels, so memory is the full-frame output
 buffers plus a bounded working set per chunk in flight. By default this renders the

@@ -1,8 +1,8 @@
 """Performance figures of issue #6 next to their targets (a benchmark script, not a test).
 
-    PYTHONPATH=. python examples/bench_perf.py            # quick: about four minutes
-    PYTHONPATH=. python examples/bench_perf.py --full     # + 1080p, methods, calibration
-    PYTHONPATH=. python examples/bench_perf.py --only eval,steps
+    PYTHONPATH=. python benchmarks/bench_perf.py            # quick: about four minutes
+    PYTHONPATH=. python benchmarks/bench_perf.py --full     # + 1080p, methods, calibration
+    PYTHONPATH=. python benchmarks/bench_perf.py --only eval,steps
 
 Sections (``--only``):
 

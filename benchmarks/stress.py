@@ -1,6 +1,6 @@
 """Stiff and extreme cases: what the core does at the edges, and that no NaN reaches an image.
 
-    PYTHONPATH=. python examples/stress.py [--only pole,index_jump] [--long-steps 10000000]
+    PYTHONPATH=. python benchmarks/stress.py [--only pole,index_jump] [--long-steps 10000000]
 
 (`make stress` runs it in the project's environment.) Each case prints its outcome
 (completed, captured, flagged failed), the drift of its invariants, and for cases that

@@ -1,6 +1,6 @@
 """Error against run time for every integrator: per problem, and per image.
 
-    PYTHONPATH=. python examples/work_precision.py [--quick] [--only volterra,kerr,image]
+    PYTHONPATH=. python benchmarks/work_precision.py [--quick] [--only volterra,kerr,image]
 
 (`make bench` runs it in full, `make bench QUICK=1` or `make bench-quick` with --quick.)
 
