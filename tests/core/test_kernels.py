@@ -113,7 +113,7 @@ def test_blocked_evaluation_equals_whole_batch(name, monkeypatch):
 
 def test_long_steps_into_the_horizon_are_split_not_failed():
     """At the longest default step the implicit solve cannot follow some rays through
-    their last steps into the horizon: the tracer splits those steps (Tracer._step) and the
+    their last steps into the horizon: the tracer splits those steps (core.tracing.stepping) and the
     rays end captured, as a small-step reference says, never failed."""
     import core
     from core.trace import MAX_STEP, TraceOptions, Tracer
