@@ -8,8 +8,9 @@ tree is turned into nested Python closures that call :mod:`core.dual`, so one co
 expression evaluates floats, arrays or dual numbers.
 
 Everything else (attribute access, subscripts, lambdas, comprehensions, calls of
-anything not whitelisted, unknown names, absurd sizes) raises :class:`ExpressionError`,
-whose message names the problem and its column.
+anything not whitelisted, unknown names, non-ASCII characters, absurd sizes or nesting)
+raises :class:`ExpressionError`, whose message names the problem and its column; no
+other exception escapes, whatever the text (tests/core/test_expressions_fuzz.py).
 """
 
 from __future__ import annotations

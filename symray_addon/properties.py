@@ -128,7 +128,8 @@ class SymRaySettings(bpy.types.PropertyGroup):
     refractive_index: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Refractive Index", default=presets.MIRAGE_EQ17_INDEX,
         update=_validator("refractive_index"),
-        description="n(x, y, z) in the centre's local frame; + - * / **, sin, exp, sqrt, pi")
+        description="n(x, y, z) in the centre's local frame; + - * / **, sin, exp, sqrt, pi "
+                    "(plain ASCII, at most 100 nested operations)")
     refractive_index_error: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Refractive Index Error", default="")
     index_form: bpy.props.EnumProperty(  # type: ignore[valid-type]
@@ -156,7 +157,8 @@ class SymRaySettings(bpy.types.PropertyGroup):
     hamiltonian: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Hamiltonian", default="0.5*(p_x**2 + p_y**2 + p_z**2)",
         update=_validator("hamiltonian"),
-        description="H(x, y, z, p_x, p_y, p_z) in the centre's local frame")
+        description="H(x, y, z, p_x, p_y, p_z) in the centre's local frame (plain ASCII, "
+                    "at most 100 nested operations)")
     hamiltonian_error: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Hamiltonian Error", default="")
     method: bpy.props.EnumProperty(  # type: ignore[valid-type]

@@ -83,6 +83,28 @@ def test_a_failed_f12_keeps_the_previous_file(addon, scene, helpers, tmp_path, m
         assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
 
 
+def test_an_animation_stops_at_a_failed_frame_and_writes_no_blank_one(addon, scene, helpers,
+                                                                     tmp_path, monkeypatch):
+    """What `blender -b file.blend -E SYMRAY -a` does when frame 2 fails."""
+    _flat_scene(scene, helpers)
+    scene.render.engine = "SYMRAY"
+    addon.module("symray_addon.output").set_png_format(scene.render.image_settings)
+    scene.render.filepath = str(tmp_path / "frame_####")
+    scene.frame_start, scene.frame_end = 1, 3
+    render_job = addon.module("symray_addon.render_job")
+    real_prepare = render_job.prepare
+
+    def prepare(frame_scene, *args, **kwargs):
+        if frame_scene.frame_current == 2:
+            raise MemoryError()
+        return real_prepare(frame_scene, *args, **kwargs)
+
+    monkeypatch.setattr(render_job, "prepare", prepare)
+    with pytest.raises(RuntimeError, match="ran out of memory"):
+        bpy.ops.render.render(animation=True)
+    assert sorted(os.listdir(tmp_path)) == ["frame_0001.png"]
+
+
 @pytest.mark.parametrize("failure", FAILURES)
 def test_a_failed_operator_render_is_a_report_and_keeps_the_image(addon, scene, helpers,
                                                                   monkeypatch, failure):
