@@ -1,6 +1,5 @@
 """The expression language: correct values, and refusal of everything off the whitelist."""
 
-import time
 
 import numpy as np
 import pytest
@@ -49,10 +48,9 @@ def test_parameters_and_definitions_fold_and_share():
     ("", "empty", 1),
 ])
 def test_refused_with_problem_and_column(text, problem, column):
-    start = time.perf_counter()
+    # (no wall-clock assert: "9**9**9" refused as "too large" shows nothing was computed)
     with pytest.raises(ex.ExpressionError) as info:
         ex.compile_expression(text, ["x", "y"])
-    assert time.perf_counter() - start < 0.5, "refusal must be fast"
     assert problem in str(info.value)
     if column is not None:
         assert info.value.column == column
@@ -67,12 +65,11 @@ def test_nothing_runs_while_refusing(tmp_path, monkeypatch):
     assert not (tmp_path / "pwned").exists()
 
 
-def test_absurd_sizes_refused_quickly():
-    start = time.perf_counter()
-    for text in ["x" + "+x" * 30_000, "(" * 500 + "x" + ")" * 500, "1" * 5000]:
-        with pytest.raises(ex.ExpressionError):
+def test_absurd_sizes_refused():
+    for text, problem in [("x" + "+x" * 30_000, "too long"), ("(" * 500 + "x" + ")" * 500,
+                                                              "nested"), ("1" * 5000, "digits")]:
+        with pytest.raises(ex.ExpressionError, match=problem):
             ex.compile_expression(text, ["x"])
-    assert time.perf_counter() - start < 1.0
 
 
 def test_definition_names_must_be_new():
