@@ -8,14 +8,16 @@ tree is turned into nested Python closures that call :mod:`core.dual`, so one co
 expression evaluates floats, arrays or dual numbers.
 
 Everything else (attribute access, subscripts, lambdas, comprehensions, calls of
-anything not whitelisted, unknown names, absurd sizes) raises :class:`ExpressionError`,
-whose message names the problem and its column.
+anything not whitelisted, unknown names, non-ASCII characters, absurd sizes or nesting)
+raises :class:`ExpressionError`, whose message names the problem and its column; no
+other exception escapes, whatever the text (tests/core/test_expressions_fuzz.py).
 """
 
 from __future__ import annotations
 
 import ast
 import math
+import unicodedata
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, NoReturn
@@ -28,9 +30,16 @@ MAX_LENGTH = 20_000
 """Longest accepted text, in characters."""
 MAX_NODES = 4_000
 """Most syntax-tree nodes in one expression."""
+MAX_DEPTH = 100
+"""Deepest accepted nesting of operations (each + - * / ** sign, call or unary sign is a
+level: a sum of n terms nests n - 1 deep). Checking, compiling and evaluating recurse
+about three frames per level, well inside Python's limit of 1000 frames."""
 MAX_EXPONENT = 1_000.0
 """Largest accepted |constant exponent| (x**c)."""
 CONSTANTS = {"pi": math.pi, "e": math.e}
+_FOLD_ERRORS: dict[str, Any] = {"over": "raise", "divide": "raise", "invalid": "raise",
+                                 "under": "ignore"}
+"""Folding a constant refuses overflow, division by zero and NaN; underflow to 0 is fine."""
 
 _BINARY = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Pow: "**"}
 _REFUSED = {
@@ -82,13 +91,17 @@ def compile_expression(text: str, names: Iterable[str],
     if not isinstance(text, str):
         raise ExpressionError(f"expected text, got {type(text).__name__}")
     if len(text) > MAX_LENGTH:
-        raise ExpressionError(f"expression is too long ({len(text)} > {MAX_LENGTH} characters)")
+        raise ExpressionError(f"expression is too long ({len(text)} > {MAX_LENGTH} characters)",
+                              1, text)
     if not text.strip():
-        raise ExpressionError("expression is empty")
+        raise ExpressionError("expression is empty", 1, text)
+    _check_ascii(text)
     tree = _parse(text)
     count = sum(1 for _ in ast.walk(tree))
     if count > MAX_NODES:
-        raise ExpressionError(f"expression is too large ({count} > {MAX_NODES} syntax nodes)")
+        raise ExpressionError(f"expression is too large ({count} > {MAX_NODES} syntax nodes)",
+                              1, text)
+    _check_depth(tree.body)
     consts = dict(CONSTANTS)
     consts.update({k: float(v) for k, v in (parameters or {}).items()})
     builder = _Builder(frozenset(names), consts)
@@ -102,6 +115,23 @@ def check(text: str, names: Iterable[str], parameters: Mapping[str, float] | Non
     compile_expression(text, names, parameters)
 
 
+def _check_ascii(text: str) -> None:
+    """Refuse any character outside ASCII, naming it and its column.
+
+    Python reads identifiers through NFKC normalisation ('ｘ' is 'x', 'ｓｉｎ' is 'sin'),
+    so accepting them would run text whose meaning differs from what is displayed.
+    """
+    bad = next((i for i, ch in enumerate(text) if ord(ch) > 127), None)
+    if bad is None:
+        return
+    char = text[bad]
+    name = unicodedata.name(char, "unnamed character")
+    column = bad - (text.rfind("\n", 0, bad) + 1) + 1
+    raise ExpressionError(f"non-ASCII character '{char}' (U+{ord(char):04X} {name}) not "
+                          "allowed: type names, digits and operators in plain ASCII",
+                          column, text)
+
+
 def _parse(text: str) -> ast.Expression:
     """ast.parse in eval mode, turning every parser failure into ExpressionError."""
     try:
@@ -109,8 +139,26 @@ def _parse(text: str) -> ast.Expression:
     except SyntaxError as err:
         column = err.offset if err.offset else None
         raise ExpressionError(f"syntax error: {err.msg}", column, text) from None
-    except (ValueError, RecursionError, MemoryError, OverflowError) as err:
-        raise ExpressionError(f"cannot parse expression: {err}") from None
+    except (RecursionError, MemoryError):  # the parser's own stack (deep nesting)
+        raise ExpressionError(f"expression is nested too deeply to parse (at most "
+                              f"{MAX_DEPTH} levels)", 1, text) from None
+    except (ValueError, OverflowError) as err:
+        raise ExpressionError(f"cannot parse expression: {err}", 1, text) from None
+
+
+def _check_depth(root: ast.AST) -> None:
+    """Refuse nesting deeper than MAX_DEPTH (iteratively: any depth is safe to check)."""
+    stack = [(root, 0)]
+    while stack:
+        node, depth = stack.pop()
+        if not isinstance(node, ast.expr) or isinstance(node, (ast.Name, ast.Constant)):
+            continue  # leaves, and operator / context markers
+        if depth >= MAX_DEPTH:
+            raise ExpressionError(
+                f"expression is nested too deeply (more than {MAX_DEPTH} levels; a chain of "
+                f"n operators such as + counts n): group long sums in parentheses",
+                node.col_offset + 1)  # an ast.expr always has a position
+        stack.extend((child, depth + 1) for child in ast.iter_child_nodes(node))
 
 
 @dataclass
@@ -213,7 +261,7 @@ class _Builder:
 
     def fold(self, node: ast.AST, symbol: str, a: float, b: float) -> float:
         try:
-            with np.errstate(all="raise"):
+            with np.errstate(**_FOLD_ERRORS):
                 value = float(_apply(symbol, np.float64(a), np.float64(b)))
         except (FloatingPointError, ZeroDivisionError, OverflowError):
             self.fail(node, f"constant '{a:g} {symbol} {b:g}' is not a finite real number")
@@ -238,7 +286,7 @@ class _Builder:
         func = dual.FUNCTIONS[fname]
         if all(a.is_constant for a in args):
             try:
-                with np.errstate(all="raise"):
+                with np.errstate(**_FOLD_ERRORS):
                     value = float(func(*[np.float64(a.value) for a in args]))
             except (FloatingPointError, OverflowError):
                 value = math.nan

@@ -38,6 +38,11 @@ PROCESS_MIN_RAYS = 4096
 threads, 0.9 s in two processes (48x48: 0.8-1.0 s against 0.5 s)."""
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3  # glibc's mallopt parameters (malloc.h)
 _POLL_S = 0.1  # how often the parent polls for cancellation while processes work
+IN_FLIGHT_PER_WORKER = 2
+"""Chunks handed to the pool and not yet taken by the caller, per worker: one traced,
+one queued. Finished chunks wait for the caller (its shading and storing), so this bounds
+the results held in memory (issue 11: a 4096x4096 flat frame peaked at 2.1 GB in two
+processes, 0.75 GB inline, before)."""
 
 Span = tuple[int, int]
 Cancel = Callable[[], bool]
@@ -110,6 +115,9 @@ def run_chunks(job: Callable[[Span, Cancel], T], spans: Iterable[Span], kind: st
     ``cancelled`` themselves; worker processes get a shared event that the caller's
     thread sets once ``cancelled`` turns true. Stops yielding once cancelled (a job may
     return early when its cancel turns true); closing the iterator early stops the jobs.
+    Back-pressure: at most ``IN_FLIGHT_PER_WORKER * workers`` chunks are handed out and
+    not yet taken by the caller, so a caller slower than its workers holds a fixed number
+    of results, whatever the image's size.
     """
     spans = list(spans)
     if kind == "inline":
@@ -118,39 +126,41 @@ def run_chunks(job: Callable[[Span, Cancel], T], spans: Iterable[Span], kind: st
                 return
             yield span, job(span, cancelled)
         return
-    if kind == "processes":
+    limit = IN_FLIGHT_PER_WORKER * workers
+    if kind == "processes" and spans:
         token = next(_TOKENS)
         try:
-            pool, futures, stop = _start_processes(token, job, spans, workers)
+            pool, started, stop = _start_processes(token, job, spans[0], workers, len(spans))
         except _PoolUnavailable:
             pass  # no process pool here: threads
         else:
             try:
                 with pool:
-                    yield from _as_completed(futures, cancelled, stop.set)
+                    yield from _bounded(lambda span: pool.submit(_run_job, token, span),
+                                        spans, limit, cancelled, stop.set, started)
             finally:
                 _JOBS.pop(token, None)
             return
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        futures = {pool.submit(job, span, cancelled): span for span in spans}
-        yield from _as_completed(futures, cancelled, lambda: None)
+        yield from _bounded(lambda span: pool.submit(job, span, cancelled), spans, limit,
+                            cancelled, lambda: None)
 
 
 class _PoolUnavailable(Exception):
     """A process pool cannot be started here (no semaphores, no fork)."""
 
 
-def _start_processes(token: int, job, spans, workers):
-    """Fork the workers (they inherit ``job`` as _JOBS[token]) and hand them every span.
+def _start_processes(token: int, job, first: Span, workers: int, n_spans: int):
+    """Fork the workers (they inherit ``job`` as _JOBS[token]) and hand them ``first``.
 
-    -> (pool, {future: span}, the event that stops the workers' jobs).
+    -> (pool, {its future: first}, the event that stops the workers' jobs).
     """
     context = multiprocessing.get_context("fork")
     pool = None
     try:
         stop = context.Event()
         _JOBS[token] = (job, stop)
-        pool = ProcessPoolExecutor(max_workers=min(workers, len(spans)), mp_context=context,
+        pool = ProcessPoolExecutor(max_workers=min(workers, n_spans), mp_context=context,
                                    initializer=_keep_freed_memory)
         with warnings.catch_warnings():
             # Python >= 3.12 warns when a process with threads forks: a lock another
@@ -158,7 +168,7 @@ def _start_processes(token: int, job, spans, workers):
             # run numpy and the tracer (no such lock) and leave with os._exit.
             warnings.filterwarnings("ignore", message=r".*fork\(\) may lead to deadlocks",
                                     category=DeprecationWarning)
-            first = pool.submit(_run_job, token, spans[0])  # forks every worker
+            future = pool.submit(_run_job, token, first)  # forks every worker
     except (OSError, NotImplementedError) as exc:  # no /dev/shm for semaphores, fork: ENOMEM
         _JOBS.pop(token, None)
         if pool is not None:
@@ -168,9 +178,7 @@ def _start_processes(token: int, job, spans, workers):
                 process.terminate()
             pool.shutdown(wait=False, cancel_futures=True)
         raise _PoolUnavailable(str(exc)) from exc
-    futures = {first: spans[0]}
-    futures.update({pool.submit(_run_job, token, span): span for span in spans[1:]})
-    return pool, futures, stop
+    return pool, {future: first}, stop
 
 
 def _keep_freed_memory() -> None:
@@ -196,14 +204,22 @@ def _run_job(token: int, span: Span):
     return job(span, stop.is_set)
 
 
-def _as_completed(futures: dict[Future, Span], cancelled: Cancel,
-                  stop: Callable[[], None]) -> Iterator[tuple[Span, Any]]:
-    """Yield finished futures' (span, result), polling ``cancelled`` in between. On
-    cancellation, an error or an early close: call ``stop`` and drop what has not begun."""
-    pending = set(futures)
+def _bounded(submit: Callable[[Span], Future], spans: list[Span], limit: int,
+             cancelled: Cancel, stop: Callable[[], None],
+             started: dict[Future, Span] | None = None) -> Iterator[tuple[Span, Any]]:
+    """Yield finished chunks' (span, result), keeping at most ``limit`` submitted and not
+    yet yielded (``started``: those already submitted, first in ``spans``; emptied as
+    they finish). Polls ``cancelled`` in between; on cancellation, an error or an early
+    close: call ``stop`` and drop what has not begun."""
+    futures = started if started is not None else {}
+    waiting = iter(spans[len(futures):])
     try:
-        while pending:
-            done, pending = wait(pending, timeout=_POLL_S, return_when=FIRST_COMPLETED)
+        while True:
+            for span in itertools.islice(waiting, max(limit - len(futures), 0)):
+                futures[submit(span)] = span
+            if not futures:
+                return
+            done, _ = wait(futures, timeout=_POLL_S, return_when=FIRST_COMPLETED)
             while done:  # a finished future holds its chunk: keep no reference to it
                 future = done.pop()
                 span, result = futures.pop(future), future.result()
@@ -212,7 +228,7 @@ def _as_completed(futures: dict[Future, Span], cancelled: Cancel,
             if cancelled():
                 return
     finally:
-        if pending:
+        if futures:
             stop()
-            for future in pending:
+            for future in futures:
                 future.cancel()

@@ -165,7 +165,7 @@ def main() -> None:
     if args.save_blend:
         bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(args.save_blend), copy=True)
     bpy.ops.render.render()
-    summary = addon_module("symray_addon.engine").last_summary
+    summary = addon_module("symray_addon.render_job").last_summary
     if not summary:
         sys.exit("render_scene: the render produced no image (see the errors above)")
     exr = args.exr or os.path.splitext(args.out)[0] + ".exr"

@@ -13,27 +13,17 @@ import time
 from typing import Any
 
 import bpy
-import numpy as np
 
 from ..core.render import ALL_PASSES
-from . import render_job
+from . import output, render_job
 
 PASSES = tuple((name, f"SymRay {name.capitalize()}", f"pass_{name}") for name in ALL_PASSES)
 """(core pass, Blender pass name, scene.symray toggle), in core.render.ALL_PASSES order."""
-
-last_summary: dict[str, Any] = {}
-"""Summary of the last frame the engine rendered (for scripts and tests)."""
 
 
 def enabled_passes(settings: Any) -> list[tuple[str, str]]:
     """(core pass, Blender pass name) of the passes switched on in ``settings``."""
     return [(core_name, name) for core_name, name, toggle in PASSES if getattr(settings, toggle)]
-
-
-def _bottom_up(image: np.ndarray, channels: int) -> np.ndarray:
-    """A (h, w[, c]) top-first image as a (h*w, channels) float32 bottom-up pass buffer."""
-    flipped = np.asarray(image, dtype=np.float32)[::-1]
-    return np.ascontiguousarray(flipped.reshape(-1, channels))
 
 
 class SymRayRenderEngine(bpy.types.RenderEngine):
@@ -54,28 +44,45 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
             self.register_pass(scene, renderlayer, name, 1, "X", "VALUE")
 
     def _fail(self, message: str) -> None:
-        """Report a problem the user can fix; the frame stays empty."""
+        """Report a failed frame. An ERROR report is what makes Blender's render operator
+        raise and keep the output file as it was (error_set alone or raising does not)."""
         self.report({"ERROR"}, message)
         self.error_set(message)
         if bpy.app.background:
             print(f"SymRay: error: {message}")
 
     def render(self, depsgraph: bpy.types.Depsgraph) -> None:
-        """Trace one frame of the evaluated scene into the render result."""
-        scene = depsgraph.scene
-        settings = scene.symray
-        self.update_stats("", "SymRay: reading the scene")
+        """Trace one frame of the evaluated scene into the render result.
+
+        Any failure (bad settings, a killed worker process, no memory, a bug) is reported
+        as an error, so that no blank or partial image is written as the frame.
+        """
         try:
-            job = render_job.prepare(scene, depsgraph, use_border=True,
-                                     camera_object=self.camera_override)
-        except (ValueError, OSError) as err:
-            self._fail(str(err))
-            return
-        width, height = job.camera.width, job.camera.height
-        passes = enabled_passes(settings)
+            self._render(depsgraph)
+        except Exception as err:  # every failure of a frame is the user's to see
+            self._fail(render_job.failure_message(err))
+
+    def _render(self, depsgraph: bpy.types.Depsgraph) -> None:
+        """render() itself; raises on any failure."""
+        scene = depsgraph.scene
+        self.update_stats("", "SymRay: reading the scene")
+        job = render_job.prepare(scene, depsgraph, use_border=True,
+                                 camera_object=self.camera_override)
+        passes = enabled_passes(scene.symray)
         for _core_name, name in passes:
             self.add_pass(name, 1, "X")
+        self.update_stats("", "SymRay: tracing")
+        result = render_job.run(job, self._progress_callback(), self.test_break)
+        if result.cancelled or self.test_break():
+            return
+        self._write_result(depsgraph, job, result, passes)
+        text = render_job.finished(result.summary)
+        self.update_stats("", f"SymRay: {text}")
+        if bpy.app.background:
+            print(f"SymRay: frame {scene.frame_current}: {text}")
 
+    def _progress_callback(self):
+        """progress(done, total) for core.render: the progress bar and a status line."""
         last_report = [0.0]
 
         def progress(done: int, total: int) -> None:
@@ -86,33 +93,26 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
                 last_report[0] = now
                 self.update_stats("", f"SymRay: traced {done} of {total}")
 
-        self.update_stats("", "SymRay: tracing")
-        try:
-            result = render_job.run(job, progress, self.test_break)
-        except (ValueError, OSError) as err:
-            self._fail(str(err))
-            return
-        if result.cancelled or self.test_break():
-            return
+        return progress
+
+    def _write_result(self, depsgraph: bpy.types.Depsgraph, job: render_job.RenderJob,
+                      result: Any, passes: list[tuple[str, str]]) -> None:
+        """Copy the image and passes into Blender's render result; nothing on a failure."""
         view_layer = depsgraph.view_layer.name if depsgraph.view_layer else ""
         # Coordinates are relative to the render region (border), which is what we traced.
-        res = self.begin_result(0, 0, width, height, layer=view_layer)
+        res = self.begin_result(0, 0, job.camera.width, job.camera.height, layer=view_layer)
         try:
             layer = res.layers[0]
-            layer.passes["Combined"].rect = _bottom_up(result.rgba, 4)
+            layer.passes["Combined"].rect = output.bottom_up(result.rgba, 4)
             for core_name, name in passes:
                 data = result.passes.get(core_name)
                 render_pass = layer.passes.get(name)
                 if data is not None and render_pass is not None:
-                    render_pass.rect = _bottom_up(data, 1)
-        finally:
-            self.end_result(res)
-        last_summary.clear()
-        last_summary.update(result.summary)
-        text = render_job.summary_text(result.summary)
-        self.update_stats("", f"SymRay: {text}")
-        if bpy.app.background:
-            print(f"SymRay: frame {scene.frame_current}: {text}")
+                    render_pass.rect = output.bottom_up(data, 1)
+        except BaseException:
+            self.end_result(res, cancel=True)
+            raise
+        self.end_result(res)
 
 
 # Built-in panels shown for SYMRAY: every generic panel (those listing BLENDER_RENDER in

@@ -16,9 +16,6 @@ import bpy
 
 from . import output, render_job
 
-last_summary: dict[str, Any] = {}
-"""Summary of the last finished operator render (for scripts and tests)."""
-
 
 class RenderTask:
     """A core render in a worker thread, with progress and cancellation for the UI."""
@@ -87,9 +84,7 @@ def finish(operator: bpy.types.Operator, result: Any, image_name: str,
     if exr_path:
         output.write_exr(exr_path, result.rgba, result.passes)
     output.write_image(image_name, result.rgba)
-    last_summary.clear()
-    last_summary.update(result.summary)
-    text = render_job.summary_text(result.summary)
+    text = render_job.finished(result.summary)
     if bpy.app.background:
         print(f"SymRay: {text}")
     operator.report({"INFO"}, f"SymRay: {text}")
@@ -122,15 +117,19 @@ class SYMRAY_OT_render(bpy.types.Operator):
         job = render_job.prepare(scene, context.evaluated_depsgraph_get())
         return job, image_name, exr_path
 
+    def _failed(self, err: Exception) -> set[str]:
+        """Report any failure as an error (never a traceback); the image stays as it was."""
+        self.report({"ERROR"}, render_job.failure_message(err))
+        return {"CANCELLED"}
+
     def execute(self, context: bpy.types.Context) -> set[str]:
         """Render synchronously (scripts, background mode)."""
         try:
             job, image_name, exr_path = self._prepare(context)
             result = render_job.run(job)
             return finish(self, result, image_name, exr_path)
-        except (ValueError, OSError) as err:
-            self.report({"ERROR"}, str(err))
-            return {"CANCELLED"}
+        except Exception as err:  # every failure is reported, whatever it is
+            return self._failed(err)
 
     def invoke(self, context: bpy.types.Context, event: bpy.types.Event) -> set[str]:
         """Render in a worker thread with progress; Esc cancels."""
@@ -138,9 +137,8 @@ class SYMRAY_OT_render(bpy.types.Operator):
             return self.execute(context)
         try:
             job, self._image_name, self._exr_path = self._prepare(context)
-        except (ValueError, OSError) as err:
-            self.report({"ERROR"}, str(err))
-            return {"CANCELLED"}
+        except Exception as err:  # every failure is reported, whatever it is
+            return self._failed(err)
         self._task = RenderTask(job)
         self._task.start()
         wm = context.window_manager
@@ -183,9 +181,8 @@ class SYMRAY_OT_render(bpy.types.Operator):
         self._cleanup(context)
         try:
             return finish(self, task.collect(), self._image_name, self._exr_path)
-        except (ValueError, OSError) as err:
-            self.report({"ERROR"}, str(err))
-            return {"CANCELLED"}
+        except Exception as err:  # every failure is reported, whatever it is
+            return self._failed(err)
 
     def cancel(self, context: bpy.types.Context) -> None:
         """Blender ended the modal operator (e.g. a file was loaded): stop the worker."""

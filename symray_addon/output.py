@@ -46,6 +46,9 @@ def check_writable(path: str) -> str:
     """Resolve ``path`` and raise OSError with a clear message unless it can be written."""
     if not path.strip():
         raise OSError("EXR path is empty")
+    if path.strip().startswith("//") and not bpy.data.filepath:
+        raise OSError(f"EXR path '{path}' is relative to the .blend file ('//'), which is not "
+                      "saved yet: save the file first, or choose an absolute path")
     raw = bpy.path.abspath(path)
     if os.path.isdir(raw) or raw.endswith(("/", "\\")):
         raise OSError(f"EXR path '{raw}' is a folder, not a file")
@@ -62,24 +65,33 @@ def check_writable(path: str) -> str:
     return target
 
 
-def _bottom_up(rgba: np.ndarray) -> np.ndarray:
-    """A (h, w, 4) top-first image as Blender's flat bottom-up float32 pixel buffer."""
-    return np.ascontiguousarray(rgba[::-1], dtype=np.float32).reshape(-1)
+def bottom_up(image: np.ndarray, channels: int) -> np.ndarray:
+    """A (h, w[, c]) top-first image as a (h*w, channels) float32 bottom-up buffer, the
+    row order of Blender's images and render passes."""
+    flipped = np.asarray(image, dtype=np.float32)[::-1]
+    return np.ascontiguousarray(flipped.reshape(-1, channels))
 
 
 def _fill(image: bpy.types.Image, rgba: np.ndarray) -> None:
     """Write a (h, w, 4) top-first array into an image of the same size."""
-    image.pixels.foreach_set(_bottom_up(rgba))
+    image.pixels.foreach_set(bottom_up(rgba, 4).reshape(-1))
     image.update()
 
 
 def write_image(name: str, rgba: np.ndarray) -> bpy.types.Image:
-    """Write ``rgba`` (h, w, 4), row 0 at the top, into float image ``name`` (made if missing)."""
+    """Write ``rgba`` (h, w, 4), row 0 at the top, into float image ``name`` (made if missing).
+
+    The pixels are packed into the .blend (as OpenEXR, 32-bit float) and the image keeps a
+    fake user, so saving the file keeps the last render (a generated image alone would come
+    back blank).
+    """
     h, w = rgba.shape[:2]
     image = bpy.data.images.get(name)
     if image is None:
         image = bpy.data.images.new(name, width=w, height=h, alpha=True, float_buffer=True)
     else:
+        if image.packed_file is not None:
+            image.unpack(method="REMOVE")  # the previous render's pixels; replaced below
         if image.source != "GENERATED":
             image.source = "GENERATED"
         image.generated_type = "BLANK"
@@ -89,6 +101,8 @@ def write_image(name: str, rgba: np.ndarray) -> bpy.types.Image:
         if tuple(image.size) != (w, h):
             image.scale(w, h)
     _fill(image, rgba)
+    image.pack()  # a float image is packed as OpenEXR: no loss
+    image.use_fake_user = True
     return image
 
 

@@ -44,6 +44,11 @@ BACKGROUND_ITEMS = [
     ("PROCEDURAL", "Procedural Sky", "SymRay's procedural star field and grid"),
 ]
 
+# Blender 5 warns when a path property holding '//' does not declare it supports that
+# (4.2 does not know the option; 5.0 is the first version it is known to be in)
+_PATH_OPTIONS = {"ANIMATABLE"} | ({"PATH_SUPPORTS_BLEND_RELATIVE"}
+                                 if bpy.app.version >= (5, 0, 0) else set())
+
 PARALLEL_ITEMS = [
     ("AUTO", "Auto", "Worker processes where the OS can fork them (Linux), threads "
      "elsewhere and for the smallest images"),
@@ -124,7 +129,8 @@ class SymRaySettings(bpy.types.PropertyGroup):
     refractive_index: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Refractive Index", default=presets.MIRAGE_EQ17_INDEX,
         update=_validator("refractive_index"),
-        description="n(x, y, z) in the centre's local frame; + - * / **, sin, exp, sqrt, pi")
+        description="n(x, y, z) in the centre's local frame; + - * / **, sin, exp, sqrt, pi "
+                    "(plain ASCII, at most 100 nested operations)")
     refractive_index_error: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Refractive Index Error", default="")
     index_form: bpy.props.EnumProperty(  # type: ignore[valid-type]
@@ -152,7 +158,8 @@ class SymRaySettings(bpy.types.PropertyGroup):
     hamiltonian: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Hamiltonian", default="0.5*(p_x**2 + p_y**2 + p_z**2)",
         update=_validator("hamiltonian"),
-        description="H(x, y, z, p_x, p_y, p_z) in the centre's local frame")
+        description="H(x, y, z, p_x, p_y, p_z) in the centre's local frame (plain ASCII, "
+                    "at most 100 nested operations)")
     hamiltonian_error: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Hamiltonian Error", default="")
     method: bpy.props.EnumProperty(  # type: ignore[valid-type]
@@ -187,8 +194,9 @@ class SymRaySettings(bpy.types.PropertyGroup):
         name="Image", default="SymRay Result",
         description="Image the SymRay Render operator writes (created if missing)")
     exr_path: bpy.props.StringProperty(  # type: ignore[valid-type]
-        name="EXR Path", default="", subtype="FILE_PATH",
-        description="Also write the operator's result as OpenEXR here (empty = no EXR)")
+        name="EXR Path", default="", subtype="FILE_PATH", options=_PATH_OPTIONS,
+        description="Also write the operator's result as OpenEXR here (empty = no EXR; "
+                    "'//' = next to the .blend, which must be saved)")
 
     def passes(self) -> tuple[str, ...]:
         """Names of the core passes to compute (core.render.ALL_PASSES switched on here:

@@ -8,7 +8,9 @@ thread, background mode directly.
 
 from __future__ import annotations
 
+import traceback
 from collections.abc import Callable
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -20,6 +22,9 @@ from . import export_camera, export_meshes, models, properties, world
 
 Progress = Callable[[int, int], None]
 Cancel = Callable[[], bool]
+
+last_summary: dict[str, Any] = {}
+"""Summary of the last frame the engine or the operator finished (for scripts and tests)."""
 
 
 @dataclass
@@ -116,3 +121,30 @@ def summary_text(summary: dict[str, Any]) -> str:
             except (TypeError, ValueError):
                 parts.append(f"{key} {summary[key]}")
     return ", ".join(parts)
+
+
+def finished(summary: dict[str, Any]) -> str:
+    """Remember ``summary`` as the last one (``last_summary``) and return its one-line text."""
+    last_summary.clear()
+    last_summary.update(summary)
+    return summary_text(summary)
+
+
+def failure_message(err: BaseException) -> str:
+    """What to tell the user when a render failed with ``err`` (any exception).
+
+    Problems the user can fix (ValueError, OSError) are their own message; anything else
+    is named plainly, and its traceback goes to the console for a bug report.
+    """
+    if isinstance(err, (ValueError, OSError)):
+        return str(err)
+    if isinstance(err, MemoryError):
+        return ("SymRay ran out of memory: lower the resolution, the number of workers "
+                "or Max Steps; nothing was written")
+    if isinstance(err, BrokenProcessPool):
+        return ("A SymRay worker process stopped unexpectedly (killed, or out of memory); "
+                "nothing was written")
+    traceback.print_exception(err)
+    if isinstance(err, RecursionError):
+        return "SymRay failed: Python's recursion limit was reached; nothing was written"
+    return f"SymRay failed ({type(err).__name__}: {err}); nothing was written"

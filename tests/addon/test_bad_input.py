@@ -101,9 +101,9 @@ def test_engine_reports_bad_input(addon, scene, helpers, rendered):
     scene.render.engine = "SYMRAY"
     scene.symray.model = "KERR"
     scene.symray.spin = 3.0
-    engine = addon.module("symray_addon.engine")
-    engine.last_summary.clear()
+    render_job = addon.module("symray_addon.render_job")
+    render_job.last_summary.clear()
     with pytest.raises(RuntimeError, match="beyond extremal"):
         bpy.ops.render.render()
-    assert engine.last_summary == {}
+    assert render_job.last_summary == {}
     np.testing.assert_array_equal(helpers.image_array(scene.symray.image_name), rendered)

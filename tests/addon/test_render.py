@@ -319,7 +319,7 @@ def test_f12_writes_exr_with_error_pass(addon, scene, helpers, tmp_path, paralle
     escaped_error = error[reference.passes["ending"] == 0]
     assert 0 < np.median(escaped_error) < float(scene.symray.tolerance)
     assert any(k.endswith("Combined.R") for k in channels)
-    summary = addon.module("symray_addon.engine").last_summary
+    summary = addon.module("symray_addon.render_job").last_summary
     assert summary["rays"] == 32 * 24
 
 

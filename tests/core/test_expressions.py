@@ -1,11 +1,11 @@
 """The expression language: correct values, and refusal of everything off the whitelist."""
 
-import time
 
 import numpy as np
 import pytest
 
 from core import expressions as ex
+from core import hamiltonians as hm
 from core.dual import Dual
 
 
@@ -45,13 +45,12 @@ def test_parameters_and_definitions_fold_and_share():
     ("'text'", "only real numbers", 1),
     ("sin(x, x)", "takes 1 argument", 1),
     ("1/0 + x", "not a finite real number", 1),
-    ("", "empty", None),
+    ("", "empty", 1),
 ])
 def test_refused_with_problem_and_column(text, problem, column):
-    start = time.perf_counter()
+    # (no wall-clock assert: "9**9**9" refused as "too large" shows nothing was computed)
     with pytest.raises(ex.ExpressionError) as info:
         ex.compile_expression(text, ["x", "y"])
-    assert time.perf_counter() - start < 0.5, "refusal must be fast"
     assert problem in str(info.value)
     if column is not None:
         assert info.value.column == column
@@ -66,12 +65,11 @@ def test_nothing_runs_while_refusing(tmp_path, monkeypatch):
     assert not (tmp_path / "pwned").exists()
 
 
-def test_absurd_sizes_refused_quickly():
-    start = time.perf_counter()
-    for text in ["x" + "+x" * 30_000, "(" * 500 + "x" + ")" * 500, "1" * 5000]:
-        with pytest.raises(ex.ExpressionError):
+def test_absurd_sizes_refused():
+    for text, problem in [("x" + "+x" * 30_000, "too long"), ("(" * 500 + "x" + ")" * 500,
+                                                              "nested"), ("1" * 5000, "digits")]:
+        with pytest.raises(ex.ExpressionError, match=problem):
             ex.compile_expression(text, ["x"])
-    assert time.perf_counter() - start < 1.0
 
 
 def test_definition_names_must_be_new():
@@ -79,3 +77,74 @@ def test_definition_names_must_be_new():
         ex.compile_program(["x"], ["x"], definitions=[("x", "1")])
     with pytest.raises(ex.ExpressionError, match="definition 'r': unknown name 'q'"):
         ex.compile_program(["r"], ["x"], definitions=[("r", "q + 1")])
+
+
+@pytest.mark.parametrize("text, column", [
+    ("+".join(["x"] * 500), 1),  # 999 characters; a left-nested chain of 499 sums
+    ("-" * 500 + "x", 101),  # the 101st sign
+    ("**".join(["x"] * 400), 301),  # the 101st power, right-nested
+    ("-" * 19_999 + "x", 1),  # deeper than Python's parser's own stack
+    ("+".join(["x"] * 9_000), 1),  # Python 3.11: deeper than its limit for the tree
+])
+def test_deep_nesting_is_refused_with_problem_and_column(text, column):
+    """Issue 11 item 4: RecursionError (or a column-less parser error) before."""
+    with pytest.raises(ex.ExpressionError) as info:
+        ex.compile_expression(text, ["x"])
+    assert "nested too deeply" in info.value.problem or "too large" in info.value.problem
+    assert info.value.column == column and f"at column {column}" in str(info.value)
+
+
+def test_a_custom_hamiltonian_with_a_500_term_sum_is_refused():
+    with pytest.raises(ex.ExpressionError, match="nested too deeply"):
+        hm.from_expression("+".join(["p_x**2"] * 500), ["x"], ["p_x"])
+
+
+def _deep_in_the_stack(frames: int, call):
+    """call() from ``frames`` frames further down the stack (as in Blender's threads)."""
+    return call() if frames == 0 else _deep_in_the_stack(frames - 1, call)
+
+
+def test_nesting_at_the_limit_compiles_and_evaluates_far_down_the_stack():
+    levels = ex.MAX_DEPTH
+    x = np.array([0.3, 1.2])
+    total = x
+    for _ in range(levels):
+        total = total + x
+    cases = {
+        "+".join(["x"] * (levels + 1)): total,
+        "-" * levels + "x": x,  # an even number of signs
+        "**".join(["x"] + ["1"] * levels): x,
+        "sin(" * (levels - 1) + "x" + ")" * (levels - 1): x,
+    }
+    iterated = x
+    for _ in range(levels - 1):
+        iterated = np.sin(iterated)
+    cases["sin(" * (levels - 1) + "x" + ")" * (levels - 1)] = iterated
+    for text, expected in cases.items():
+        compiled = _deep_in_the_stack(500, lambda t=text: ex.compile_expression(t, ["x"]))
+        value = _deep_in_the_stack(500, lambda c=compiled: c({"x": Dual.variable(x, 0)}))
+        np.testing.assert_allclose(value.v, expected, rtol=1e-15)
+    h = _deep_in_the_stack(500, lambda: hm.from_expression(
+        "+".join(["p_x**2"] * levels), ["x"], ["p_x"]))  # 99 sums of a power: 100 levels
+    np.testing.assert_allclose(h.value(np.zeros((2, 1)), x[:, None]), levels * x ** 2,
+                               rtol=1e-13)  # 100 roundings of a sum against one product
+
+
+@pytest.mark.parametrize("text, char, column", [
+    ("ｘ + 1", "ｘ", 1),  # fullwidth x: NFKC would read it as x
+    ("1 + ｓｉｎ(x)", "ｓ", 5),
+    ("x − 1", "−", 3),  # the minus sign U+2212
+    ("x\u00a0+ 1", "\u00a0", 2),  # no-break space
+    ("\U0001d465 * 2", "\U0001d465", 1),  # mathematical italic x
+])
+def test_non_ascii_text_is_refused_naming_the_character(text, char, column):
+    """Issue 11 item 5: 'ｘ' and 'ｓｉｎ' were silently read as 'x' and 'sin' before."""
+    with pytest.raises(ex.ExpressionError) as info:
+        ex.compile_expression(text, ["x"])
+    assert f"non-ASCII character '{char}' (U+{ord(char):04X}" in info.value.problem
+    assert info.value.column == column
+
+
+def test_constants_that_underflow_to_zero_are_accepted():
+    assert ex.compile_expression("x + exp(-800) + 1e-200 * 1e-200", ["x"]).evaluate(
+        {"x": 1.5}) == 1.5

@@ -5,6 +5,7 @@ import errno
 import multiprocessing
 import os
 import threading
+import time
 import weakref
 
 import numpy as np
@@ -148,6 +149,31 @@ def test_finished_chunks_are_not_kept_by_the_pool(kind):
         alive.append(weakref.ref(result))
         del result
         assert sum(ref() is not None for ref in alive[:-2]) == 0
+
+
+@pytest.mark.parametrize("kind", ["threads", pytest.param("processes", marks=needs_fork)])
+@pytest.mark.parametrize("count", [1, 2, 3])
+def test_chunks_handed_out_are_bounded_by_what_the_caller_took(kind, count):
+    """Back-pressure (issue 11 item 6): workers faster than the caller never run more than
+    IN_FLIGHT_PER_WORKER chunks per worker ahead of it, whatever the number of chunks
+    (before, every chunk was handed out at once and the results piled up)."""
+    started = multiprocessing.get_context("fork" if kind == "processes" else None).Value("i", 0)
+
+    def job(span, cancel):
+        with started.get_lock():
+            started.value += 1
+        return np.zeros((span[1] - span[0], 16))
+
+    spans = [(s, s + 100) for s in range(0, 6000, 100)]
+    limit = workers.IN_FLIGHT_PER_WORKER * count
+    taken = 0
+    for span, result in workers.run_chunks(job, spans, kind, count, workers.CancelLatch(None)):
+        taken += 1
+        assert result.shape == (100, 16) and span[0] % 100 == 0
+        assert started.value <= taken - 1 + limit, (started.value, taken)
+        if taken < 4:
+            time.sleep(0.05)  # a slow caller: the workers could run far ahead
+    assert taken == len(spans) and started.value == len(spans)
 
 
 def test_choose_picks_processes_for_big_images_where_fork_exists(monkeypatch):
