@@ -164,6 +164,6 @@ def _camera_problem(model: str, rg: float, spin: float, tolerance: float, metric
                      np.array(camera))
     except expressions.ExpressionError:
         return ""  # shown with the expression
-    except ValueError as err:
+    except (ValueError, ArithmeticError) as err:
         return str(err)
     return ""
