@@ -1,7 +1,9 @@
-"""Checking the user's expressions (n(x,y,z), g^ij, H) as they are typed.
+"""Checking the user's expressions (n(x,y,z), g^ij, H) as they are typed, and the numeric
+settings a .blend or a script can carry past the properties' own limits (settings_problems).
 
-Nothing here imports bpy: it works on plain strings, so it is shared by the property
-update callbacks, the operator and the render engine, and is testable on its own.
+Nothing here imports bpy: it works on plain strings and attribute access, so it is shared
+by the property update callbacks, the panel, the operator and the render engine, and is
+testable on its own.
 
 The inverse metric is one text (the ``metric`` property, or a Text data-block named by
 ``metric_text``): statements separated by newlines or ``;``. A statement ``name = expr``
