@@ -58,12 +58,10 @@ def spacetime_momenta(model, chart, S: np.ndarray, D: np.ndarray):
     Q = np.vstack([np.zeros((1, n_rays)), S])
     with np.errstate(all="ignore"):
         ginv = inverse_metric_soa(model, Q)
-    _check_metric(model, chart, Q, ginv)
-    with np.errstate(all="ignore"):
         try:
             g = np.linalg.inv(ginv)
         except np.linalg.LinAlgError:
-            raise _singular(model, Q[:, 0]) from None
+            raise _diagnose(model, chart, Q, ginv, np.ones(n_rays, dtype=bool)) from None
     xi_t = np.zeros((n_rays, 4))
     xi_t[:, 0] = 1.0
     xi_phi = np.zeros((n_rays, 4))
@@ -74,7 +72,7 @@ def spacetime_momenta(model, chart, S: np.ndarray, D: np.ndarray):
     u = xi_t + omega[:, None] * xi_phi
     norm2 = _dot(g, u, u)
     if not np.all(norm2 < 0):
-        raise _no_rest(model, Q[:, ~(norm2 < 0)])
+        raise _diagnose(model, chart, Q, ginv, ~(norm2 < 0))
     u /= np.sqrt(-norm2)[:, None]
     V = np.zeros((n_rays, 4, 3))
     for a in range(3):
@@ -82,7 +80,9 @@ def spacetime_momenta(model, chart, S: np.ndarray, D: np.ndarray):
         unit[a] = 1.0
         V[:, 1:, a] = chart.coord_directions(S, unit).T
     V += u[:, :, None] * np.einsum("nij,ni,nja->na", g, u, V)[:, None, :]  # project out u
-    E = _orthonormalize(g, V, model, Q)
+    E, spacelike = _orthonormalize(g, V)
+    if not spacelike.all():
+        raise _diagnose(model, chart, Q, ginv, ~spacelike)
     k = -u + np.einsum("nia,an->ni", E, D)
     P = np.ascontiguousarray(np.einsum("nij,nj->in", g, k))
     return Q, P
@@ -93,14 +93,15 @@ def _dot(g, a, b):
     return np.einsum("nij,ni,nj->n", g, a, b)
 
 
-def _orthonormalize(g, V, model, Q):
-    """Symmetric orthonormalisation V (V^T g V)^(-1/2) of three spacelike vectors (N, 4, 3)."""
+def _orthonormalize(g, V):
+    """Symmetric orthonormalisation V (V^T g V)^(-1/2) of three vectors (N, 4, 3), and
+    (N,) whether they were spacelike (where not, the frame is meaningless)."""
     G = np.einsum("nia,nij,njb->nab", V, g, V)
     w, U = np.linalg.eigh(G)
-    if not np.all(w > 0):
-        raise _no_rest(model, Q[:, ~np.all(w > 0, axis=1)])
-    inv_sqrt = np.einsum("nab,nb,ncb->nac", U, 1.0 / np.sqrt(w), U)
-    return np.einsum("nia,nab->nib", V, inv_sqrt)
+    spacelike = np.all(w > 0, axis=1)
+    with np.errstate(all="ignore"):
+        inv_sqrt = np.einsum("nab,nb,ncb->nac", U, 1.0 / np.sqrt(w), U)
+    return np.einsum("nia,nab->nib", V, inv_sqrt), spacelike
 
 
 def medium_momenta(model, S: np.ndarray, D: np.ndarray):
@@ -111,30 +112,37 @@ def medium_momenta(model, S: np.ndarray, D: np.ndarray):
     return S.copy(), D * scale
 
 
-def _check_metric(model, chart, Q: np.ndarray, ginv: np.ndarray) -> None:
-    """Raise the ObserverError of the first ray start where g^ij is not a usable metric:
-    on a spherical chart's axis, not finite or singular, or of the wrong signature."""
-    finite = np.isfinite(ginv).all(axis=(1, 2))
-    w = np.linalg.eigvalsh(np.where(finite[:, None, None], ginv, 0.0))
-    lorentzian = finite & (np.sum(w < 0, axis=1) == 1) & (np.sum(w > 0, axis=1) == 3)
-    if lorentzian.all():
-        return
-    k = np.flatnonzero(~lorentzian)[0]
-    singular = ~finite | (np.min(np.abs(w), axis=1) <= _SINGULAR * np.max(np.abs(w), axis=1))
-    if getattr(chart, "name", "") == "spherical" and abs(np.sin(Q[2, k])) < _AXIS:
-        raise CoordinateAxisError(
+def _diagnose(model, chart, Q: np.ndarray, ginv: np.ndarray, bad: np.ndarray) -> ObserverError:
+    """Why no observer frame exists at the ray starts ``bad`` ((N,) bool) of Q (4, N):
+    on a spherical chart's axis, inside the horizon, g^ij singular, of the wrong
+    signature, or (a valid metric) no observer at rest there. Only runs on failure."""
+    Q, ginv = Q[:, bad], ginv[bad]
+    if getattr(chart, "name", "") == "spherical" and np.any(np.abs(np.sin(Q[2])) < _AXIS):
+        return CoordinateAxisError(
             "the camera is on the polar axis (theta = 0 or pi) of the model's spherical / "
             "Boyer–Lindquist coordinates, where they are singular: move it off the axis "
             "(x = y = 0 in the centre's frame), or use the Kerr–Schild chart")
-    if _inside_horizon(model, Q[:, k:k + 1]):
-        raise _no_rest(model, Q[:, k:k + 1])
-    if singular[k]:
-        raise _singular(model, Q[:, k])
-    signs = ", ".join("-" if x < 0 else "+" if x > 0 else "0" for x in np.sort(w[k]))
-    hint = " (a metric written as (+, -, -, -) must be negated)" if \
-        np.sum(w[k] < 0) == 3 else ""
-    raise MetricSignatureError(
-        f"the metric has signature ({signs}) at the camera ({_where(model, Q[:, k])}); SymRay "
+    inside = _inside_horizon(model, Q)
+    if inside.any():
+        return _no_rest(model, Q[:, inside])
+    finite = np.isfinite(ginv).all(axis=(1, 2))
+    w = np.linalg.eigvalsh(np.where(finite[:, None, None], ginv, 0.0))
+    size = np.abs(w)
+    singular = ~finite | (size.min(axis=1) <= _SINGULAR * size.max(axis=1))
+    if singular.any():
+        return _singular(model, Q[:, np.argmax(singular)])
+    lorentzian = (np.sum(w < 0, axis=1) == 1) & (np.sum(w > 0, axis=1) == 3)
+    if not lorentzian.all():
+        return _signature(model, Q[:, np.argmin(lorentzian)], w[np.argmin(lorentzian)])
+    return _no_rest(model, Q)
+
+
+def _signature(model, q: np.ndarray, w: np.ndarray) -> MetricSignatureError:
+    """The error for a ray start q (4,) where g^ij has eigenvalues w of the wrong signs."""
+    signs = ", ".join("-" if x < 0 else "+" for x in np.sort(w))
+    hint = " (a metric written as (+, -, -, -) must be negated)" if np.sum(w < 0) == 3 else ""
+    return MetricSignatureError(
+        f"the metric has signature ({signs}) at the camera ({_where(model, q)}); SymRay "
         f"needs (-, +, +, +): one time coordinate and three space coordinates{hint}")
 
 
@@ -148,7 +156,7 @@ def _singular(model, q: np.ndarray) -> SingularMetricError:
 
 def _no_rest(model, Q: np.ndarray) -> InsideHorizonError:
     """The error for ray starts (4, M) with a valid metric but no observer at rest there."""
-    if _inside_horizon(model, Q) or getattr(model, "rg", 0.0) > 0:
+    if _inside_horizon(model, Q).any() or getattr(model, "rg", 0.0) > 0:
         return InsideHorizonError(
             f"the camera ({_where(model, Q[:, 0])}) is inside the black hole's horizon: no "
             "light from there reaches the outside; move it further from the centre")
@@ -158,11 +166,13 @@ def _no_rest(model, Q: np.ndarray) -> InsideHorizonError:
         "metric?); move the camera")
 
 
-def _inside_horizon(model, Q: np.ndarray) -> bool:
-    """Whether any of the points Q (4, M) is inside the model's horizon (captured_soa)."""
+def _inside_horizon(model, Q: np.ndarray) -> np.ndarray:
+    """(M,) bool: the points Q (4, M) inside the model's horizon (its captured_soa)."""
     captured = getattr(model, "captured_soa", None)
+    if captured is None:
+        return np.zeros(Q.shape[1], dtype=bool)
     with np.errstate(all="ignore"):
-        return captured is not None and bool(np.any(captured(Q)))
+        return np.asarray(captured(Q), dtype=bool)
 
 
 def _where(model, q: np.ndarray) -> str:
@@ -186,7 +196,7 @@ def check_camera(tracer, position) -> None:
     if not inside[0]:
         return
     S = tracer.chart.to_coords(X.T)
-    if _inside_horizon(tracer.model, np.vstack([np.zeros((1, 1)), S])):
+    if _inside_horizon(tracer.model, np.vstack([np.zeros((1, 1)), S])).any():
         # every ray would end at once (inside r- an observer exists, but sees nothing)
         raise _no_rest(tracer.model, np.vstack([np.zeros((1, 1)), S]))
     spacetime_momenta(tracer.model, tracer.chart, S, np.array([[0.0], [0.0], [1.0]]))
