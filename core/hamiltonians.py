@@ -16,7 +16,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from . import dual
+from . import checks, dual
 from . import expressions as ex
 from .dual import Dual
 
@@ -74,7 +74,7 @@ class Hamiltonian:
         self.momenta = tuple(momenta)
         self.dim = len(self.coords)
         self.separable = bool(separable)
-        self.parameters = dict(parameters or {})
+        self.parameters = checks.check_parameters(parameters)
         self._time_scale = None
         if time_scale is not None:
             self._time_scale = ex.compile_program([time_scale], self.coords, self.parameters)
@@ -444,15 +444,12 @@ def metric(inverse: Sequence[Sequence[str]], coords: Sequence[str] = ("t", "x", 
 
 
 def _check_rg(rg: float) -> float:
-    rg = float(rg)
-    if not (math.isfinite(rg) and rg > 0):
-        raise ValueError(f"rg (Schwarzschild radius) must be a positive number, got {rg}")
-    return rg
+    return checks.check_positive("rg (Schwarzschild radius)", rg)
 
 
 def _check_spin(rg: float, a: float) -> float:
-    a = float(a)
-    if not math.isfinite(a) or abs(a) > rg / 2:
+    a = checks.check_range("a (Kerr spin)", a)
+    if abs(a) > rg / 2:
         raise ValueError(f"Kerr spin a = {a} is beyond extremal: need |a| <= rg/2 = M = {rg / 2}"
                          f" (a/M = {2 * a / rg:.4g})")
     return a
@@ -727,8 +724,7 @@ class Medium(ExpressionHamiltonian):
                          positive=("n",))
         self.index_text = index
         self.literal = literal
-        self.bounds = None if bounds is None else (np.asarray(bounds[0], float),
-                                                   np.asarray(bounds[1], float))
+        self.bounds = checks.check_box("medium bounds", bounds)
         self._index = ex.compile_expression(index, coords, parameters)
 
     def index_soa(self, Q) -> np.ndarray:

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import hamiltonians, integrators
+from . import checks, hamiltonians, integrators
 from .charts import chart_for
 from .intersect import Group, segment_overlaps
 from .observer import medium_momenta, spacetime_momenta
@@ -63,7 +63,8 @@ class Scene:
     user metric about the axis."""
 
     def __post_init__(self):
-        self.center = np.asarray(self.center, dtype=np.float64).reshape(3)
+        self.center = checks.check_vector("scene center", self.center)
+        checks.check_optional(checks.check_positive, "region_radius", self.region_radius)
         axis = np.asarray(self.axis, dtype=np.float64).reshape(3)
         norm = np.linalg.norm(axis)
         if not (np.isfinite(norm) and norm > 0):
@@ -104,6 +105,10 @@ class TraceOptions:
     step: float | None = None
     max_steps: int = 20_000
     region_radius: float | None = None
+
+    def __post_init__(self):
+        checks.check_render_options(self.tolerance, self.step, self.max_steps)
+        checks.check_optional(checks.check_positive, "region_radius", self.region_radius)
 
 
 @dataclass
