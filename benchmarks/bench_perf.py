@@ -249,9 +249,10 @@ def bench_image(size: int, method: str | None, full: bool) -> None:
                                                passes=("error", "steps", "ending"))
     line("render with the error pass (3x the tracing)", f"{seconds:8.1f} s", "",
          None)
-    line("  error pass: median / max estimate (px)",
-         f"{out.summary['error_median'] / pixel_angle(size, size):.3f} / "
-         f"{out.summary['error_max'] / pixel_angle(size, size):.1f}")
+    median, worst = (out.summary[k] for k in ("error_median", "error_max"))
+    line("  error pass: median / max estimate (px)", "n/a (no ray has an estimate)"
+         if median is None else f"{median / pixel_angle(size, size):.3f} / "
+         f"{worst / pixel_angle(size, size):.1f}")
     for other in ("yoshida4", "rk4"):
         if other == (method or core.trace.DEFAULT_METHOD):
             continue

@@ -6,6 +6,7 @@ The contract (DESIGN.md): ``core.integrate``, ``core.hamiltonians``, ``core.Came
 
 from . import (
     camera,
+    checks,
     dual,
     expressions,
     hamiltonians,
@@ -21,19 +22,26 @@ from .expressions import ExpressionError
 from .imageio import FAILED_COLOR, ImageWriteError, read_png, write_exr, write_png
 from .integrators import METHODS, IntegrationResult, PoincareTransformed, get_method, integrate
 from .intersect import Disk, Group, Hits, Plane, Sphere, TriangleMesh, Volume, checker, colormap
-from .observer import InsideHorizonError
+from .observer import (
+    CoordinateAxisError,
+    InsideHorizonError,
+    MetricSignatureError,
+    ObserverError,
+    SingularMetricError,
+)
 from .render import MAX_STEPS_COLOR, RenderResult, render
 from .sky import Background, equirect_lookup, procedural_sky
 from .trace import ENDING, Scene
 
 __all__ = [
-    "camera", "dual", "expressions", "hamiltonians", "imageio", "integrators", "intersect",
-    "presets", "sky", "workers", "Camera", "Frame", "ExpressionError", "FAILED_COLOR",
+    "camera", "checks", "dual", "expressions", "hamiltonians", "imageio", "integrators",
+    "intersect", "presets", "sky", "workers", "Camera", "Frame", "ExpressionError", "FAILED_COLOR",
     "MAX_STEPS_COLOR",
     "ImageWriteError", "read_png", "write_exr", "write_png",
     "METHODS", "IntegrationResult", "PoincareTransformed", "get_method", "integrate",
     "Disk", "Group", "Hits", "Plane", "Sphere", "TriangleMesh", "Volume", "checker", "colormap",
-    "InsideHorizonError", "RenderResult", "render", "Background", "equirect_lookup",
+    "InsideHorizonError", "ObserverError", "CoordinateAxisError", "MetricSignatureError",
+    "SingularMetricError", "RenderResult", "render", "Background", "equirect_lookup",
     "procedural_sky",
     "ENDING", "Scene",
 ]

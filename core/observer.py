@@ -13,8 +13,31 @@ from __future__ import annotations
 import numpy as np
 
 
-class InsideHorizonError(ValueError):
-    """No static or zero-angular-momentum observer exists where the camera is."""
+class ObserverError(ValueError):
+    """No observer frame can be set up where the rays start (the camera); subclasses say why."""
+
+
+class InsideHorizonError(ObserverError):
+    """The camera is inside a horizon: no static or zero-angular-momentum observer exists."""
+
+
+class CoordinateAxisError(ObserverError):
+    """The camera is on the polar axis of spherical / Boyer–Lindquist coordinates."""
+
+
+class SingularMetricError(ObserverError):
+    """The metric is singular (or not finite) at the camera."""
+
+
+class MetricSignatureError(ObserverError):
+    """The metric at the camera is not of signature (-, +, +, +)."""
+
+
+_AXIS = 1e-6
+"""|sin theta| below which a camera counts as on the polar axis of a spherical chart."""
+_SINGULAR = 1e-14
+"""A metric whose eigenvalues' smallest |w| is below this times the largest is called
+singular (a few float64 epsilons: the accuracy of the eigenvalues themselves)."""
 
 
 def inverse_metric_soa(model, Q: np.ndarray) -> np.ndarray:
@@ -33,9 +56,12 @@ def spacetime_momenta(model, chart, S: np.ndarray, D: np.ndarray):
     """(Q, P) (4, N) for photons at spatial coords S seen along local Cartesian directions D."""
     n_rays = S.shape[1]
     Q = np.vstack([np.zeros((1, n_rays)), S])
-    ginv = inverse_metric_soa(model, Q)
     with np.errstate(all="ignore"):
-        g = np.linalg.inv(ginv)
+        ginv = inverse_metric_soa(model, Q)
+        try:
+            g = np.linalg.inv(ginv)
+        except np.linalg.LinAlgError:
+            raise _diagnose(model, chart, Q, ginv, np.ones(n_rays, dtype=bool)) from None
     xi_t = np.zeros((n_rays, 4))
     xi_t[:, 0] = 1.0
     xi_phi = np.zeros((n_rays, 4))
@@ -46,8 +72,7 @@ def spacetime_momenta(model, chart, S: np.ndarray, D: np.ndarray):
     u = xi_t + omega[:, None] * xi_phi
     norm2 = _dot(g, u, u)
     if not np.all(norm2 < 0):
-        raise InsideHorizonError("the camera is inside the black hole's horizon (or where no "
-                                 "observer can stay at rest): move it further out")
+        raise _diagnose(model, chart, Q, ginv, ~(norm2 < 0))
     u /= np.sqrt(-norm2)[:, None]
     V = np.zeros((n_rays, 4, 3))
     for a in range(3):
@@ -55,7 +80,9 @@ def spacetime_momenta(model, chart, S: np.ndarray, D: np.ndarray):
         unit[a] = 1.0
         V[:, 1:, a] = chart.coord_directions(S, unit).T
     V += u[:, :, None] * np.einsum("nij,ni,nja->na", g, u, V)[:, None, :]  # project out u
-    E = _orthonormalize(g, V)
+    E, spacelike = _orthonormalize(g, V)
+    if not spacelike.all():
+        raise _diagnose(model, chart, Q, ginv, ~spacelike)
     k = -u + np.einsum("nia,an->ni", E, D)
     P = np.ascontiguousarray(np.einsum("nij,nj->in", g, k))
     return Q, P
@@ -67,14 +94,14 @@ def _dot(g, a, b):
 
 
 def _orthonormalize(g, V):
-    """Symmetric orthonormalisation V (V^T g V)^(-1/2) of three spacelike vectors (N, 4, 3)."""
+    """Symmetric orthonormalisation V (V^T g V)^(-1/2) of three vectors (N, 4, 3), and
+    (N,) whether they were spacelike (where not, the frame is meaningless)."""
     G = np.einsum("nia,nij,njb->nab", V, g, V)
     w, U = np.linalg.eigh(G)
-    if not np.all(w > 0):
-        raise InsideHorizonError("the camera's spatial directions are not spacelike here "
-                                 "(inside the horizon?): move the camera further out")
-    inv_sqrt = np.einsum("nab,nb,ncb->nac", U, 1.0 / np.sqrt(w), U)
-    return np.einsum("nia,nab->nib", V, inv_sqrt)
+    spacelike = np.all(w > 0, axis=1)
+    with np.errstate(all="ignore"):
+        inv_sqrt = np.einsum("nab,nb,ncb->nac", U, 1.0 / np.sqrt(w), U)
+    return np.einsum("nia,nab->nib", V, inv_sqrt), spacelike
 
 
 def medium_momenta(model, S: np.ndarray, D: np.ndarray):
@@ -83,3 +110,93 @@ def medium_momenta(model, S: np.ndarray, D: np.ndarray):
     with np.errstate(all="ignore"):
         scale = np.sqrt(0.5 / h)
     return S.copy(), D * scale
+
+
+def _diagnose(model, chart, Q: np.ndarray, ginv: np.ndarray, bad: np.ndarray) -> ObserverError:
+    """Why no observer frame exists at the ray starts ``bad`` ((N,) bool) of Q (4, N):
+    on a spherical chart's axis, inside the horizon, g^ij singular, of the wrong
+    signature, or (a valid metric) no observer at rest there. Only runs on failure."""
+    Q, ginv = Q[:, bad], ginv[bad]
+    if chart.name == "spherical" and np.any(np.abs(np.sin(Q[2])) < _AXIS):
+        return CoordinateAxisError(
+            "the camera is on the polar axis (theta = 0 or pi) of the model's spherical / "
+            "Boyer–Lindquist coordinates, where they are singular: move it off the axis "
+            "(x = y = 0 in the centre's frame), or use the Kerr–Schild chart")
+    inside = _inside_horizon(model, Q)
+    if inside.any():
+        return _no_rest(model, Q[:, inside])
+    finite = np.isfinite(ginv).all(axis=(1, 2))
+    w = np.linalg.eigvalsh(np.where(finite[:, None, None], ginv, 0.0))
+    size = np.abs(w)
+    singular = ~finite | (size.min(axis=1) <= _SINGULAR * size.max(axis=1))
+    if singular.any():
+        return _singular(model, Q[:, np.argmax(singular)])
+    lorentzian = (np.sum(w < 0, axis=1) == 1) & (np.sum(w > 0, axis=1) == 3)
+    if not lorentzian.all():
+        return _signature(model, Q[:, np.argmin(lorentzian)], w[np.argmin(lorentzian)])
+    return _no_rest(model, Q)
+
+
+def _signature(model, q: np.ndarray, w: np.ndarray) -> MetricSignatureError:
+    """The error for a ray start q (4,) where g^ij has eigenvalues w of the wrong signs."""
+    signs = ", ".join("-" if x < 0 else "+" for x in np.sort(w))
+    hint = " (a metric written as (+, -, -, -) must be negated)" if np.sum(w < 0) == 3 else ""
+    return MetricSignatureError(
+        f"the metric has signature ({signs}) at the camera ({_where(model, q)}); SymRay "
+        f"needs (-, +, +, +): one time coordinate and three space coordinates{hint}")
+
+
+def _singular(model, q: np.ndarray) -> SingularMetricError:
+    """The error for a ray start q (4,) where g^ij is not finite or not invertible."""
+    return SingularMetricError(
+        f"the inverse metric g^ij is singular at the camera ({_where(model, q)}): not "
+        "finite, or of determinant 0 (e.g. all entries zero); a metric must be invertible "
+        "where the rays start")
+
+
+def _no_rest(model, Q: np.ndarray) -> InsideHorizonError:
+    """The error for ray starts (4, M) with a valid metric but no observer at rest there."""
+    if _inside_horizon(model, Q).any() or model.rg > 0:
+        return InsideHorizonError(
+            f"the camera ({_where(model, Q[:, 0])}) is inside the black hole's horizon: no "
+            "light from there reaches the outside; move it further from the centre")
+    return InsideHorizonError(
+        f"no observer can stay at rest at the camera ({_where(model, Q[:, 0])}): the metric's "
+        "time direction is not timelike there (inside a horizon or an ergoregion of the "
+        "metric?); move the camera")
+
+
+def _inside_horizon(model, Q: np.ndarray) -> np.ndarray:
+    """(M,) bool: the points Q (4, M) inside the model's horizon (its capture test)."""
+    captured = model.capture_test()
+    if captured is None:
+        return np.zeros(Q.shape[1], dtype=bool)
+    with np.errstate(all="ignore"):
+        return np.asarray(captured(Q), dtype=bool)
+
+
+def _where(model, q: np.ndarray) -> str:
+    """'at (t, x, y, z) = (...)' for one point of the model's coordinates."""
+    coords = model.coords
+    names = ", ".join(coords) if len(coords) == len(q) else "q"
+    return f"at ({names}) = ({', '.join(f'{v:.4g}' for v in q)})"
+
+
+def check_camera(tracer, position) -> None:
+    """Raise the ObserverError that tracing rays from world ``position`` would meet.
+
+    Only spacetimes have an observer, and only a camera inside the model's region starts
+    rays where it is (others start on the region's boundary, far from the mass).
+    """
+    if not (tracer.curved and tracer.spacetime):
+        return
+    X = (np.asarray(position, dtype=np.float64).reshape(1, 3) - tracer.scene.center) \
+        @ tracer.rotation
+    _, inside = tracer.region.entry(X, np.array([[0.0, 0.0, 1.0]]))
+    if not inside[0]:
+        return
+    S = tracer.chart.to_coords(X.T)
+    if _inside_horizon(tracer.model, np.vstack([np.zeros((1, 1)), S])).any():
+        # every ray would end at once (inside r- an observer exists, but sees nothing)
+        raise _no_rest(tracer.model, np.vstack([np.zeros((1, 1)), S]))
+    spacetime_momenta(tracer.model, tracer.chart, S, np.array([[0.0], [0.0], [1.0]]))

@@ -9,15 +9,18 @@ that ran out of steps in ``MAX_STEPS_COLOR``, never as a plausible colour.
 
 from __future__ import annotations
 
+import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import checks
 from . import workers as workers_module
 from .geometry import Intersector
 from .imageio import FAILED_COLOR
+from .observer import check_camera
 from .sky import Background
 from .tracing import DEFAULT_METHOD, ENDING, RayResults, Scene, TraceOptions, Tracer
 
@@ -52,14 +55,13 @@ def render(scene: Scene, camera, *, method: str = DEFAULT_METHOD, tolerance: flo
     threads. ``progress(done, total)`` and ``should_cancel()`` are called from the
     caller's thread, or from the worker threads when there are threads.
     """
-    passes = tuple(passes)
-    unknown = set(passes) - set(ALL_PASSES)
-    if unknown:
-        raise ValueError(f"unknown passes {sorted(unknown)}; choose from {ALL_PASSES}")
+    options = TraceOptions(method=method, tolerance=tolerance, step=step, max_steps=max_steps)
+    passes = _check_render_call(passes, chunk_size, workers, cores)
     start_time = time.perf_counter()
     extent = _scene_extent(scene, camera)
-    options = TraceOptions(method=method, tolerance=tolerance, step=step, max_steps=max_steps)
     tracer = Tracer(scene, options, extent)
+    checks.check_render_method(method, tracer.curved and time_scaled(tracer.model))
+    check_camera(tracer, camera.frame.position)
     background = scene.background if isinstance(scene.background, Background) else \
         Background(scene.background)
     n = camera.n_pixels
@@ -92,6 +94,31 @@ def render(scene: Scene, camera, *, method: str = DEFAULT_METHOD, tolerance: flo
                           tracer)
     result.summary["parallel"] = f"{count} {kind}" if kind != "inline" else "inline"
     return result
+
+
+def _check_render_call(passes, chunk_size, workers, cores) -> tuple[str, ...]:
+    """ValueError for what core.render refuses beyond TraceOptions; -> the passes."""
+    passes = tuple(passes)
+    unknown = set(passes) - set(ALL_PASSES)
+    if unknown:
+        raise ValueError(f"unknown passes {sorted(unknown)}; choose from {ALL_PASSES}")
+    checks.check_int("chunk_size", chunk_size)
+    checks.check_optional(checks.check_int, "workers", workers)
+    checks.check_optional(checks.check_int, "cores", cores)
+    return passes
+
+
+def time_scaled(model) -> bool:
+    """Whether a model's rays are integrated with a Poincaré time scale g(q) (not 1)."""
+    return bool(model.scales_time)
+
+
+def check_scene_camera(scene: Scene, position, tolerance: float = 1e-8) -> None:
+    """Raise the core.ObserverError that rendering ``scene`` from ``position`` would meet
+    (camera inside a horizon or on a coordinate axis, metric singular or of the wrong
+    signature there); nothing for a camera where rays can start."""
+    far = float(np.linalg.norm(np.asarray(position, dtype=np.float64) - scene.center))
+    check_camera(Tracer(scene, TraceOptions(tolerance=tolerance), max(far, 1e-9)), position)
 
 
 def _trace_chunk(tracer: Tracer, origins, directions, with_error: bool, cancel):
@@ -161,20 +188,42 @@ class _Buffers:
     def summary(self, seconds, tracer) -> dict:
         traced = self.ending >= 0
         finite = traced & np.isfinite(self.error) & (self.ending != ENDING["captured"])
-        errs = self.error[finite]
+        errs = self.error[finite] if self.with_error else self.error[:0]
         counts = {name: int(np.count_nonzero(self.ending == code)) for name, code in ENDING.items()}
+        # no estimate (no error pass, nothing integrated, every ray failed): None, never 0
+        integrated = self.energy[finite] if tracer.curved else self.energy[:0]
         return {
             "time_s": seconds, "rays": int(np.count_nonzero(traced)),
             "steps": int(self.steps.sum()), "failed": counts["failed"],
-            "error_median": float(np.median(errs)) if errs.size and self.with_error else 0.0,
-            "error_max": float(errs.max()) if errs.size and self.with_error else 0.0,
+            "error_median": float(np.median(errs)) if errs.size else None,
+            "error_max": float(np.max(errs)) if errs.size else None,
             # |H - H0| at the end of the rays that colour a pixel (a captured ray's last
             # step inside the horizon says nothing about the image)
-            "energy_error_max": float(np.max(self.energy[finite], initial=0.0)),
+            "energy_error_max": float(np.max(integrated)) if integrated.size else None,
             "endings": counts, "step": tracer.step,
             "region_radius": None if tracer.region is None else tracer.region.radius,
             "method": tracer.options.method if tracer.curved else "straight",
         }
+
+
+_SUMMARY_FIELDS = (("time_s", "{:.2f} s"), ("rays", "{} rays"), ("steps", "{} steps"),
+                   ("failed", "{} failed"), ("error_median", "median error {:.3g}"),
+                   ("error_max", "max error {:.3g}"))
+
+
+def summary_text(summary: dict) -> str:
+    """One line describing a render summary; an error without an estimate (None) is 'n/a'."""
+    parts = []
+    for key, fmt in _SUMMARY_FIELDS:
+        if key not in summary:
+            continue
+        value = summary[key]
+        try:
+            parts.append(fmt.format(value) if value is not None else
+                         re.sub(r"\{[^}]*\}", "n/a", fmt))
+        except (TypeError, ValueError):
+            parts.append(f"{key} {value}")
+    return ", ".join(parts)
 
 
 def shade(rays: RayResults, background: Background) -> np.ndarray:

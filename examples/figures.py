@@ -26,7 +26,6 @@ import argparse
 import math
 import os
 import time
-from collections.abc import Callable
 
 import numpy as np
 
@@ -46,38 +45,18 @@ OUT = os.path.join("out", "figures")
 # scene building blocks
 
 
-class Textured:
-    """An intersector whose hits are coloured by a texture(uv, position, normal) -> (M, 4).
-
-    Wraps a constant-colour primitive and recolours only its hits, so the texture is never
-    evaluated on an empty set (core's _shade cannot reshape an empty texture result).
-    """
-
-    def __init__(self, obj, texture: Callable):
-        self.obj, self.texture, self.bounds = obj, texture, obj.bounds
-
-    def intersect(self, a, b):
-        """Nearest hits of segments a -> b, recoloured where they hit."""
-        hits = self.obj.intersect(a, b)
-        if hits.hit.any():
-            h = hits.hit
-            hits.color[h] = self.texture(hits.uv[h], hits.position[h], hits.normal[h])
-        return hits
-
-
-def checker_board(y: float, size: float, cells: int = 8, z: float = 0.0) -> Textured:
+def checker_board(y: float, size: float, cells: int = 8, z: float = 0.0) -> core.Plane:
     """A square checkerboard facing -y (towards cameras placed at negative y)."""
-    plane = core.Plane(point=(0, y, z), normal=(0, -1, 0), u_axis=(1, 0, 0),
-                       extent=(size, size))
-    return Textured(plane, core.checker(cells, cells, (0.9, 0.8, 0.2, 1), (0.1, 0.2, 0.6, 1)))
+    return core.Plane(point=(0, y, z), normal=(0, -1, 0), u_axis=(1, 0, 0), extent=(size, size),
+                      color=core.checker(cells, cells, (0.9, 0.8, 0.2, 1), (0.1, 0.2, 0.6, 1)))
 
 
-def textured_spheres() -> list[Textured]:
+def textured_spheres() -> list[core.Sphere]:
     """Two checkered spheres (longitude x latitude cells), left-front and right-back."""
-    a = core.Sphere(center=(-4.0, -2.0, 1.2), radius=1.3)
-    b = core.Sphere(center=(4.5, 3.0, -1.0), radius=1.1)
-    return [Textured(a, core.checker(12, 6, (0.9, 0.2, 0.2, 1), (0.95, 0.95, 0.95, 1))),
-            Textured(b, core.checker(12, 6, (0.2, 0.8, 0.3, 1), (0.1, 0.1, 0.1, 1)))]
+    return [core.Sphere(center=(-4.0, -2.0, 1.2), radius=1.3,
+                        color=core.checker(12, 6, (0.9, 0.2, 0.2, 1), (0.95, 0.95, 0.95, 1))),
+            core.Sphere(center=(4.5, 3.0, -1.0), radius=1.1,
+                        color=core.checker(12, 6, (0.2, 0.8, 0.3, 1), (0.1, 0.1, 0.1, 1)))]
 
 
 def sky() -> core.Background:
@@ -261,11 +240,10 @@ def mirage_scene(index: str | None, board_z: tuple[float, float]) -> core.Scene:
         c[f <= 1 / 3, :3] = 1.0
         return c
 
-    board = Textured(core.Plane(point=(20, 0, 0.5 * (z0 + z1)), normal=(-1, 0, 0),
-                                u_axis=(0, 1, 0), extent=(1.0, z1 - z0)), paint)
-    ground = Textured(core.Plane(point=(0, 0, 0), normal=(0, 0, 1), u_axis=(1, 0, 0),
-                                 extent=(400, 400)),
-                      core.checker(200, 200, (0.35, 0.3, 0.25, 1), (0.3, 0.25, 0.2, 1)))
+    board = core.Plane(point=(20, 0, 0.5 * (z0 + z1)), normal=(-1, 0, 0), u_axis=(0, 1, 0),
+                       extent=(1.0, z1 - z0), color=paint)
+    ground = core.Plane(point=(0, 0, 0), normal=(0, 0, 1), u_axis=(1, 0, 0), extent=(400, 400),
+                        color=core.checker(200, 200, (0.35, 0.3, 0.25, 1), (0.3, 0.25, 0.2, 1)))
     poles = [core.Plane(point=(x, y, 0.6), normal=(-1, 0, 0), u_axis=(0, 1, 0),
                         extent=(0.08, 1.2), color=(0.25, 0.12, 0.05, 1))
              for x, y in ((12.0, -1.0), (32.0, 1.6))]

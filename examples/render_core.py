@@ -18,6 +18,7 @@ import numpy as np
 import core
 from core import hamiltonians as hm
 from core.presets import MIRAGE_EQ17_INDEX
+from core.render import summary_text
 
 
 def schwarzschild_scene() -> core.Scene:
@@ -52,9 +53,8 @@ def render_to(name: str, scene: core.Scene, camera: core.Camera, method: str, ou
     channels["steps"] = result.passes["steps"].astype(np.float32)
     exr = core.write_exr(os.path.join(out_dir, f"core_{name}.exr"), channels)
     s = result.summary
-    print(f"{name}: {s['rays']} rays in {s['time_s']:.1f} s, {s['steps']} steps, "
-          f"failed {s['failed']}, error median {s['error_median']:.2e} max {s['error_max']:.2e}"
-          f" rad; endings {s['endings']}\n  -> {png}, {exr}")
+    print(f"{name}: {summary_text(s)} (errors in rad); endings {s['endings']}\n"
+          f"  -> {png}, {exr}")
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -7,14 +7,16 @@ the user (``core.expressions.ExpressionError`` is one).
 
 from __future__ import annotations
 
-import math
+import functools
 from dataclasses import dataclass
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
-from ..core import expressions
+from ..core import Scene, expressions
 from ..core import hamiltonians as hm
+from ..core.render import check_scene_camera
 from . import validation
 
 
@@ -62,11 +64,10 @@ def build_model(settings: Any, metric_source: str) -> Any | None:
     if model == "SCHWARZSCHILD":
         return hm.schwarzschild(rg=float(settings.rg))
     if model == "KERR":
-        spin = float(settings.spin)
-        if not math.isfinite(spin) or abs(spin) > 1.0:
-            raise ValueError(f"Kerr spin a/M = {spin:g} is beyond extremal: it must lie in "
-                             "[-1, 1]")
-        rg = float(settings.rg)
+        problem = validation.spin_problem(settings.spin)
+        if problem:
+            raise ValueError(problem)
+        spin, rg = float(settings.spin), float(settings.rg)
         return hm.kerr(rg=rg, a=spin * rg / 2.0, chart="kerr_schild")
     if model == "MEDIUM":
         index = _expression(settings.refractive_index, validation.INDEX_NAMES,
@@ -105,3 +106,45 @@ def check_observer(model: Any | None, where: Placement, camera_position: np.ndar
     if r <= r_plus * (1.0 + 1e-9):
         raise ValueError(f"The camera is inside the black hole's horizon (r = {r:.4g} <= "
                          f"r+ = {r_plus:.4g}): move it further from the centre object")
+
+
+OBSERVER_MODELS = frozenset({"SCHWARZSCHILD", "KERR", "METRIC"})
+"""Models whose rays start in an observer's frame at the camera (spacetimes)."""
+
+
+def check_camera(settings: Any, model: Any, where: Placement, camera_position: Any) -> None:
+    """ValueError (a core.ObserverError) if rays of ``model`` cannot start at the camera:
+    inside a horizon, on a coordinate axis, where the metric is singular or of the wrong
+    signature."""
+    if settings.model not in OBSERVER_MODELS:
+        return
+    check_observer(model, where, camera_position)
+    scene = Scene(model=model, center=where.center, rotation=where.rotation)
+    check_scene_camera(scene, camera_position, validation.typed_float(settings.tolerance))
+
+
+def camera_problem(settings: Any, metric_source: str, center_matrix: Any | None,
+                   camera_position: Any) -> str:
+    """The message check_camera raises, "" if none (or if the settings themselves are
+    invalid: their own messages say so). Cached: the panel asks at every redraw."""
+    if settings.model not in OBSERVER_MODELS or validation.settings_problems(settings):
+        return ""
+    center = None if center_matrix is None else tuple(map(tuple, center_matrix))
+    return _camera_problem(settings.model, float(settings.rg), float(settings.spin),
+                           float(settings.tolerance), metric_source, center,
+                           tuple(float(v) for v in camera_position))
+
+
+@functools.lru_cache(maxsize=16)
+def _camera_problem(model: str, rg: float, spin: float, tolerance: float, metric_source: str,
+                    center: tuple | None, camera: tuple) -> str:
+    """camera_problem on plain (hashable) values."""
+    settings = SimpleNamespace(model=model, rg=rg, spin=spin, tolerance=tolerance)
+    try:
+        check_camera(settings, build_model(settings, metric_source), placement(center),
+                     np.array(camera))
+    except expressions.ExpressionError:
+        return ""  # shown with the expression
+    except (ValueError, ArithmeticError) as err:
+        return str(err)
+    return ""

@@ -6,7 +6,7 @@ import textwrap
 
 import bpy
 
-from . import presets, properties, validation
+from . import models, presets, properties, validation
 from .operator import SYMRAY_OT_render
 
 WRAP = 60
@@ -29,6 +29,20 @@ def _expression(layout: bpy.types.UILayout, settings: bpy.types.PropertyGroup, p
     row.prop(settings, prop)
     if error:
         _error_lines(layout, error)
+
+
+def render_problems(scene: bpy.types.Scene) -> list[str]:
+    """What a render would stop with that is known before it: settings out of range (a
+    .blend or a script can set anything), a method that cannot trace the model, a camera
+    where no rays can start (inside a horizon, metric singular or of the wrong signature)."""
+    settings = scene.symray
+    problems = validation.settings_problems(settings)
+    if problems or scene.camera is None:
+        return problems
+    center = settings.center.matrix_world if settings.center is not None else None
+    problem = models.camera_problem(settings, properties.metric_source(settings), center,
+                                    scene.camera.matrix_world.translation)
+    return [problem] if problem else []
 
 
 class SymRayPanelMixin:
@@ -67,10 +81,8 @@ class RENDER_PT_symray(SymRayPanelMixin, bpy.types.Panel):
             layout.prop(settings, "rg")
         if model == "KERR":
             row = layout.row()
-            row.alert = abs(settings.spin) > 1.0
+            row.alert = bool(validation.spin_problem(settings.spin))
             row.prop(settings, "spin")
-            if abs(settings.spin) > 1.0:
-                _error_lines(layout, "Spin beyond extremal: |a/M| must be at most 1")
         elif model == "MEDIUM":
             _expression(layout, settings, "refractive_index", settings.refractive_index_error)
             layout.prop(settings, "index_form")
@@ -90,6 +102,8 @@ class RENDER_PT_symray(SymRayPanelMixin, bpy.types.Panel):
         elif model == "CUSTOM":
             _expression(layout, settings, "hamiltonian", settings.hamiltonian_error)
         layout.separator()
+        for message in render_problems(context.scene):
+            _error_lines(layout, message)
         row = layout.row()
         row.scale_y = 1.3
         row.operator(SYMRAY_OT_render.bl_idname, icon="RENDER_STILL")

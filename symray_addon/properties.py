@@ -27,8 +27,10 @@ METHOD_ITEMS = [
     ("yoshida8", "Yoshida 8", "8th order composition"),
     ("suzuki4", "Suzuki 4", "4th order fractal composition"),
     ("suzuki6", "Suzuki 6", "6th order fractal composition"),
-    ("tao2", "Tao 2", "2nd order, explicit for non-separable H (extended phase space)"),
-    ("tao4", "Tao 4", "4th order, explicit for non-separable H (extended phase space)"),
+    ("tao2", "Tao 2", "2nd order, explicit for non-separable H (extended phase space); "
+     "media and metrics only: it cannot trace black holes"),
+    ("tao4", "Tao 4", "4th order, explicit for non-separable H (extended phase space); "
+     "media and metrics only: it cannot trace black holes"),
     ("rk4", "Runge–Kutta 4", "Non-symplectic reference, 4th order"),
     ("dopri5", "Dormand–Prince 5", "Non-symplectic reference, adaptive"),
 ]
@@ -167,7 +169,8 @@ class SymRaySettings(bpy.types.PropertyGroup):
         description="Integrator for Hamilton's equations")
     tolerance: bpy.props.FloatProperty(  # type: ignore[valid-type]
         name="Tolerance", default=1e-6, min=1e-14, max=0.1, precision=6, step=0.0001,
-        description="Target accuracy; sets the integration step")
+        description="Target accuracy of the rays' directions (radians), 1e-14 to 0.1; sets "
+                    "the integration step")
     max_steps: bpy.props.IntProperty(  # type: ignore[valid-type]
         name="Max Steps", default=20000, min=1, max=100_000_000,
         description="Steps after which a ray is given up (ending 'max_steps')")

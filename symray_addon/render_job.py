@@ -18,7 +18,8 @@ import bpy
 import numpy as np
 
 from .. import core
-from . import export_camera, export_meshes, models, properties, world
+from ..core.render import summary_text as render_summary_text
+from . import export_camera, export_meshes, models, properties, validation, world
 
 Progress = Callable[[int, int], None]
 Cancel = Callable[[], bool]
@@ -52,6 +53,9 @@ def prepare(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, use_border: 
     camera, camera inside a horizon, nothing to render).
     """
     settings = scene.symray
+    problems = validation.settings_problems(settings)
+    if problems:
+        raise ValueError(problems[0])
     camera_object = camera_object or scene.camera
     if camera_object is None:
         raise ValueError("The scene has no active camera: add one or set Scene > Camera")
@@ -64,7 +68,7 @@ def prepare(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, use_border: 
         center_matrix = _evaluated(settings.center, depsgraph).matrix_world
     where = models.placement(center_matrix)
     model = models.build_model(settings, properties.metric_source(settings))
-    models.check_observer(model, where, np.array(kwargs["matrix_world"])[:3, 3])
+    models.check_camera(settings, model, where, np.array(kwargs["matrix_world"])[:3, 3])
 
     intersector = export_meshes.build_intersector(depsgraph)
     if intersector is None and model is None:
@@ -84,7 +88,7 @@ def prepare(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, use_border: 
         passes += ("ending",)  # needed to cut the background out
     options = {
         "method": settings.method,
-        "tolerance": float(settings.tolerance),
+        "tolerance": validation.typed_float(settings.tolerance),
         "max_steps": int(settings.max_steps),
         "passes": passes,
         "parallel": settings.parallel.lower(),
@@ -110,17 +114,9 @@ def run(job: RenderJob, progress: Progress | None = None,
 
 
 def summary_text(summary: dict[str, Any]) -> str:
-    """One line describing a render summary (time, rays, steps, errors, failures)."""
-    parts = []
-    for key, fmt in (("time_s", "{:.2f} s"), ("rays", "{} rays"), ("steps", "{} steps"),
-                     ("failed", "{} failed"), ("error_median", "median error {:.3g}"),
-                     ("error_max", "max error {:.3g}")):
-        if key in summary and summary[key] is not None:
-            try:
-                parts.append(fmt.format(summary[key]))
-            except (TypeError, ValueError):
-                parts.append(f"{key} {summary[key]}")
-    return ", ".join(parts)
+    """One line describing a render summary (core.render's summary_text: 'n/a' where an
+    error has no estimate)."""
+    return render_summary_text(summary)
 
 
 def finished(summary: dict[str, Any]) -> str:

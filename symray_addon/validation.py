@@ -1,7 +1,9 @@
-"""Checking the user's expressions (n(x,y,z), g^ij, H) as they are typed.
+"""Checking the user's expressions (n(x,y,z), g^ij, H) as they are typed, and the numeric
+settings a .blend or a script can carry past the properties' own limits (settings_problems).
 
-Nothing here imports bpy: it works on plain strings, so it is shared by the property
-update callbacks, the operator and the render engine, and is testable on its own.
+Nothing here imports bpy: it works on plain strings and attribute access, so it is shared
+by the property update callbacks, the panel, the operator and the render engine, and is
+testable on its own.
 
 The inverse metric is one text (the ``metric`` property, or a Text data-block named by
 ``metric_text``): statements separated by newlines or ``;``. A statement ``name = expr``
@@ -14,9 +16,11 @@ and ``#`` starts a comment. Example (Minkowski)::
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
-from ..core import expressions
+from ..core import checks, expressions
 
 INDEX_NAMES: tuple[str, ...] = ("x", "y", "z")
 """Names a refractive index n(x, y, z) may use (the centre object's local frame)."""
@@ -27,6 +31,8 @@ HAMILTONIAN_MOMENTA: tuple[str, ...] = ("p_x", "p_y", "p_z")
 HAMILTONIAN_NAMES: tuple[str, ...] = HAMILTONIAN_COORDS + HAMILTONIAN_MOMENTA
 """Names a user Hamiltonian H(x, y, z, p_x, p_y, p_z) may use."""
 METRIC_SIZE = 4
+TIME_SCALED_MODELS = frozenset({"SCHWARZSCHILD", "KERR"})
+"""Models the renderer integrates with a Poincaré time scale g(q) (Tao's methods fail there)."""
 
 
 @dataclass(frozen=True)
@@ -174,3 +180,52 @@ def check_metric(text: str) -> str:
     except expressions.ExpressionError as err:
         return describe(err)
     return ""
+
+
+def typed_float(value: float) -> float:
+    """A FloatProperty's value as typed: Blender stores float32 (0.1 reads back as
+    0.10000000149), and 7 significant digits give the decimal back."""
+    return float(f"{float(value):.7g}")
+
+
+def spin_problem(spin: Any) -> str:
+    """"" for a Kerr spin a/M in [-1, 1], else the message."""
+    try:
+        spin = checks.check_range("Spin a/M", spin)
+    except ValueError as err:
+        return f"{err}: it must lie in [-1, 1]"
+    if abs(spin) > 1.0:
+        return f"Kerr spin a/M = {spin:g} is beyond extremal: it must lie in [-1, 1]"
+    return ""
+
+
+def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
+    """The checks of every numeric setting (and the method) that the model uses."""
+    model = settings.model
+    found = [
+        lambda: checks.check_tolerance(typed_float(settings.tolerance), "Tolerance"),
+        lambda: checks.check_int("Max Steps", settings.max_steps),
+        lambda: checks.check_int("Workers", settings.workers, 0),
+        lambda: checks.check_render_method(settings.method, model in TIME_SCALED_MODELS),
+    ]
+    if model in TIME_SCALED_MODELS:
+        found.append(lambda: checks.check_positive("Schwarzschild Radius", settings.rg))
+    if model == "MEDIUM" and settings.use_medium_bounds:
+        found.append(lambda: checks.check_vector("Box Min", settings.medium_min))
+        found.append(lambda: checks.check_vector("Box Max", settings.medium_max))
+    return found
+
+
+def settings_problems(settings: Any) -> list[str]:
+    """Messages for settings a render would refuse: values a .blend or a script can set
+    beyond the properties' own ranges (NaN, 0, ...), a Kerr spin beyond extremal, a method
+    that cannot trace the model. Empty when every setting is usable."""
+    problems = []
+    for check in _settings_checks(settings):
+        try:
+            check()
+        except ValueError as err:
+            problems.append(str(err))
+    if settings.model == "KERR" and spin_problem(settings.spin):
+        problems.append(spin_problem(settings.spin))
+    return problems

@@ -28,6 +28,8 @@ def _rgba(color: Any) -> np.ndarray | Texture:
 
 def _shade(color: np.ndarray | Texture, uv: np.ndarray, p: np.ndarray, n: np.ndarray):
     """Evaluate a colour spec at hit points -> (M, 4)."""
+    if uv.shape[0] == 0:  # no hit: a texture is not asked about an empty batch
+        return np.zeros((0, 4))
     if not callable(color):
         return np.broadcast_to(color, (uv.shape[0], 4)).copy()
     c = np.asarray(color(uv, p, n), dtype=np.float64).reshape(uv.shape[0], -1)

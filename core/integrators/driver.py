@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from ..checks import check_integrate_options
 from ._common import Method, restrict
 from .poincare import Clocked, PoincareTransformed
 from .registry import get_method
@@ -226,6 +227,7 @@ def integrate(H: Any, q0: Any, p0: Any, step: float | np.ndarray = 0.01, steps: 
     horizon (res.captured, see capture_test). Further keyword options go to the method
     (get_method), e.g. base="implicit_midpoint", omega=20.0, max_iter=20.
     """
+    check_integrate_options(step, steps, tol, record_every, energy_every, max_steps)
     meth = get_method(method, **options)
     H = as_system(H)
     is_rk_adaptive = meth.adaptive

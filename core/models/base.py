@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import checks
 from .. import expressions as ex
 from ..dual import Dual
 from ..integrators.system import System
@@ -87,7 +88,7 @@ class Hamiltonian(System):
         self.momenta = tuple(momenta)
         self.dim = len(self.coords)
         self.separable = bool(separable)
-        self.parameters = dict(parameters or {})
+        self.parameters = checks.check_parameters(parameters)
         self._time_scale: ex.Program | None = None
         if time_scale is not None:
             self._time_scale = ex.compile_program([time_scale], self.coords, self.parameters)

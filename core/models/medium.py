@@ -6,6 +6,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from .. import checks
 from .. import expressions as ex
 from .expression import ExpressionHamiltonian
 
@@ -23,8 +24,7 @@ class Medium(ExpressionHamiltonian):
                          positive=("n",))
         self.index_text = index
         self.literal = literal
-        self.bounds = None if bounds is None else (np.asarray(bounds[0], float),
-                                                   np.asarray(bounds[1], float))
+        self.bounds = checks.check_box("medium bounds", bounds)
         self._index = ex.compile_expression(index, coords, parameters)
 
     def index_soa(self, Q) -> np.ndarray:

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 
+from .. import checks
 from ..charts import SpheroidalChart
 from .base import Hamiltonian
 from .kerr_schild import KerrSchild
@@ -16,15 +17,12 @@ _FLAT_CARTESIAN = [["-1", "0", "0", "0"], ["0", "1", "0", "0"],
 
 
 def _check_rg(rg: float) -> float:
-    rg = float(rg)
-    if not (math.isfinite(rg) and rg > 0):
-        raise ValueError(f"rg (Schwarzschild radius) must be a positive number, got {rg}")
-    return rg
+    return checks.check_positive("rg (Schwarzschild radius)", rg)
 
 
 def _check_spin(rg: float, a: float) -> float:
-    a = float(a)
-    if not math.isfinite(a) or abs(a) > rg / 2:
+    a = checks.check_range("a (Kerr spin)", a)
+    if abs(a) > rg / 2:
         raise ValueError(f"Kerr spin a = {a} is beyond extremal: need |a| <= rg/2 = M = {rg / 2}"
                          f" (a/M = {2 * a / rg:.4g})")
     return a

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import checks
 from ..geometry import Group, Intersector
 
 ENDING = {"escaped": 0, "captured": 1, "hit": 2, "failed": 3, "max_steps": 4}
@@ -32,7 +33,8 @@ class Scene:
     user metric about the axis."""
 
     def __post_init__(self) -> None:
-        self.center = np.asarray(self.center, dtype=np.float64).reshape(3)
+        self.center = checks.check_vector("scene center", self.center)
+        checks.check_optional(checks.check_positive, "region_radius", self.region_radius)
         axis = np.asarray(self.axis, dtype=np.float64).reshape(3)
         norm = np.linalg.norm(axis)
         if not (np.isfinite(norm) and norm > 0):

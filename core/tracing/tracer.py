@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import integrators
+from .. import checks, integrators
 from ..charts import chart_for
 from ..observer import medium_momenta, spacetime_momenta
 from .regions import Region, region_for
@@ -38,6 +38,10 @@ class TraceOptions:
     step: float | None = None
     max_steps: int = 20_000
     region_radius: float | None = None
+
+    def __post_init__(self) -> None:
+        checks.check_render_options(self.tolerance, self.step, self.max_steps)
+        checks.check_optional(checks.check_positive, "region_radius", self.region_radius)
 
 
 def tracing_model(model: Any) -> Any:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import os
 
 import bpy
@@ -106,4 +107,97 @@ def test_engine_reports_bad_input(addon, scene, helpers, rendered):
     with pytest.raises(RuntimeError, match="beyond extremal"):
         bpy.ops.render.render()
     assert render_job.last_summary == {}
+    np.testing.assert_array_equal(helpers.image_array(scene.symray.image_name), rendered)
+
+
+# -- issue #11: values beyond the properties' ranges, methods and cameras that cannot render --
+
+KERR_METHODS_REFUSED = ("tao2", "tao4")
+SIGNATURE_MINUS = "1, 0, 0, 0; 0, -1, 0, 0; 0, 0, -1, 0; 0, 0, 0, -1"
+ALL_ZERO = "0, 0, 0, 0; 0, 0, 0, 0; 0, 0, 0, 0; 0, 0, 0, 0"
+
+
+@pytest.mark.parametrize("prop, value, model, match", [
+    ("tolerance", math.nan, "KERR", "Tolerance must be a finite number in [1e-14, 0.1], got nan"),
+    ("rg", math.nan, "SCHWARZSCHILD", "Schwarzschild Radius must be a finite number > 0"),
+    ("spin", math.nan, "KERR", "Spin a/M must be a finite number, got nan"),
+    ("medium_min", (math.nan, 0.0, 0.0), "MEDIUM", "Box Min must be finite numbers"),
+])
+def test_non_finite_settings_are_refused(scene, helpers, rendered, prop, value, model, match):
+    """Blender's properties let NaN through (af19e2b: tolerance NaN rendered unbent)."""
+    scene.symray.model = model
+    setattr(scene.symray, prop, value)
+    _fails(helpers, scene, rendered, match)
+
+
+@pytest.mark.parametrize("prop, value, match", [
+    ("max_steps", 0, "Max Steps must be an integer >= 1, got 0"),
+    ("tolerance", 5.0, "Tolerance must be a finite number in [1e-14, 0.1], got 5"),
+    ("tolerance", 0.0, "Tolerance must be a finite number in [1e-14, 0.1], got 0"),
+    ("workers", -3, "Workers must be an integer >= 0, got -3"),
+])
+def test_values_beyond_the_property_range_are_refused(scene, helpers, rendered, prop, value,
+                                                      match):
+    """A .blend (or a script writing the ID property) bypasses the properties' min/max."""
+    scene.symray.model = "KERR"
+    scene.symray[prop] = value
+    _fails(helpers, scene, rendered, match)
+
+
+def test_nan_tolerance_from_a_saved_file(scene, helpers, rendered, tmp_path):
+    scene.symray.model = "KERR"
+    scene.symray.tolerance = math.nan
+    path = str(tmp_path / "nan.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    message = helpers.operator_error(lambda: bpy.ops.symray.render())
+    assert "Tolerance must be a finite number" in message
+
+
+def test_the_ends_of_the_tolerance_range_are_accepted(addon, scene):
+    """Blender keeps floats in float32 (0.1 reads back as 0.10000000149): the typed
+    decimal is what is checked."""
+    validation = addon.module("symray_addon.validation")
+    scene.symray.model = "KERR"
+    for value in (0.1, 1e-14):
+        scene.symray.tolerance = value
+        assert float(scene.symray.tolerance) != value
+        assert validation.settings_problems(scene.symray) == []
+
+
+@pytest.mark.parametrize("method", KERR_METHODS_REFUSED)
+@pytest.mark.parametrize("model", ["SCHWARZSCHILD", "KERR"])
+def test_tao_is_refused_for_black_holes(scene, helpers, rendered, method, model):
+    """af19e2b: an all-magenta image reported as a success."""
+    scene.symray.model = model
+    scene.symray.method = method
+    _fails(helpers, scene, rendered, f"method '{method}' cannot render a black hole")
+
+
+def test_tao_is_accepted_for_a_medium(addon, scene):
+    validation = addon.module("symray_addon.validation")
+    scene.symray.model = "MEDIUM"
+    scene.symray.method = "tao2"
+    assert validation.settings_problems(scene.symray) == []
+
+
+@pytest.mark.parametrize("metric, match", [
+    (SIGNATURE_MINUS, r"signature (-, -, -, +) at the camera"),
+    (ALL_ZERO, "g^ij is singular at the camera"),
+])
+def test_metric_problems_at_the_camera(scene, helpers, rendered, metric, match):
+    """af19e2b: 'inside the black hole's horizon' and numpy's bare 'Singular matrix'."""
+    scene.symray.model = "METRIC"
+    scene.symray.metric = metric
+    message = _fails(helpers, scene, rendered, match)
+    assert "horizon" not in message and message.strip() != "Singular matrix"
+
+
+def test_engine_reports_out_of_range_settings(addon, scene, helpers, rendered):
+    """F12 with a NaN tolerance: an error, the previous image untouched."""
+    scene.render.engine = "SYMRAY"
+    scene.symray.model = "KERR"
+    scene.symray.tolerance = math.nan
+    with pytest.raises(RuntimeError, match="Tolerance must be a finite number"):
+        bpy.ops.render.render()
     np.testing.assert_array_equal(helpers.image_array(scene.symray.image_name), rendered)

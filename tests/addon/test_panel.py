@@ -83,3 +83,42 @@ def test_panel_shows_expression_errors(scene):
 @pytest.mark.parametrize("panel", ["RENDER_PT_symray_integration", "RENDER_PT_symray_output"])
 def test_sub_panels_draw(scene, panel):
     assert _draw(panel, scene)
+
+
+def _labels(scene) -> list[str]:
+    return [text for kind, text in _draw("RENDER_PT_symray", scene) if kind == "label"]
+
+
+def _camera(scene, location):
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.location = location
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    bpy.context.view_layer.update()
+
+
+@pytest.mark.parametrize("setup, words", [
+    (dict(model="KERR", tolerance=float("nan")), "Tolerance must be a finite number"),
+    (dict(model="KERR", method="tao4"), "method 'tao4' cannot render a black hole"),
+    (dict(model="KERR", spin=float("nan")), "Spin a/M must be a finite number"),
+    (dict(model="METRIC", metric="1, 0, 0, 0; 0, -1, 0, 0; 0, 0, -1, 0; 0, 0, 0, -1"),
+     "signature (-, -, -, +)"),
+    (dict(model="METRIC", metric="0, 0, 0, 0; 0, 0, 0, 0; 0, 0, 0, 0; 0, 0, 0, 0"),
+     "singular at the camera"),
+    (dict(model="SCHWARZSCHILD", rg=40.0), "inside the black hole's horizon"),
+])
+def test_panel_shows_render_problems_before_a_render(scene, setup, words):
+    """Issue #11: what a render would refuse is shown in the panel before it starts."""
+    _camera(scene, (0.0, -30.0, 0.0))
+    assert not any(words in text for text in _labels(scene))  # the defaults are fine
+    for name, value in setup.items():
+        setattr(scene.symray, name, value)
+    text = " ".join(_labels(scene))
+    assert words in text, text
+
+
+def test_panel_shows_nothing_for_a_good_setup(scene):
+    _camera(scene, (0.0, -30.0, 0.0))
+    for model in ("SCHWARZSCHILD", "KERR", "METRIC", "MEDIUM", "CUSTOM", "FLAT"):
+        scene.symray.model = model
+        assert _labels(scene) == [], model
