@@ -110,8 +110,56 @@ class SpheroidalChart:
         return np.stack([z, z, np.ones_like(z)])
 
 
-def chart_for(model: Hamiltonian) -> CartesianChart | SpheroidalChart:
+class IsotropicChart:
+    """World (Schwarzschild-Cartesian, r = |X|) <-> isotropic Cartesian (ρ = |x|) positions.
+
+    Both charts share directions (the map is radial), and a static observer's orthonormal
+    frame has the same components in both (its spatial metric is diagonal in radial and
+    tangential directions in both), so camera directions carry over unchanged.
+    """
+
+    name = "isotropic"
+    offset = 0
+    time_index = None
+
+    def __init__(self, mass: float):
+        self.mass = float(mass)
+
+    def to_coords(self, X: np.ndarray) -> np.ndarray:
+        """Isotropic positions (3, N) of world positions (3, N) (NaN inside r = 2M)."""
+        r = np.sqrt(np.einsum("ij,ij->j", X, X))
+        M = self.mass
+        with np.errstate(invalid="ignore", divide="ignore"):
+            rho = 0.5 * (r - M + np.sqrt(r * r - 2.0 * M * r))
+            return X * np.where(r > 0, rho / r, np.nan)
+
+    def to_cartesian(self, S: np.ndarray) -> np.ndarray:
+        """World positions of isotropic ones: X = x (1 + M/2ρ)²."""
+        rho = np.sqrt(np.einsum("ij,ij->j", S, S))
+        return S * (1.0 + 0.5 * self.mass / rho) ** 2
+
+    def coord_directions(self, S: np.ndarray, D: np.ndarray) -> np.ndarray:
+        """Isotropic components of world directions: the same (see the class)."""
+        return D.copy()
+
+    def cartesian_velocity(self, S: np.ndarray, dS: np.ndarray) -> np.ndarray:
+        """World velocity J dS of an isotropic one: J = λ I + λ'(ρ) x xᵀ / ρ, λ = (1 + M/2ρ)²."""
+        rho = np.sqrt(np.einsum("ij,ij->j", S, S))
+        u = 0.5 * self.mass / rho
+        lam = (1.0 + u) ** 2
+        dlam = -2.0 * (1.0 + u) * u / rho
+        radial = np.einsum("ij,ij->j", S, dS) / rho
+        return lam * dS + dlam * radial * S
+
+    def axial_killing(self, S: np.ndarray) -> np.ndarray:
+        """Spatial components of the rotation generator about z: (-y, x, 0)."""
+        return np.stack([-S[1], S[0], np.zeros_like(S[0])])
+
+
+def chart_for(model: Hamiltonian) -> CartesianChart | SpheroidalChart | IsotropicChart:
     """The chart a model's coordinates are written in."""
+    if model.chart == "isotropic":
+        return IsotropicChart(model.mass)
     if model.chart == "spherical":
         return SpheroidalChart(model.a)
     if model.kind == "spacetime":

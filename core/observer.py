@@ -185,15 +185,21 @@ def _where(model, q: np.ndarray) -> str:
 def check_camera(tracer, position) -> None:
     """Raise the ObserverError that tracing rays from world ``position`` would meet.
 
-    Only spacetimes have an observer, and only a camera inside the model's region starts
-    rays where it is (others start on the region's boundary, far from the mass).
+    Only spacetimes have an observer (and a medium with a horizon, Schwarzschild's optical
+    form, a camera that must be outside it), and only a camera inside the model's region
+    starts rays where it is (others start on the region's boundary, far from the mass).
     """
-    if not (tracer.curved and tracer.spacetime):
+    if not tracer.curved:
         return
     X = (np.asarray(position, dtype=np.float64).reshape(1, 3) - tracer.scene.center) \
         @ tracer.rotation
     _, inside = tracer.region.entry(X, np.array([[0.0, 0.0, 1.0]]))
     if not inside[0]:
+        return
+    if not tracer.spacetime:
+        model = tracer.model
+        if model.horizon > 0 and not (model.radius_at(X.T) > model.horizon).all():
+            raise _no_rest(model, X.T)
         return
     S = tracer.chart.to_coords(X.T)
     if _inside_horizon(tracer.model, np.vstack([np.zeros((1, 1)), S])).any():

@@ -13,6 +13,7 @@ import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -22,7 +23,7 @@ from .geometry import Intersector
 from .imageio import FAILED_COLOR
 from .observer import check_camera
 from .sky import Background
-from .tracing import DEFAULT_METHOD, ENDING, RayResults, Scene, TraceOptions, Tracer
+from .tracing import ENDING, RayResults, Scene, TraceOptions, Tracer
 
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
@@ -41,7 +42,7 @@ class RenderResult:
     cancelled: bool = False
 
 
-def render(scene: Scene, camera, *, method: str = DEFAULT_METHOD, tolerance: float = 1e-8,
+def render(scene: Scene, camera, *, method: Any = None, tolerance: float = 1e-8,
            step: float | None = None, max_steps: int = 20_000,
            passes: Sequence[str] = ALL_PASSES, chunk_size: int = 16_384,
            workers: int | None = None, parallel: str = "auto", cores: int | None = None,
@@ -60,7 +61,8 @@ def render(scene: Scene, camera, *, method: str = DEFAULT_METHOD, tolerance: flo
     start_time = time.perf_counter()
     extent = _scene_extent(scene, camera)
     tracer = Tracer(scene, options, extent)
-    checks.check_render_method(method, tracer.curved and time_scaled(tracer.model))
+    if tracer.curved:
+        checks.check_render_method(tracer.method, time_scaled(tracer.model))
     check_camera(tracer, camera.frame.position)
     background = scene.background if isinstance(scene.background, Background) else \
         Background(scene.background)
@@ -202,7 +204,7 @@ class _Buffers:
             "energy_error_max": float(np.max(integrated)) if integrated.size else None,
             "endings": counts, "step": tracer.step,
             "region_radius": None if tracer.region is None else tracer.region.radius,
-            "method": tracer.options.method if tracer.curved else "straight",
+            "method": tracer.method.name if tracer.curved else "straight",
         }
 
 

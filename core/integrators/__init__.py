@@ -29,6 +29,14 @@ from .implicit import Gauss4, ImplicitMidpoint, StormerVerlet, SymplecticEuler
 from .poincare import Clocked, PoincareTransformed
 from .registry import METHODS, get_method
 from .rk import RK4, Dopri5
+from .splitting import (
+    SplitRequired,
+    SplitSystem,
+    Splitting,
+    blanes_moan4,
+    blanes_moan6,
+    leapfrog,
+)
 from .tao import Tao2
 
 __all__ = [
@@ -44,6 +52,12 @@ __all__ = [
     "Method",
     "PoincareTransformed",
     "SolverOptions",
+    "SplitRequired",
+    "SplitSystem",
+    "Splitting",
+    "blanes_moan4",
+    "blanes_moan6",
+    "leapfrog",
     "StormerVerlet",
     "SymplecticEuler",
     "Tao2",

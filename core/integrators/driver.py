@@ -11,6 +11,7 @@ from ..checks import check_integrate_options
 from ._common import Method, restrict
 from .poincare import Clocked, PoincareTransformed
 from .registry import get_method
+from .splitting import Splitting
 from .system import CaptureTest, System, as_system
 
 
@@ -241,8 +242,9 @@ def integrate(H: Any, q0: Any, p0: Any, step: float | np.ndarray = 0.01, steps: 
         E0 = H.value_soa(Q, P)
     mode = "adaptive" if is_rk_adaptive else "clock" if adaptive else "fixed"
     Hk: System = H
-    if mode == "clock":
-        Hk = PoincareTransformed(Clocked(H), 0.0)
+    if mode == "clock":  # the splittings integrate the model's split of K (with s)
+        split = H.split_parts(0.0, clocked=True) if isinstance(meth, Splitting) else None
+        Hk = split or PoincareTransformed(Clocked(H), 0.0)
         Q = np.concatenate((Q, np.zeros((1, N))))
         P = np.concatenate((P, -E0[None]))
     run = _Run(meth, Hk, H, Q, P, n, E0.copy(), mode, step)

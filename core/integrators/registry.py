@@ -8,6 +8,7 @@ from . import compose
 from ._common import Method
 from .implicit import Gauss4, ImplicitMidpoint, StormerVerlet, SymplecticEuler
 from .rk import RK4, Dopri5
+from .splitting import blanes_moan4, blanes_moan6, leapfrog
 from .tao import Tao2
 
 METHODS: dict[str, Method] = {
@@ -22,6 +23,9 @@ METHODS: dict[str, Method] = {
     "suzuki6": compose.suzuki6(),
     "tao2": Tao2(),
     "tao4": compose.tao4(),
+    "leapfrog": leapfrog(),
+    "blanes_moan4": blanes_moan4(),
+    "blanes_moan6": blanes_moan6(),
     "rk4": RK4(),
     "dopri5": Dopri5(),
 }

@@ -17,6 +17,7 @@ Optional, with the defaults of :class:`System`:
     frozen_q(Q, H0=None) -> FrozenQ | None        # dH/dq at fixed q for any p; default None
     subset(idx) -> System                         # the system for rays idx; default itself
     capture_test() -> (Q -> (N,) bool) | None     # rays past a horizon; default None
+    split_parts(H0, clocked=False) -> SplitSystem | None  # K in two exact parts; default None
 
 Models (core.models) and the wrappers here (PoincareTransformed, Clocked) subclass
 :class:`System`. An object written to the required part only (duck-typed, as the tests'
@@ -109,6 +110,14 @@ class System:
 
     def capture_test(self) -> CaptureTest | None:
         """Q (n, N) -> (N,) bool: rays past the model's horizon; None where there is none."""
+        return None
+
+    def split_parts(self, H0: Any = 0.0, clocked: bool = False) -> System | None:
+        """The Poincaré-transformed K of rays with H = H0 written as two exactly solvable
+        parts, a :class:`core.integrators.SplitSystem` for the explicit splittings (and the
+        other methods); with ``clocked``, the parameter s as a last coordinate (momentum
+        p_s = -H0). None: no split is offered (the default; media and Schwarzschild's
+        optical form offer one)."""
         return None
 
 

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Mapping, Sequence
-from typing import Any
 
 import numpy as np
 
@@ -122,20 +121,21 @@ class Hamiltonian(System):
         """Whether the model has a Poincaré time scale g(q) other than 1."""
         return self._time_scale is not None
 
-    def for_backward_tracing(self) -> Hamiltonian:
+    split_method: str | None = None
+    """The explicit splitting measured cheapest on this model's split (split_parts), for
+    the renderer's default method; None where the model offers no split."""
+
+    def for_backward_tracing(self, explicit_split: bool = False) -> Hamiltonian:
         """The same light rays in the chart the tracer follows them in (regular where rays
-        followed into the past go); the model itself unless a better chart exists."""
+        followed into the past go); the model itself unless a better chart exists. With
+        ``explicit_split``: a form whose split_parts an explicit splitting can take, where
+        there is one (Schwarzschild: its isotropic optical medium)."""
         return self
 
     def radius_at(self, X: np.ndarray) -> np.ndarray:
         """The radial coordinate that ``horizon`` is measured in, at local Cartesian
         positions X (3, N): the distance from the centre unless a model says otherwise."""
         return np.sqrt(np.einsum("ij,ij->j", X, X))
-
-    def split_parts(self) -> Any:
-        """The parts of an explicit splitting of this model for the integrators; None: no
-        split is offered (every model today; issue #14)."""
-        return None
 
     def time_scale_soa(self, Q: np.ndarray):
         """Poincaré time-transformation g(q) and dg/dq (docs/design.md); default g = 1."""

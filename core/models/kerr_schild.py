@@ -66,7 +66,7 @@ class KerrSchild(Hamiltonian):
             keys |= set(d.d)
         return {self.coords[k] for k in keys} | set(self.momenta)
 
-    def for_backward_tracing(self) -> KerrSchild:
+    def for_backward_tracing(self, explicit_split: bool = False) -> KerrSchild:
         """The outgoing chart: rays followed into the past cross the past horizon smoothly."""
         return self if self.outgoing else KerrSchild(self.rg, self.a, self.horizon, True)
 

@@ -11,6 +11,7 @@ from ..charts import SpheroidalChart
 from .base import Hamiltonian
 from .kerr_schild import KerrSchild
 from .metric import MetricHamiltonian
+from .schwarzschild_optical import SchwarzschildOptical
 
 _FLAT_CARTESIAN = [["-1", "0", "0", "0"], ["0", "1", "0", "0"],
                    ["0", "0", "1", "0"], ["0", "0", "0", "1"]]
@@ -57,11 +58,14 @@ class SphericalSpacetime(MetricHamiltonian):
         self.rg, self.a = rg, a
         self.horizon = horizon
 
-    def for_backward_tracing(self) -> Hamiltonian:
+    def for_backward_tracing(self, explicit_split: bool = False) -> Hamiltonian:
         """Schwarzschild (a = 0, rg > 0): Kerr–Schild with a = 0, outgoing, which has the
         same r, theta, phi but no coordinate pole and no horizon singularity (the picture is
-        the same). Otherwise the model itself."""
+        the same); for an explicit splitting, the isotropic optical medium, which has a
+        split (the same picture again). Otherwise the model itself."""
         if self.a == 0.0 and self.rg > 0:
+            if explicit_split:
+                return SchwarzschildOptical(self.rg)
             return KerrSchild(self.rg, 0.0, kerr_horizon(self.rg, 0.0), outgoing=True)
         return self
 

@@ -24,7 +24,7 @@ from .regions import Region, region_for
 from .scene import ENDING, Scene
 from .segments import RayResults, SceneGeometry
 from .stepping import DRIFT, DRIFT_STEPS, SPLITS, Stepper
-from .steps import DEFAULT_METHOD, default_step, solver_tolerance
+from .steps import default_method, default_step, solver_tolerance
 
 _FAR = 1e12  # length of the straight segment cast after a ray leaves the model's region
 
@@ -33,7 +33,8 @@ _FAR = 1e12  # length of the straight segment cast after a ray leaves the model'
 class TraceOptions:
     """How rays are integrated."""
 
-    method: Any = DEFAULT_METHOD
+    method: Any = None
+    """A method name or object; None: the model's default (steps.default_method)."""
     tolerance: float = 1e-8
     step: float | None = None
     max_steps: int = 20_000
@@ -44,11 +45,14 @@ class TraceOptions:
         checks.check_optional(checks.check_positive, "region_radius", self.region_radius)
 
 
-def tracing_model(model: Any) -> Any:
+def tracing_model(model: Any, method: Any = None) -> Any:
     """The chart rays are followed in: regular where rays followed into the past go
     (``Hamiltonian.for_backward_tracing``; e.g. Kerr–Schild outgoing, and Schwarzschild
-    in (t, r, theta, phi) as Kerr–Schild with a = 0)."""
-    return None if model is None else model.for_backward_tracing()
+    in (t, r, theta, phi) as Kerr–Schild with a = 0, or for an explicit splitting
+    ``method`` as its isotropic optical medium)."""
+    if model is None:
+        return None
+    return model.for_backward_tracing(explicit_split=isinstance(method, integrators.Splitting))
 
 
 class Tracer:
@@ -62,15 +66,18 @@ class Tracer:
         self.options = options
         self.rotation = scene.frame()
         self.geometry = SceneGeometry(scene.intersector(), list(scene.volumes))
-        self.model = model = tracing_model(scene.model)
         self.curved = scene.curved
         if not self.curved:
+            self.model = tracing_model(scene.model)
             return
+        self.method = integrators.get_method(options.method or default_method(scene.model))
+        self.model = model = tracing_model(scene.model, self.method)
+        if isinstance(self.method, integrators.Splitting):  # refused without a split
+            integrators.splitting.split_flows(model.split_parts(), self.method.name)
         self.chart = chart_for(model)
         self.spacetime = self.chart.time_index is not None
-        self.mass = model.mass if self.spacetime else 0.0
-        self.method = integrators.get_method(options.method)
-        if isinstance(options.method, str) and self.method.accepts("tol"):
+        self.mass = model.mass
+        if not isinstance(options.method, integrators.Method) and self.method.accepts("tol"):
             self.method = self.method.with_options(tol=solver_tolerance(options.tolerance))
         radius = scene.region_radius or options.region_radius
         self.region = region_for(model, options.tolerance, extent, radius)
@@ -146,7 +153,7 @@ class Tracer:
         else:
             Q, P = medium_momenta(model, S, D)
         H0 = model.value_soa(Q, P)
-        K = integrators.PoincareTransformed(model, H0)
+        K = model.split_parts(H0) or integrators.PoincareTransformed(model, H0)
         method = self.method
         state = method.init(K, Q, P)
         idx = rows.copy()

@@ -24,7 +24,8 @@ def test_every_method_states_its_properties(name):
 
 def test_explicit_methods():
     explicit = {n for n, m in METHODS.items() if m.explicit}
-    assert explicit == {"rk4", "dopri5", "tao2", "tao4"}
+    assert explicit == {"rk4", "dopri5", "tao2", "tao4", "leapfrog", "blanes_moan4",
+                        "blanes_moan6"}
     assert core.get_method("yoshida4", base="tao2").explicit
 
 
@@ -39,8 +40,12 @@ def test_models_are_systems_with_the_tracer_interface():
               hm.from_expression("0.5*p**2 + q**2", q=["q"], p=["p"])]
     for m in models:
         assert isinstance(m, hm.Hamiltonian) and isinstance(m, System)
-        assert m.split_parts() is None
+        # a split where the model offers one (media), None elsewhere
+        assert (m.split_parts() is None) == (m.kind != "medium")
         assert isinstance(m.for_backward_tracing(), hm.Hamiltonian)
+    # Schwarzschild's form for the explicit splittings is its isotropic optical medium
+    optical = hm.schwarzschild().for_backward_tracing(explicit_split=True)
+    assert optical.chart == "isotropic" and optical.split_parts() is not None
     assert type(hm.minkowski()) is hm.Minkowski and hm.minkowski().flat
     assert not hm.schwarzschild().flat
     ks = hm.kerr(1.0, 0.4, chart="kerr_schild")
