@@ -19,24 +19,24 @@ PRESETS: dict[str, tuple[str, str, dict[str, object]]] = {
     "SCHWARZSCHILD_LENS": (
         "Schwarzschild Lens",
         "Non-rotating black hole (seed Eq. 15) lensing the sky and the objects behind it",
-        {"model": "SCHWARZSCHILD", "rg": 1.0, "method": "gauss4", "tolerance": 1e-6},
+        {"model": "SCHWARZSCHILD", "rg": 1.0, "method": "AUTO", "tolerance": 1e-6},
     ),
     "KERR": (
         "Kerr Black Hole",
         "Rotating black hole, a/M = 0.9 (seed Eq. 12), spin axis = the centre's local Z",
-        {"model": "KERR", "rg": 1.0, "spin": 0.9, "method": "gauss4", "tolerance": 1e-6},
+        {"model": "KERR", "rg": 1.0, "spin": 0.9, "method": "AUTO", "tolerance": 1e-6},
     ),
     "MIRAGE_EQ17": (
         "Mirage (Eq. 17)",
         "Refractive index of the seed's Eq. 17 with its literal Hamiltonian H = n|p|^2/2",
         {"model": "MEDIUM", "refractive_index": MIRAGE_EQ17_INDEX, "index_form": "SEED",
-         "use_medium_bounds": False, "method": "gauss4", "tolerance": 1e-6},
+         "use_medium_bounds": False, "method": "AUTO", "tolerance": 1e-6},
     ),
     "MIRAGE_EQ18": (
         "Mirage (Eq. 18)",
         "Refractive index of the seed's Eq. 18 with its literal Hamiltonian H = n|p|^2/2",
         {"model": "MEDIUM", "refractive_index": MIRAGE_EQ18_INDEX, "index_form": "SEED",
-         "use_medium_bounds": False, "method": "gauss4", "tolerance": 1e-6},
+         "use_medium_bounds": False, "method": "AUTO", "tolerance": 1e-6},
     ),
 }
 """identifier -> (label, description, settings to assign to scene.symray)."""

@@ -33,6 +33,14 @@ METHOD_ITEMS = [
      "media and metrics only: it cannot trace black holes"),
     ("rk4", "Runge–Kutta 4", "Non-symplectic reference, 4th order"),
     ("dopri5", "Dormand–Prince 5", "Non-symplectic reference, adaptive"),
+    # appended (Blender stores an enum by its position: the items above keep theirs)
+    ("leapfrog", "Leapfrog", "2nd order, explicit splitting (needs a model with a split: "
+     "Schwarzschild, media)"),
+    ("blanes_moan4", "Blanes–Moan 4", "4th order, explicit splitting (Schwarzschild, media)"),
+    ("blanes_moan6", "Blanes–Moan 6", "6th order, explicit splitting (Schwarzschild, media)"),
+    ("AUTO", "Automatic", "The measured cheapest for the model: Blanes–Moan 6 for "
+     "Schwarzschild, Blanes–Moan 4 for media (explicit symplectic splittings), "
+     "Gauss–Legendre 4 otherwise"),
 ]
 
 INDEX_FORM_ITEMS = [
@@ -165,7 +173,7 @@ class SymRaySettings(bpy.types.PropertyGroup):
     hamiltonian_error: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Hamiltonian Error", default="")
     method: bpy.props.EnumProperty(  # type: ignore[valid-type]
-        name="Method", items=METHOD_ITEMS, default="gauss4",
+        name="Method", items=METHOD_ITEMS, default="AUTO",
         description="Integrator for Hamilton's equations")
     tolerance: bpy.props.FloatProperty(  # type: ignore[valid-type]
         name="Tolerance", default=1e-6, min=1e-14, max=0.1, precision=6, step=0.0001,

@@ -87,7 +87,7 @@ def prepare(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, use_border: 
     if transparent and "ending" not in passes:
         passes += ("ending",)  # needed to cut the background out
     options = {
-        "method": settings.method,
+        "method": None if settings.method == "AUTO" else settings.method,
         "tolerance": validation.typed_float(settings.tolerance),
         "max_steps": int(settings.max_steps),
         "passes": passes,

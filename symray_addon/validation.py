@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..core import checks, expressions
+from ..core.integrators import METHODS, Splitting
 
 INDEX_NAMES: tuple[str, ...] = ("x", "y", "z")
 """Names a refractive index n(x, y, z) may use (the centre object's local frame)."""
@@ -33,6 +34,8 @@ HAMILTONIAN_NAMES: tuple[str, ...] = HAMILTONIAN_COORDS + HAMILTONIAN_MOMENTA
 METRIC_SIZE = 4
 TIME_SCALED_MODELS = frozenset({"SCHWARZSCHILD", "KERR"})
 """Models the renderer integrates with a Poincaré time scale g(q) (Tao's methods fail there)."""
+SPLIT_MODELS = frozenset({"SCHWARZSCHILD", "MEDIUM"})
+"""Models whose tracing form offers an explicit split (the splitting methods need one)."""
 
 
 @dataclass(frozen=True)
@@ -199,6 +202,13 @@ def spin_problem(spin: Any) -> str:
     return ""
 
 
+def _check_split(method: str, model: str) -> None:
+    """ValueError if an explicit splitting is chosen for a model that offers no split."""
+    if isinstance(METHODS.get(method), Splitting) and model not in SPLIT_MODELS:
+        raise ValueError(f"method '{method}' is an explicit splitting: only Schwarzschild and "
+                         "media offer the split it needs; choose Automatic or gauss4")
+
+
 def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
     """The checks of every numeric setting (and the method) that the model uses."""
     model = settings.model
@@ -207,6 +217,7 @@ def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
         lambda: checks.check_int("Max Steps", settings.max_steps),
         lambda: checks.check_int("Workers", settings.workers, 0),
         lambda: checks.check_render_method(settings.method, model in TIME_SCALED_MODELS),
+        lambda: _check_split(settings.method, model),
     ]
     if model in TIME_SCALED_MODELS:
         found.append(lambda: checks.check_positive("Schwarzschild Radius", settings.rg))

@@ -89,3 +89,16 @@ def test_errors_refreshed_after_load(scene, tmp_path):
     bpy.ops.wm.save_as_mainfile(filepath=path)
     bpy.ops.wm.open_mainfile(filepath=path)
     assert "unknown name 'w'" in bpy.context.scene.symray.refractive_index_error
+
+
+def test_splitting_methods_need_a_model_with_a_split(scene, addon):
+    """Automatic is the default; an explicit splitting on Kerr is named in the panel's
+    problems before a render, and accepted for Schwarzschild and media."""
+    validation = addon.module("symray_addon.validation")
+    s = scene.symray
+    assert s.method == "AUTO"
+    s.model, s.method = "KERR", "blanes_moan4"
+    assert any("explicit splitting" in p for p in validation.settings_problems(s))
+    for model in ("SCHWARZSCHILD", "MEDIUM"):
+        s.model = model
+        assert not any("explicit splitting" in p for p in validation.settings_problems(s))
