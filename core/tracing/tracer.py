@@ -20,6 +20,7 @@ import numpy as np
 from .. import checks, integrators
 from ..charts import chart_for
 from ..observer import medium_momenta, spacetime_momenta
+from . import dense
 from .regions import Region, region_for
 from .scene import ENDING, Scene
 from .segments import RayResults, SceneGeometry
@@ -27,6 +28,9 @@ from .stepping import DRIFT, DRIFT_STEPS, SPLITS, Stepper
 from .steps import default_method, default_step, solver_tolerance
 
 _FAR = 1e12  # length of the straight segment cast after a ray leaves the model's region
+CHORD_SHARE = 0.5
+"""Chords near geometry stay within CHORD_SHARE x tolerance x (distance from the camera) of
+the ray's cubic path: half the tolerance, as the integration gets (core/tracing/steps.py)."""
 
 
 @dataclass
@@ -113,7 +117,9 @@ class Tracer:
         h = step or self.step
         assert h is not None  # a curved scene's tracer has a step
         if todo.size:
-            self._integrate(todo, start[todo].T.copy(), D[todo].T.copy(), out, h, cancel)
+            camera = self._to_local(origins[todo]).T  # (3, M): where each ray is seen from
+            self._integrate(todo, start[todo].T.copy(), D[todo].T.copy(), out, h, cancel,
+                            camera)
         return out
 
     # --- straight parts --------------------------------------------------------------
@@ -138,7 +144,7 @@ class Tracer:
             out.ending[rows[miss]] = ENDING["escaped"]
 
     # --- the integration ---------------------------------------------------------------
-    def _integrate(self, rows, X, D, out: RayResults, h: float, cancel):
+    def _integrate(self, rows, X, D, out: RayResults, h: float, cancel, camera):
         """Follow rays from local positions X (3, M) along local directions D (3, M).
 
         Per step, everything is done in the model's local frame on (3, M) arrays; world
@@ -164,6 +170,7 @@ class Tracer:
             if cancel is not None and step % 32 == 0 and cancel():
                 step -= 1
                 break
+            start = method.qp(state)
             state, ok, drift = self.stepper.step(K, state, h, SPLITS)
             Q, P = method.qp(state)
             if self.spacetime:
@@ -178,7 +185,8 @@ class Tracer:
                 out.ending[idx[ended]] = ENDING["failed"]
                 out.position[idx[ended]] = self._to_world(X_prev[:, ended].T)
             if self._near is not None:  # surfaces and volumes along this step's segment
-                ended |= self._segments(idx, X_prev, X, ok, out)
+                step_ends = _StepEnds(self, K, start, (Q, P), h)
+                ended |= self._segments(idx, X_prev, X, ok, out, step_ends, camera)
             if self.captured is not None:
                 captured = ~ended & self.captured(Q)
                 if captured.any():
@@ -197,7 +205,7 @@ class Tracer:
                 keep = np.flatnonzero(~ended)
                 if keep.size == 0:
                     return
-                idx, X = idx[keep], X[:, keep]
+                idx, X, camera = idx[keep], X[:, keep], camera[:, keep]
                 state = tuple(a[..., keep] for a in state)
                 K = K.subset(keep)
                 H0, streak = H0[keep], streak[keep]
@@ -208,10 +216,14 @@ class Tracer:
         out.position[idx] = self._to_world(X_prev.T)
         self._finish_energy(out, idx, Q, P, H0)
 
-    def _segments(self, idx, X_prev, X, ok, out: RayResults) -> np.ndarray:
-        """Surface hits and volume emission along the segments X_prev -> X near geometry.
+    def _segments(self, idx, X_prev, X, ok, out: RayResults, step_ends: _StepEnds,
+                  camera) -> np.ndarray:
+        """Surface hits and volume emission along this step's path near geometry.
 
-        -> (M,) bool: the rays that hit a surface (their ending is recorded in ``out``).
+        The path between X_prev and X is followed on chords through its cubic Hermite
+        interpolant (core/tracing/dense.py), as many per ray as keep the chords within
+        the tolerance at the ray's distance from the camera (one where the path is
+        straight enough). -> (M,) bool: the rays that hit a surface (recorded in ``out``).
         """
         assert self._near is not None
         lo, hi = self._near
@@ -222,8 +234,25 @@ class Tracer:
         c = np.flatnonzero(near)
         if c.size == 0:
             return hit_rows
-        a, b = self._to_world(X_prev[:, c].T), self._to_world(X[:, c].T)
-        hit_rows[c] = self.geometry.record(idx[c], a, b, out)
+        X0, X1 = X_prev[:, c], X[:, c]
+        V0, V1, h = step_ends.velocities(c)
+        allowed = CHORD_SHARE * self.options.tolerance * \
+            np.linalg.norm(X0 - camera[:, c], axis=0)
+        k = dense.pieces(dense.chord_deviation(V0, V1, h), allowed)
+        for n in np.unique(k):
+            g = np.flatnonzero(k == n)
+            hn = h if np.ndim(h) == 0 else h[g]
+            points = [X0[:, g]] + [dense.hermite(X0[:, g], V0[:, g], X1[:, g], V1[:, g], hn,
+                                                 j / n) for j in range(1, n)] + [X1[:, g]]
+            alive = np.ones(g.size, dtype=bool)
+            for a, b in zip(points[:-1], points[1:], strict=True):
+                live = np.flatnonzero(alive)
+                hit = self.geometry.record(idx[c[g[live]]], self._to_world(a[:, live].T),
+                                           self._to_world(b[:, live].T), out)
+                hit_rows[c[g[live[hit]]]] = True
+                alive[live[hit]] = False
+                if not alive.any():
+                    break
         return hit_rows
 
     def _finish_energy(self, out, rows, Q, P, H0):
@@ -264,3 +293,24 @@ class Tracer:
 
     def _to_world(self, local):
         return local @ self.rotation.T + self.scene.center
+
+
+class _StepEnds:
+    """A step's two ends (Q, P) and size, with the local Cartesian velocities dX/dσ there
+    for the rays that need them (surfaces near their path)."""
+
+    def __init__(self, tracer: Tracer, K: Any, start: tuple, end: tuple, h: Any) -> None:
+        self.tracer, self.K, self.start, self.end, self.h = tracer, K, start, end, h
+
+    def velocities(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, Any]:
+        """(V at the start, V at the end, h) of the rays ``rows``, each V (3, M)."""
+        K = self.K.subset(rows)
+        ends = [self._velocity(K, Q[:, rows], P[:, rows]) for Q, P in (self.start, self.end)]
+        h = self.h if np.ndim(self.h) == 0 else self.h[rows]
+        return ends[0], ends[1], h
+
+    def _velocity(self, K: Any, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
+        chart = self.tracer.chart
+        _, dp = K.gradient_soa(Q, P, wrt="p")
+        with np.errstate(all="ignore"):
+            return chart.cartesian_velocity(Q[chart.offset:], dp[chart.offset:])
