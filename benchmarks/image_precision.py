@@ -25,10 +25,8 @@ from __future__ import annotations
 
 import argparse
 import csv
-import importlib.util
 import math
 import os
-import pathlib
 import time
 from dataclasses import dataclass
 
@@ -36,21 +34,13 @@ import numpy as np
 
 import core
 from core import hamiltonians as hm
+from core.presets import MIRAGE_VIEWS, mirage_view
 from core.trace import TraceOptions, Tracer
 
 OUT = os.path.join("out", "bench")
 REFERENCE = ("dopri5", 1e-11)
 REGION = 2000.0
 CHUNK = 8192
-
-
-def _figures():
-    """examples/figures.py as a module (the mirage view is built there)."""
-    path = pathlib.Path(__file__).resolve().parents[1] / "examples" / "figures.py"
-    spec = importlib.util.spec_from_file_location("figures_for_bench", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def _black_hole_camera(width: int, height: int) -> core.Camera:
@@ -87,12 +77,10 @@ class SceneCase:
 def scene_case(name: str, quick: bool) -> SceneCase:
     """The scene ``name`` at the size for ``quick`` or full runs."""
     if name == "mirage":
-        figures = _figures()
-        index, cz, tilt, board, fov = figures.MIRAGE_VIEWS["fig10"]
         w, h = (64, 48) if quick else (192, 144)
-        cam = figures.camera((0, 0, cz), (1, 0, cz + tilt), fov, w, h)
-        return SceneCase(figures.mirage_scene(index, board), cam, math.radians(fov) / w, None,
-                         _runs(quick, media=True))
+        scene, cam = mirage_view("fig10", w, h)
+        fov = MIRAGE_VIEWS["fig10"][4]
+        return SceneCase(scene, cam, math.radians(fov) / w, None, _runs(quick, media=True))
     size = 48 if quick else 192
     scene = kerr_scene() if name == "kerr" else schwarzschild_scene()
     return SceneCase(scene, _black_hole_camera(size, size), math.radians(40.0) / size, REGION,
@@ -100,17 +88,21 @@ def scene_case(name: str, quick: bool) -> SceneCase:
 
 
 def _runs(quick: bool, media: bool, splits: bool = True):
-    """(method, tolerances) per scene kind."""
+    """(method, tolerances) per scene kind. Media's step rule goes by order alone (no
+    calibrated constant), so their tolerances are a finer grid, the same for every method."""
+    if media:
+        grid = (1e-4, 1e-5, 1e-6) if quick else (1e-3, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6, 1e-7)
+        low = (1e-3, 1e-4) if quick else (1e-3, 3e-4, 1e-4, 3e-5, 1e-5)
+        return [("rk4", grid), ("dopri5", grid), ("gauss4", grid), ("yoshida4", grid),
+                ("leapfrog", low), ("blanes_moan4", grid), ("blanes_moan6", grid)]
     wide = (1e-4, 1e-6) if quick else (1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
     tight = (1e-4, 1e-7) if quick else (1e-4, 1e-6, 1e-8, 1e-10)
-    runs = [("rk4", wide), ("dopri5", wide), ("gauss4", (1e-4, 1e-6) if quick else
-                                              (1e-4, 1e-6, 1e-8)),
+    runs = [("rk4", wide), ("dopri5", wide),
+            ("gauss4", (1e-4, 1e-6) if quick else (1e-4, 1e-6, 1e-8)),
             ("yoshida4", (1e-4,) if quick else (1e-4, 1e-6))]
     if splits:
         runs += [("leapfrog", (1e-4,) if quick else (1e-4, 1e-6)),
                  ("blanes_moan4", tight), ("blanes_moan6", tight)]
-    if media:  # every method runs on the medium's split K (explicit for the compositions)
-        runs = [(m, t if m not in ("leapfrog",) else (1e-3, 1e-4)) for m, t in runs]
     return runs
 
 

@@ -31,7 +31,7 @@ import numpy as np
 
 import core
 from core import hamiltonians as hm
-from core.presets import MIRAGE_EQ17_INDEX, MIRAGE_EQ18_INDEX
+from core.presets import MIRAGE_EQ17_INDEX, MIRAGE_EQ18_INDEX, MIRAGE_VIEWS, mirage_scene
 
 RG = 1.0
 M = RG / 2
@@ -227,42 +227,6 @@ def shadow_edges(ending: np.ndarray, pixel: float, distance: float):
     return (cols.min() - w / 2) * to_rg, (cols.max() + 1 - w / 2) * to_rg
 
 
-def mirage_scene(index: str | None, board_z: tuple[float, float]) -> core.Scene:
-    """A banded board (red top, green, white bottom) 20 m away on grey ground, literal n."""
-    z0, z1 = board_z
-
-    def paint(uv, p, n):
-        c = np.zeros((len(p), 4))
-        c[:, 3] = 1.0
-        f = (p[:, 2] - z0) / (z1 - z0)
-        c[f > 2 / 3, 0] = 1.0
-        c[(f <= 2 / 3) & (f > 1 / 3), 1] = 1.0
-        c[f <= 1 / 3, :3] = 1.0
-        return c
-
-    board = core.Plane(point=(20, 0, 0.5 * (z0 + z1)), normal=(-1, 0, 0), u_axis=(0, 1, 0),
-                       extent=(1.0, z1 - z0), color=paint)
-    ground = core.Plane(point=(0, 0, 0), normal=(0, 0, 1), u_axis=(1, 0, 0), extent=(400, 400),
-                        color=core.checker(200, 200, (0.35, 0.3, 0.25, 1), (0.3, 0.25, 0.2, 1)))
-    poles = [core.Plane(point=(x, y, 0.6), normal=(-1, 0, 0), u_axis=(0, 1, 0),
-                        extent=(0.08, 1.2), color=(0.25, 0.12, 0.05, 1))
-             for x, y in ((12.0, -1.0), (32.0, 1.6))]
-    model = None if index is None else hm.medium(index, literal=True, bounds=MIRAGE_BOX)
-    return core.Scene(model=model, objects=[board, *poles, ground],
-                      background=(0.3, 0.45, 0.95))
-
-
-MIRAGE_BOX = ((-1.0, -100.0, -1.0), (250.0, 100.0, 3.0))
-"""Where the mirage media bend light (outside, n is constant to 1e-9: rays are straight)."""
-
-
-MIRAGE_VIEWS = {
-    # name: (index, camera height, tilt, board z range, horizontal fov in degrees)
-    "fig10": (MIRAGE_EQ17_INDEX, 0.4, -0.04, (0.1, 0.7), 10.0),
-    "fig11": (MIRAGE_EQ18_INDEX, 0.9, 0.0, (0.2, 0.9), 10.0),
-}
-
-
 def mirage_view(name: str, width: int, height: int, method: str, step: float = 0.05,
                 with_medium: bool = True):
     """Render a mirage view (fig10 or fig11), or the same view without the medium."""
@@ -270,7 +234,7 @@ def mirage_view(name: str, width: int, height: int, method: str, step: float = 0
     scene = mirage_scene(index if with_medium else None, board)
     if width < height:  # a column (tests): keep the figure's vertical field of view
         fov = math.degrees(2 * math.atan(math.tan(math.radians(fov) / 2) * 3 / 4))
-    cam = camera((0, 0, cz), (1, 0, cz + tilt), fov, width, height)
+    cam = camera((0, 0, cz), (1, 0, cz + tilt), fov, width, height)  # = presets.mirage_view
     return render(f"{name} {'medium' if with_medium else 'no medium'}", scene, cam, method,
                   step=step)
 

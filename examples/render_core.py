@@ -17,7 +17,7 @@ import numpy as np
 
 import core
 from core import hamiltonians as hm
-from core.presets import MIRAGE_EQ17_INDEX
+from core.presets import mirage_view
 from core.render import summary_text
 
 
@@ -31,16 +31,7 @@ def schwarzschild_scene() -> core.Scene:
                       background="procedural")
 
 
-def mirage_scene() -> core.Scene:
-    """Hot ground (seed Eq. 17, literal form): a pole and its inverted image below it."""
-    ground = core.Plane(point=(0, 0, 0), normal=(0, 0, 1), color=(0.35, 0.3, 0.25, 1))
-    pole = core.Plane(point=(20, 0, 0.4), normal=(-1, 0, 0), u_axis=(0, 1, 0), extent=(1.0, 0.6),
-                      color=core.checker(2, 3, (0.9, 0.1, 0.1, 1), (0.95, 0.95, 0.95, 1)))
-    return core.Scene(model=hm.medium(MIRAGE_EQ17_INDEX, literal=True),
-                      objects=[pole, ground], background="procedural")
-
-
-def render_to(name: str, scene: core.Scene, camera: core.Camera, method: str, out_dir: str,
+def render_to(name: str, scene: core.Scene, camera: core.Camera, method: str | None, out_dir: str,
               **options) -> None:
     """Render, write PNG and EXR, print the summary."""
     result = core.render(scene, camera, method=method,
@@ -62,7 +53,8 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--width", type=int, default=160)
     parser.add_argument("--height", type=int, default=120)
-    parser.add_argument("--method", default="yoshida4")
+    parser.add_argument("--method", default=None,
+                        help="integrator (default: the measured cheapest for each model)")
     parser.add_argument("--out", default="out")
     args = parser.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
@@ -70,9 +62,8 @@ def main(argv: list[str] | None = None) -> None:
                                   fov_deg=45, width=args.width, height=args.height)
     render_to("schwarzschild", schwarzschild_scene(), cam, args.method, args.out,
               tolerance=1e-6)
-    cam = core.Camera.perspective(position=(0, 0, 0.4), look_at=(1, 0, 0.37), up=(0, 0, 1),
-                                  fov_deg=8, width=args.width, height=args.height)
-    render_to("mirage", mirage_scene(), cam, args.method, args.out, step=0.05)
+    scene, cam = mirage_view("fig10", args.width, args.height)  # the seed's Fig. 10 view
+    render_to("mirage", scene, cam, args.method, args.out, tolerance=1e-6)
 
 
 if __name__ == "__main__":

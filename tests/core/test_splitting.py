@@ -166,17 +166,9 @@ def test_energy_stays_bounded_over_long_runs(name):
 
 
 def _mirage(width: int, height: int):
-    """The fig10 view of examples/figures.py (hot ground, seed Eq. 17, literal form)."""
-    import importlib.util
-    import pathlib
-
-    path = pathlib.Path(__file__).resolve().parents[2] / "examples" / "figures.py"
-    spec = importlib.util.spec_from_file_location("figures_for_splitting", path)
-    figures = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(figures)
-    index, cz, tilt, board, fov = figures.MIRAGE_VIEWS["fig10"]
-    cam = figures.camera((0, 0, cz), (1, 0, cz + tilt), fov, width, height)
-    return figures.mirage_scene(index, board), cam, math.radians(fov) / width
+    """The seed's Fig. 10 view (hot ground, Eq. 17, literal form) and its pixel angle."""
+    scene, cam = core.presets.mirage_view("fig10", width, height)
+    return scene, cam, math.radians(core.presets.MIRAGE_VIEWS["fig10"][4]) / width
 
 
 @pytest.mark.parametrize("name", ["leapfrog", "blanes_moan4"])
