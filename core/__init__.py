@@ -1,6 +1,6 @@
 """SymRay core: symplectic ray tracing in pure numpy (no Blender needed).
 
-The contract (DESIGN.md): ``core.integrate``, ``core.hamiltonians``, ``core.Camera``,
+The contract (docs/design.md): ``core.integrate``, ``core.hamiltonians``, ``core.Camera``,
 ``core.Scene``, ``core.render``, ``core.ENDING`` and the intersectors.
 """
 

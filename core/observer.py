@@ -1,4 +1,4 @@
-"""Initial ray momenta in the observer's local orthonormal frame (DESIGN.md "Observer").
+"""Initial ray momenta in the observer's local orthonormal frame (docs/design.md, "Observer").
 
 For a spacetime the observer is the zero-angular-momentum observer u ∝ ξ_t + ω ξ_φ
 (ω = −g(ξ_t, ξ_φ)/g(ξ_φ, ξ_φ)); without frame dragging that is the static observer.

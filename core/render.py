@@ -48,7 +48,7 @@ def render(scene: Scene, camera, *, method: Any = None, tolerance: float = 1e-8,
            workers: int | None = None, parallel: str = "auto", cores: int | None = None,
            progress: Callable[[int, int], None] | None = None,
            should_cancel: Callable[[], bool] | None = None) -> RenderResult:
-    """Render ``scene`` seen by ``camera`` (DESIGN.md "Rendering in the core").
+    """Render ``scene`` seen by ``camera`` (docs/design.md, "Rendering in the core").
 
     The image is traced in chunks of at most ``chunk_size`` rays by ``workers`` forked
     processes or threads (``parallel``: "auto", "processes", "threads"; see

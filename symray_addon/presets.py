@@ -3,7 +3,7 @@
 The refractive-index expressions of the seed's mirage figures (Satoh, "Symplectic Ray
 Tracing", Eq. 17 and 18) live in ``core/presets.py`` and nowhere else. They are written for
 the seed's literal optical Hamiltonian H = n |p|^2 / 2 (``index_form = 'SEED'``), so the
-figures can be reproduced as printed; see DESIGN.md, "Refractive media".
+figures can be reproduced as printed; see docs/design.md, "Models and conventions".
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""``scene.symray``: every SymRay setting of a scene (the Blender contract of DESIGN.md)."""
+"""``scene.symray``: every SymRay setting of a scene (the Blender contract of docs/design.md)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The public `core.integrate` contract (DESIGN.md): shapes of inputs and results."""
+"""The public `core.integrate` contract (docs/design.md): shapes of inputs and results."""
 
 import numpy as np
 import pytest

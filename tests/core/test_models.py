@@ -106,7 +106,7 @@ def test_kerr_reduces_to_schwarzschild():
 
 
 def test_kerr_schild_principal_null_direction_is_null():
-    """l_mu of DESIGN.md is null for eta and g: H(q, l) = 0 anywhere (r from the quartic)."""
+    """l_mu of docs/design.md is null for eta and g: H(q, l) = 0 anywhere (r from the quartic)."""
     a = 0.45
     ks = hm.kerr(1.0, a, chart="kerr_schild")
     q, _ = cartesian_points(30)
