@@ -353,6 +353,28 @@ def long(steps: int = 10_000_000, step: float = 0.01):
                   data={"result": res})
 
 
+def long_split(steps: int = 1_000_000, step: float = 0.25):
+    """A ray in a graded-index fibre, n^2 = 2 - (x^2 + y^2), for 10^6 Poincaré steps of the
+    medium's explicit split (over 60 000 oscillations): |H - H0| after 1 % of the run and
+    at the end, for the splittings and rk4 (bounded against growing linearly)."""
+    H = hm.medium("sqrt(2 - (x**2 + y**2))")
+    q0, p0 = np.array([0.3, 0.0, 0.0]), np.array([0.0, 0.2, 1.0])
+    p0 *= math.sqrt(2 - 0.09) / np.linalg.norm(p0)
+    rows = {}
+    for method in ("leapfrog", "blanes_moan4", "rk4"):
+        start = time.perf_counter()
+        early, late = (core.integrate(H, q0, p0, step=step, steps=n, method=method,
+                                      adaptive=True, energy_every=100)
+                       for n in (steps // 100, steps))
+        sec = time.perf_counter() - start
+        growth = late.energy_error / early.energy_error
+        rows[method] = (f"|H - H0| {early.energy_error:.2e} after {steps // 100} steps, "
+                        f"{late.energy_error:.2e} after {steps} ({growth:.2f}x), "
+                        f"{outcome(late)}, {sec:.0f} s")
+    return report(f"long_split ({steps:.0e} steps of {step}, one ray, graded-index fibre)",
+                  **rows)
+
+
 def n_zero(size: int = 12):
     """An index that goes to zero: n = 1e-3 + z^2 (physical; rays speed up as 1/n), n = z
     (non-positive below z = 0: flagged failed), literal n = z (rays stall)."""
@@ -436,7 +458,8 @@ def tao_render(size: int = 8):
 
 
 CASES = {"near_critical": near_critical, "horizon": horizon, "spin": spin, "pole": pole,
-         "index_jump": index_jump, "stability": stability, "long": long, "n_zero": n_zero,
+         "index_jump": index_jump, "stability": stability, "long": long,
+         "long_split": long_split, "n_zero": n_zero,
          "far": far, "tao_render": tao_render}
 
 
