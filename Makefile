@@ -29,8 +29,10 @@ $(VENV311)/.stamp: requirements-oldest.txt
 venv: $(VENV)/.stamp
 venv311: $(VENV311)/.stamp
 
+# ruff (rules, and one formatter: `ruff format`, applied to the whole tree) and mypy on core/
 lint: venv
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 	$(VENV)/bin/mypy -p core
 
 test-main: venv

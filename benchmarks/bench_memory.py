@@ -31,10 +31,13 @@ def main() -> None:
     parser.add_argument("--method", default="rk4")
     parser.add_argument("--full", action="store_true")
     args = parser.parse_args()
-    cam = core.Camera.perspective(position=(0, -30, 3), look_at=(0, 0, 0), up=(0, 0, 1),
-                                  fov_deg=40, width=1920, height=1080)
-    scene = core.Scene(model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"),
-                       objects=[core.Sphere(center=(0, 8, 0), radius=1, color=(1, 0, 0, 1))])
+    cam = core.Camera.perspective(
+        position=(0, -30, 3), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=40, width=1920, height=1080
+    )
+    scene = core.Scene(
+        model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"),
+        objects=[core.Sphere(center=(0, 8, 0), radius=1, color=(1, 0, 0, 1))],
+    )
     before = peak_rss_mib()
     limit = cam.n_pixels if args.full else args.chunks * args.chunk_size
     state = {"done": 0}
@@ -44,14 +47,22 @@ def main() -> None:
         print(f"\r{done}/{total} pixels, peak RSS {peak_rss_mib():.0f} MiB", end="", flush=True)
 
     start = time.perf_counter()
-    out = core.render(scene, cam, method=args.method, tolerance=1e-6,
-                      chunk_size=args.chunk_size, progress=progress,
-                      should_cancel=lambda: state["done"] >= limit)
+    out = core.render(
+        scene,
+        cam,
+        method=args.method,
+        tolerance=1e-6,
+        chunk_size=args.chunk_size,
+        progress=progress,
+        should_cancel=lambda: state["done"] >= limit,
+    )
     seconds = time.perf_counter() - start
     print()
-    print(f"rendered {state['done']} of {cam.n_pixels} pixels in {seconds:.1f} s "
-          f"({'complete' if not out.cancelled else 'cancelled as asked'}); "
-          f"peak RSS {peak_rss_mib():.0f} MiB (imports {before:.0f} MiB); target < 2048 MiB")
+    print(
+        f"rendered {state['done']} of {cam.n_pixels} pixels in {seconds:.1f} s "
+        f"({'complete' if not out.cancelled else 'cancelled as asked'}); "
+        f"peak RSS {peak_rss_mib():.0f} MiB (imports {before:.0f} MiB); target < 2048 MiB"
+    )
 
 
 if __name__ == "__main__":

@@ -57,8 +57,7 @@ from core import hamiltonians as hm  # noqa: E402
 from core.integrators import METHODS, PoincareTransformed, get_method  # noqa: E402
 from core.trace import ERROR_CONSTANTS, TraceOptions, Tracer  # noqa: E402
 
-CAMERA = dict(position=(0.0, -30.0, 2.0), look_at=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0),
-              fov_deg=40.0)
+CAMERA = dict(position=(0.0, -30.0, 2.0), look_at=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0), fov_deg=40.0)
 """The Kerr image's camera: 30 rg from the hole, 40 degrees across the larger dimension."""
 SPIN = 0.45  # a = 0.45 rg = 0.9 M
 
@@ -117,8 +116,7 @@ def sample_states(H, n: int, seed: int = 0):
 
 
 def bench_eval() -> None:
-    print("\n[eval] Kerr a/M = 0.9 value-and-gradient, one core, ns per ray "
-          "(target <= 300)")
+    print("\n[eval] Kerr a/M = 0.9 value-and-gradient, one core, ns per ray (target <= 300)")
     for chart, label in (("boyer_lindquist", "BL"), ("kerr_schild", "KS")):
         H = kerr(chart)
         for n in (10_000, 100_000):
@@ -141,9 +139,11 @@ def bench_steps(n: int = 10_000, tolerance: float = 1.36e-4) -> None:
     H = kerr("kerr_schild")
     Q, P = sample_states(H, n, seed=1)
     K = PoincareTransformed(H, H.value_soa(Q, P))
-    print(f"\n[steps] ns per ray-step on K = g (H - H0), Kerr–Schild, {Q.shape[1]} rays, one "
-          f"core, at the render's step h for tolerance {tolerance:g} (0.1 pixel at 512x512);\n"
-          "  per unit of fictitious time (ns / h): the cost of a ray at that accuracy")
+    print(
+        f"\n[steps] ns per ray-step on K = g (H - H0), Kerr–Schild, {Q.shape[1]} rays, one "
+        f"core, at the render's step h for tolerance {tolerance:g} (0.1 pixel at 512x512);\n"
+        "  per unit of fictitious time (ns / h): the cost of a ray at that accuracy"
+    )
     for name in METHODS:
         # the render's own method object: implicit solves to the tolerance's precision
         tracer = Tracer(core.Scene(model=H), TraceOptions(method=name, tolerance=tolerance))
@@ -155,8 +155,9 @@ def bench_steps(n: int = 10_000, tolerance: float = 1.36e-4) -> None:
 
         t = best_time(run, repeats=3, budget=2.0) / Q.shape[1] * 1e9
         note = "" if name in ERROR_CONSTANTS else "  (no error constant: not calibrated)"
-        line(f"{name}", f"{t:8.0f} ns/ray-step",
-             f"h {h:<8.3g} {t / h / 1e3:8.1f} us per unit{note}")
+        line(
+            f"{name}", f"{t:8.0f} ns/ray-step", f"h {h:<8.3g} {t / h / 1e3:8.1f} us per unit{note}"
+        )
 
 
 # ------------------------------------------------------------------------------------
@@ -169,8 +170,7 @@ def pixel_angle(width: int, height: int) -> float:
 
 
 def kerr_scene():
-    return core.Scene(model=hm.kerr(rg=1.0, a=SPIN, chart="kerr_schild"),
-                      background="procedural")
+    return core.Scene(model=hm.kerr(rg=1.0, a=SPIN, chart="kerr_schild"), background="procedural")
 
 
 def cpu_seconds() -> float:
@@ -179,16 +179,29 @@ def cpu_seconds() -> float:
     return time.process_time() + children.ru_utime + children.ru_stime
 
 
-def render_kerr(width: int, height: int, method: str | None, workers: int | None = None,
-                passes=("steps", "ending"), parallel: str = "auto"):
+def render_kerr(
+    width: int,
+    height: int,
+    method: str | None,
+    workers: int | None = None,
+    passes=("steps", "ending"),
+    parallel: str = "auto",
+):
     """Render the Kerr frame at tolerance = 0.1 pixel -> (result, wall s, cores busy, camera,
     tolerance); cores busy = CPU time (workers included) over the wall time."""
     cam = core.Camera.perspective(width=width, height=height, **CAMERA)
     tol = 0.1 * pixel_angle(width, height)
     kwargs = {} if method is None else {"method": method}
     cpu, start = cpu_seconds(), time.perf_counter()
-    out = core.render(kerr_scene(), cam, tolerance=tol, workers=workers, parallel=parallel,
-                      passes=passes, **kwargs)
+    out = core.render(
+        kerr_scene(),
+        cam,
+        tolerance=tol,
+        workers=workers,
+        parallel=parallel,
+        passes=passes,
+        **kwargs,
+    )
     wall = time.perf_counter() - start
     return out, wall, (cpu_seconds() - cpu) / wall, cam, tol
 
@@ -206,15 +219,20 @@ def escape_errors(cam, tol: float, method: str, n: int = 600):
     origins, directions = cam.rays()
     origins, directions = origins[rows], directions[rows]
     scene = kerr_scene()
-    tracer = Tracer(scene, TraceOptions(method=method, tolerance=tol),
-                    extent=float(np.linalg.norm(CAMERA["position"])))
+    tracer = Tracer(
+        scene,
+        TraceOptions(method=method, tolerance=tol),
+        extent=float(np.linalg.norm(CAMERA["position"])),
+    )
     rays = tracer.trace(origins, directions)
-    ref_opts = TraceOptions(method="rk4", step=0.004, region_radius=10 * tracer.region.radius,
-                            max_steps=10 ** 6)
+    ref_opts = TraceOptions(
+        method="rk4", step=0.004, region_radius=10 * tracer.region.radius, max_steps=10**6
+    )
     ref = Tracer(scene, ref_opts).trace(origins, directions)
     pixel = pixel_angle(cam.width, cam.height)
-    mag = magnification(scene, ref_opts, origins, directions, ref, pixel,
-                        (cam.frame.right, cam.frame.up))
+    mag = magnification(
+        scene, ref_opts, origins, directions, ref, pixel, (cam.frame.right, cam.frame.up)
+    )
     both = (rays.ending == core.ENDING["escaped"]) & (ref.ending == core.ENDING["escaped"])
     err = angle_between(rays.direction[both], ref.direction[both]) / pixel
     mismatch = int(np.count_nonzero(rays.ending != ref.ending))
@@ -223,56 +241,78 @@ def escape_errors(cam, tol: float, method: str, n: int = 600):
 
 def bench_image(size: int, method: str | None, full: bool) -> None:
     label = method or f"default method ({core.trace.DEFAULT_METHOD})"
-    print(f"\n[image] {size}x{size} Kerr a/M = 0.9 (Kerr–Schild), camera at 30 rg, "
-          f"tolerance = 0.1 pixel, {label}")
+    print(
+        f"\n[image] {size}x{size} Kerr a/M = 0.9 (Kerr–Schild), camera at 30 rg, "
+        f"tolerance = 0.1 pixel, {label}"
+    )
     out, seconds, busy, cam, tol = render_kerr(size, size, method, workers=2)
     s = out.summary
-    line(f"render, {s['parallel']} (passes steps, ending)", f"{seconds:8.1f} s",
-         "<= 60 s" if size == 512 else "", seconds <= 60 if size == 512 else None)
+    line(
+        f"render, {s['parallel']} (passes steps, ending)",
+        f"{seconds:8.1f} s",
+        "<= 60 s" if size == 512 else "",
+        seconds <= 60 if size == 512 else None,
+    )
     line("  cores busy (CPU time / wall time)", f"{busy:8.2f}")
     line("  rays / ray-steps", f"{s['rays']} / {s['steps']}")
-    line("  steps per ray (mean), failed rays", f"{s['steps'] / max(s['rays'], 1):8.1f}, "
-         f"{s['failed']}")
+    line(
+        "  steps per ray (mean), failed rays",
+        f"{s['steps'] / max(s['rays'], 1):8.1f}, {s['failed']}",
+    )
     line("  us per ray-step (wall, 2 workers)", f"{seconds / max(s['steps'], 1) * 1e6:8.2f}")
-    line("  method, step, region radius",
-         f"{s['method']}, {s['step']:.3g}, {s.get('region_radius', float('nan')):.0f} rg")
+    line(
+        "  method, step, region radius",
+        f"{s['method']}, {s['step']:.3g}, {s.get('region_radius', float('nan')):.0f} rg",
+    )
     errors, equivalent, mismatch = escape_errors(cam, tol, s["method"])
     line("  escape error vs reference, median (px)", f"{np.median(errors):8.3f}")
     line("  escape error vs reference, 99% (px)", f"{np.percentile(errors, 99):8.3f}")
     line("  escape error vs reference, max (px)", f"{errors.max():8.3f}")
-    line("  ... over the lens magnification, max (px)", f"{equivalent.max():8.3f}", "<= 0.1",
-         equivalent.max() <= 0.1)
+    line(
+        "  ... over the lens magnification, max (px)",
+        f"{equivalent.max():8.3f}",
+        "<= 0.1",
+        equivalent.max() <= 0.1,
+    )
     line("  endings different from the reference", f"{mismatch:8d}")
     if not full:
         return
-    out, seconds, busy, cam, tol = render_kerr(size, size, method, workers=2,
-                                               passes=("error", "steps", "ending"))
-    line("render with the error pass (3x the tracing)", f"{seconds:8.1f} s", "",
-         None)
+    out, seconds, busy, cam, tol = render_kerr(
+        size, size, method, workers=2, passes=("error", "steps", "ending")
+    )
+    line("render with the error pass (3x the tracing)", f"{seconds:8.1f} s", "", None)
     median, worst = (out.summary[k] for k in ("error_median", "error_max"))
-    line("  error pass: median / max estimate (px)", "n/a (no ray has an estimate)"
-         if median is None else f"{median / pixel_angle(size, size):.3f} / "
-         f"{worst / pixel_angle(size, size):.1f}")
+    line(
+        "  error pass: median / max estimate (px)",
+        "n/a (no ray has an estimate)"
+        if median is None
+        else f"{median / pixel_angle(size, size):.3f} / {worst / pixel_angle(size, size):.1f}",
+    )
     for other in ("yoshida4", "rk4"):
         if other == (method or core.trace.DEFAULT_METHOD):
             continue
         out, seconds, busy, cam, tol = render_kerr(size, size, other, workers=2)
         s = out.summary
         errors, equivalent, _ = escape_errors(cam, tol, other)
-        line(f"the same with {other}", f"{seconds:8.1f} s",
-             f"h {s['step']:.3g}, {s['steps'] / s['rays']:.1f} steps/ray, error 99% "
-             f"{np.percentile(errors, 99):.3f} px, equivalent max {equivalent.max():.3f} px")
+        line(
+            f"the same with {other}",
+            f"{seconds:8.1f} s",
+            f"h {s['step']:.3g}, {s['steps'] / s['rays']:.1f} steps/ray, error 99% "
+            f"{np.percentile(errors, 99):.3f} px, equivalent max {equivalent.max():.3f} px",
+        )
 
 
 def bench_cores(size: int, method: str | None) -> None:
-    print(f"\n[cores] {size}x{size}, the same scene: one worker vs two (forked processes, "
-          "the default where fork exists), and two threads; best of two runs each")
+    print(
+        f"\n[cores] {size}x{size}, the same scene: one worker vs two (forked processes, "
+        "the default where fork exists), and two threads; best of two runs each"
+    )
     if not core.workers.can_fork():
         print("  no fork on this OS: processes fall back to threads")
+
     def best_of_two(workers: int, parallel: str):
         """(wall s, cores busy) of the faster of two renders: this VM's runs vary by 15 %."""
-        runs = [render_kerr(size, size, method, workers, parallel=parallel)[1:3]
-                for _ in range(2)]
+        runs = [render_kerr(size, size, method, workers, parallel=parallel)[1:3] for _ in range(2)]
         return min(runs)
 
     t1, busy1 = best_of_two(1, "processes")
@@ -280,10 +320,12 @@ def bench_cores(size: int, method: str | None) -> None:
     t2t, busy2t = best_of_two(2, "threads")
     line("1 worker process", f"{t1:8.1f} s", f"cores busy {busy1:.2f}")
     line("2 worker processes", f"{t2:8.1f} s", f"cores busy {busy2:.2f}")
-    line("speed-up 1 -> 2 cores", f"{t1 / t2:8.2f} x", "both cores used (> 1.5x)",
-         t1 / t2 > 1.5)
-    line("2 threads instead (for comparison)", f"{t2t:8.1f} s",
-         f"cores busy {busy2t:.2f}, {t1 / t2t:.2f}x: threads queue for the GIL")
+    line("speed-up 1 -> 2 cores", f"{t1 / t2:8.2f} x", "both cores used (> 1.5x)", t1 / t2 > 1.5)
+    line(
+        "2 threads instead (for comparison)",
+        f"{t2t:8.1f} s",
+        f"cores busy {busy2t:.2f}, {t1 / t2t:.2f}x: threads queue for the GIL",
+    )
     if t1 / t2 < 1.5:
         print(f"  (load average {os.getloadavg()[0]:.1f}: above ~1 other work is running too)")
 
@@ -321,8 +363,10 @@ def bench_calibrate(n: int = 1500) -> None:
     give the same error. Rays grazing the photon region are magnified without bound
     (their forward error too); this measure is not, and sets core.trace's step rule.
     """
-    print(f"\n[calibrate] error constants, Kerr a/M = 0.9 (Kerr–Schild), {n} rays from 30 rg, "
-          "region 3000 rg (far-field error negligible)")
+    print(
+        f"\n[calibrate] error constants, Kerr a/M = 0.9 (Kerr–Schild), {n} rays from 30 rg, "
+        "region 3000 rg (far-field error negligible)"
+    )
     cam = core.Camera.perspective(width=512, height=512, **CAMERA)
     pixel = pixel_angle(512, 512)
     rng = np.random.default_rng(2)
@@ -330,7 +374,7 @@ def bench_calibrate(n: int = 1500) -> None:
     origins, directions = cam.rays()
     origins, directions = origins[rows], directions[rows]
     scene = kerr_scene()
-    ref_opts = TraceOptions(method="rk4", step=0.003, region_radius=3000.0, max_steps=10 ** 6)
+    ref_opts = TraceOptions(method="rk4", step=0.003, region_radius=3000.0, max_steps=10**6)
     ref = Tracer(scene, ref_opts).trace(origins, directions)
     axes = (cam.frame.right, cam.frame.up)
     mag = magnification(scene, ref_opts, origins, directions, ref, pixel, axes)
@@ -340,24 +384,29 @@ def bench_calibrate(n: int = 1500) -> None:
         p = method.order
         h_big = {1: 0.004, 2: 0.03}.get(p, 0.2)
         for h in (h_big, 0.5 * h_big):
-            rays = Tracer(scene, TraceOptions(method=name, step=h, region_radius=3000.0,
-                                              max_steps=10 ** 6)).trace(origins, directions)
-            both = (rays.ending == core.ENDING["escaped"]) & \
-                (ref.ending == core.ENDING["escaped"])
+            rays = Tracer(
+                scene, TraceOptions(method=name, step=h, region_radius=3000.0, max_steps=10**6)
+            ).trace(origins, directions)
+            both = (rays.ending == core.ENDING["escaped"]) & (ref.ending == core.ENDING["escaped"])
             bad = int(np.count_nonzero(rays.ending != ref.ending))
             if not both.any():  # tao2/tao4 on K = g (H - H0): see the README's integrators
-                line(f"{name} (order {p}, h {h:g})", "no ray escapes as in the reference",
-                     f"endings off {bad}")
+                line(
+                    f"{name} (order {p}, h {h:g})",
+                    "no ray escapes as in the reference",
+                    f"endings off {bad}",
+                )
                 continue
             err = angle_between(rays.direction[both], ref.direction[both])
             equivalent = err / np.maximum(1.0, mag[both])
-            line(f"{name} (order {p}, h {h:g})", f"C = {equivalent.max() / h ** p:9.2e}",
-                 f"forward p99 {np.percentile(err, 99):.1e} max {err.max():.1e}, "
-                 f"endings off {bad}")
+            line(
+                f"{name} (order {p}, h {h:g})",
+                f"C = {equivalent.max() / h**p:9.2e}",
+                f"forward p99 {np.percentile(err, 99):.1e} max {err.max():.1e}, endings off {bad}",
+            )
     # the far field: beyond the region radius R the rest of the bending is added to first
     # order; what is left over is ~ C_far (M / R)^2 (forward error, not magnified)
     mass = 0.5
-    fine = TraceOptions(method="gauss4", step=0.01, region_radius=3000.0, max_steps=10 ** 6)
+    fine = TraceOptions(method="gauss4", step=0.01, region_radius=3000.0, max_steps=10**6)
     far = Tracer(scene, fine).trace(origins, directions)
     for radius in (50.0, 100.0, 200.0):
         opts = TraceOptions(method="gauss4", step=0.01, region_radius=radius)
@@ -365,8 +414,11 @@ def bench_calibrate(n: int = 1500) -> None:
         both = (rays.ending == core.ENDING["escaped"]) & (far.ending == core.ENDING["escaped"])
         err = angle_between(rays.direction[both], far.direction[both])
         scale = (radius / mass) ** 2
-        line(f"far field from R = {radius:.0f} rg", f"C_far = {err.max() * scale:6.1f}",
-             f"median {np.median(err) * scale:.1f}")
+        line(
+            f"far field from R = {radius:.0f} rg",
+            f"C_far = {err.max() * scale:6.1f}",
+            f"median {np.median(err) * scale:.1f}",
+        )
 
 
 # ------------------------------------------------------------------------------------
@@ -379,7 +431,8 @@ def _addon_package():
         return None
     if "symray_bench" not in sys.modules:
         spec = importlib.util.spec_from_file_location(
-            "symray_bench", ROOT / "__init__.py", submodule_search_locations=[str(ROOT)])
+            "symray_bench", ROOT / "__init__.py", submodule_search_locations=[str(ROOT)]
+        )
         pkg = importlib.util.module_from_spec(spec)
         sys.modules["symray_bench"] = pkg
         spec.loader.exec_module(pkg)
@@ -404,8 +457,10 @@ def uv_sphere(center, radius, n_u=160, n_v=80):
 
 def bench_flat(size: int) -> None:
     pkg = _addon_package()
-    print(f"\n[flat] {size}x{size} flat scene (a UV sphere + a ground quad) through the "
-          "add-on's BVH intersector vs a plain loop of BVHTree.ray_cast")
+    print(
+        f"\n[flat] {size}x{size} flat scene (a UV sphere + a ground quad) through the "
+        "add-on's BVH intersector vs a plain loop of BVHTree.ray_cast"
+    )
     if pkg is None:
         print("  (skipped: no bpy module)")
         return
@@ -418,12 +473,21 @@ def bench_flat(size: int) -> None:
     verts = np.vstack([verts, quad])
     n_tri = len(tris)
     obj = np.r_[np.zeros(n_tri - 2, np.int32), np.ones(2, np.int32)]
-    mats = [materials.MaterialSampler(np.array([0.8, 0.2, 0.2, 1.0])),
-            materials.MaterialSampler(np.array([0.7, 0.7, 0.7, 1.0]))]
-    bvh = meshes.BVHIntersector(verts, tris, obj, obj.astype(np.int64),
-                                np.zeros((n_tri, 3, 2)), mats, ["Sphere", "Ground"])
-    cam = score.Camera.perspective(position=(0.0, -6.0, 3.0), look_at=(0.0, 0.0, 0.8),
-                                   up=(0.0, 0.0, 1.0), fov_deg=50.0, width=size, height=size)
+    mats = [
+        materials.MaterialSampler(np.array([0.8, 0.2, 0.2, 1.0])),
+        materials.MaterialSampler(np.array([0.7, 0.7, 0.7, 1.0])),
+    ]
+    bvh = meshes.BVHIntersector(
+        verts, tris, obj, obj.astype(np.int64), np.zeros((n_tri, 3, 2)), mats, ["Sphere", "Ground"]
+    )
+    cam = score.Camera.perspective(
+        position=(0.0, -6.0, 3.0),
+        look_at=(0.0, 0.0, 0.8),
+        up=(0.0, 0.0, 1.0),
+        fov_deg=50.0,
+        width=size,
+        height=size,
+    )
     origins, directions = cam.rays()
     tree = bvh._tree
 
@@ -437,18 +501,25 @@ def bench_flat(size: int) -> None:
     t_plain = best_time(plain, repeats=5)
     line("triangles / rays", f"{n_tri} / {cam.n_pixels}")
     line("plain loop of BVHTree.ray_cast (wall, CPU)", f"{w_plain:6.3f}, {t_plain:6.3f} s")
-    for background, label in (((0.05, 0.05, 0.08), "solid background"),
-                              ("procedural", "procedural sky")):
+    for background, label in (
+        ((0.05, 0.05, 0.08), "solid background"),
+        ("procedural", "procedural sky"),
+    ):
         scene = score.Scene(model=None, objects=bvh, background=background)
-        w_render = best_time(lambda scene=scene: score.render(scene, cam), repeats=5,
-                             clock=time.perf_counter)
-        t_render = best_time(lambda scene=scene: score.render(scene, cam), repeats=5,
-                             clock=cpu_seconds)
+        w_render = best_time(
+            lambda scene=scene: score.render(scene, cam), repeats=5, clock=time.perf_counter
+        )
+        t_render = best_time(
+            lambda scene=scene: score.render(scene, cam), repeats=5, clock=cpu_seconds
+        )
         line(f"render, add-on's BVH, {label}", f"{w_render:6.3f}, {t_render:6.3f} s")
         solid = label.startswith("solid")
-        line("  ratio wall (CPU)", f"{w_render / w_plain:5.2f} ({t_render / t_plain:4.2f}) x",
-             "<= 2" if solid else "(+ the sky's noise)",
-             w_render / w_plain <= 2 if solid else None)
+        line(
+            "  ratio wall (CPU)",
+            f"{w_render / w_plain:5.2f} ({t_render / t_plain:4.2f}) x",
+            "<= 2" if solid else "(+ the sky's noise)",
+            w_render / w_plain <= 2 if solid else None,
+        )
 
 
 # ------------------------------------------------------------------------------------
@@ -462,26 +533,46 @@ def hd_child(method: str | None) -> None:
     s = out.summary
     kind = s["parallel"]
     workers = int(kind.split()[0]) if kind.endswith("processes") else 0
-    print(json.dumps({"seconds": seconds, "parent_mib": own, "worker_mib": worker,
-                      "workers": workers, "rays": s["rays"], "steps": s["steps"],
-                      "tolerance": tol, "parallel": kind}))
+    print(
+        json.dumps(
+            {
+                "seconds": seconds,
+                "parent_mib": own,
+                "worker_mib": worker,
+                "workers": workers,
+                "rays": s["rays"],
+                "steps": s["steps"],
+                "tolerance": tol,
+                "parallel": kind,
+            }
+        )
+    )
 
 
 def bench_hd(method: str | None) -> None:
-    print("\n[hd] 1920x1080 Kerr a/M = 0.9 frame, tolerance = 0.1 pixel, 2 workers "
-          "(in a child process)")
-    cmd = [sys.executable, __file__, "--hd-child"] + ([] if method is None else
-                                                       ["--method", method])
+    print(
+        "\n[hd] 1920x1080 Kerr a/M = 0.9 frame, tolerance = 0.1 pixel, 2 workers "
+        "(in a child process)"
+    )
+    cmd = [sys.executable, __file__, "--hd-child"] + (
+        [] if method is None else ["--method", method]
+    )
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     done = subprocess.run(cmd, capture_output=True, text=True, env=env, check=True)
     res = json.loads(done.stdout.strip().splitlines()[-1])
-    line(f"render time ({res['parallel']})", f"{res['seconds']:8.1f} s", "<= 600 s",
-         res["seconds"] <= 600)
+    line(
+        f"render time ({res['parallel']})",
+        f"{res['seconds']:8.1f} s",
+        "<= 600 s",
+        res["seconds"] <= 600,
+    )
     # forked workers share the parent's pages until they write: the sum is an upper bound
     peak = res["parent_mib"] + res["workers"] * res["worker_mib"]
     line("peak resident memory, all processes", f"{peak:8.0f} MiB", "< 2048 MiB", peak < 2048)
-    line("  the render's process / largest worker", f"{res['parent_mib']:.0f} / "
-         f"{res['worker_mib']:.0f} MiB")
+    line(
+        "  the render's process / largest worker",
+        f"{res['parent_mib']:.0f} / {res['worker_mib']:.0f} MiB",
+    )
     line("steps per ray (mean)", f"{res['steps'] / max(res['rays'], 1):8.1f}")
 
 
@@ -497,10 +588,17 @@ def main() -> None:
     if args.hd_child:
         hd_child(args.method)
         return
-    sections = [s for s in args.only.split(",") if s] or \
-        ["eval", "steps", "image", "cores", "flat"] + (["hd", "calibrate"] if args.full else [])
-    print(f"SymRay performance (numpy {np.__version__}, Python {sys.version.split()[0]}, "
-          f"{os.cpu_count()} CPUs)")
+    sections = [s for s in args.only.split(",") if s] or [
+        "eval",
+        "steps",
+        "image",
+        "cores",
+        "flat",
+    ] + (["hd", "calibrate"] if args.full else [])
+    print(
+        f"SymRay performance (numpy {np.__version__}, Python {sys.version.split()[0]}, "
+        f"{os.cpu_count()} CPUs)"
+    )
     start = time.perf_counter()
     for section in sections:
         if section == "eval":

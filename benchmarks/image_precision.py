@@ -44,23 +44,35 @@ CHUNK = 8192
 
 
 def _black_hole_camera(width: int, height: int) -> core.Camera:
-    return core.Camera.perspective(position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1),
-                                   fov_deg=40, width=width, height=height)
+    return core.Camera.perspective(
+        position=(0, -30, 2),
+        look_at=(0, 0, 0),
+        up=(0, 0, 1),
+        fov_deg=40,
+        width=width,
+        height=height,
+    )
 
 
 def kerr_scene() -> core.Scene:
     """The README's Kerr scene: a/M = 0.9 (Kerr–Schild), a red sphere behind the hole."""
-    return core.Scene(model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"),
-                      objects=[core.Sphere(center=(0, 8, 0), radius=1, color=(1, 0, 0, 1))],
-                      background="procedural")
+    return core.Scene(
+        model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"),
+        objects=[core.Sphere(center=(0, 8, 0), radius=1, color=(1, 0, 0, 1))],
+        background="procedural",
+    )
 
 
 def schwarzschild_scene() -> core.Scene:
     """Schwarzschild (rg = 1) with a 16 rg checker board 12 rg behind the hole."""
-    board = core.Plane(point=(0, 12, 0), normal=(0, -1, 0), u_axis=(1, 0, 0),
-                       extent=(16, 16), color=core.checker(8, 8))
-    return core.Scene(model=hm.schwarzschild(rg=1.0), objects=[board],
-                      background="procedural")
+    board = core.Plane(
+        point=(0, 12, 0),
+        normal=(0, -1, 0),
+        u_axis=(1, 0, 0),
+        extent=(16, 16),
+        color=core.checker(8, 8),
+    )
+    return core.Scene(model=hm.schwarzschild(rg=1.0), objects=[board], background="procedural")
 
 
 @dataclass
@@ -83,8 +95,13 @@ def scene_case(name: str, quick: bool) -> SceneCase:
         return SceneCase(scene, cam, math.radians(fov) / w, None, _runs(quick, media=True))
     size = 48 if quick else 192
     scene = kerr_scene() if name == "kerr" else schwarzschild_scene()
-    return SceneCase(scene, _black_hole_camera(size, size), math.radians(40.0) / size, REGION,
-                     _runs(quick, media=False, splits=name == "schwarzschild"))
+    return SceneCase(
+        scene,
+        _black_hole_camera(size, size),
+        math.radians(40.0) / size,
+        REGION,
+        _runs(quick, media=False, splits=name == "schwarzschild"),
+    )
 
 
 def _runs(quick: bool, media: bool, splits: bool = True):
@@ -93,24 +110,38 @@ def _runs(quick: bool, media: bool, splits: bool = True):
     if media:
         grid = (1e-4, 1e-5, 1e-6) if quick else (1e-3, 1e-4, 3e-5, 1e-5, 3e-6, 1e-6, 1e-7)
         low = (1e-3, 1e-4) if quick else (1e-3, 3e-4, 1e-4, 3e-5, 1e-5)
-        return [("rk4", grid), ("dopri5", grid), ("gauss4", grid), ("yoshida4", grid),
-                ("leapfrog", low), ("blanes_moan4", grid), ("blanes_moan6", grid)]
+        return [
+            ("rk4", grid),
+            ("dopri5", grid),
+            ("gauss4", grid),
+            ("yoshida4", grid),
+            ("leapfrog", low),
+            ("blanes_moan4", grid),
+            ("blanes_moan6", grid),
+        ]
     wide = (1e-4, 1e-6) if quick else (1e-4, 1e-5, 1e-6, 1e-7, 1e-8)
     tight = (1e-4, 1e-7) if quick else (1e-4, 1e-6, 1e-8, 1e-10)
-    runs = [("rk4", wide), ("dopri5", wide),
-            ("gauss4", (1e-4, 1e-6) if quick else (1e-4, 1e-6, 1e-8)),
-            ("yoshida4", (1e-4,) if quick else (1e-4, 1e-6))]
+    runs = [
+        ("rk4", wide),
+        ("dopri5", wide),
+        ("gauss4", (1e-4, 1e-6) if quick else (1e-4, 1e-6, 1e-8)),
+        ("yoshida4", (1e-4,) if quick else (1e-4, 1e-6)),
+    ]
     if splits:
-        runs += [("leapfrog", (1e-4,) if quick else (1e-4, 1e-6)),
-                 ("blanes_moan4", tight), ("blanes_moan6", tight)]
+        runs += [
+            ("leapfrog", (1e-4,) if quick else (1e-4, 1e-6)),
+            ("blanes_moan4", tight),
+            ("blanes_moan6", tight),
+        ]
     return runs
 
 
 def trace(case: SceneCase, method: str, tolerance: float):
     """(ending, direction, position, steps, seconds) of every pixel."""
     extent = float(np.linalg.norm(case.camera.frame.position - case.scene.center))
-    options = TraceOptions(method=method, tolerance=tolerance, region_radius=case.region,
-                           max_steps=10**6)
+    options = TraceOptions(
+        method=method, tolerance=tolerance, region_radius=case.region, max_steps=10**6
+    )
     tracer = Tracer(case.scene, options, extent)
     n = case.camera.n_pixels
     ending, steps = np.empty(n, np.int8), np.empty(n, np.int64)
@@ -165,17 +196,27 @@ def run_scene(name: str, quick: bool, out: str) -> list[dict]:
         for tol in tolerances:
             e, d, p, s, sec = trace(case, method, tol)
             err, apart = pixel_errors(case, ref, (e, d, p))
-            row = dict(scene=name, method=method, tolerance=tol, pixels=case.camera.n_pixels,
-                       seconds=round(sec, 3), steps=int(s.sum()),
-                       ns_per_ray_step=round(1e9 * sec / max(int(s.sum()), 1)),
-                       err_median_px=float(np.median(err)),
-                       err_p99_px=float(np.percentile(err, 99)), err_max_px=float(err.max()),
-                       ending_apart=apart,
-                       failed=int(np.count_nonzero(e == core.ENDING["failed"])))
+            row = dict(
+                scene=name,
+                method=method,
+                tolerance=tol,
+                pixels=case.camera.n_pixels,
+                seconds=round(sec, 3),
+                steps=int(s.sum()),
+                ns_per_ray_step=round(1e9 * sec / max(int(s.sum()), 1)),
+                err_median_px=float(np.median(err)),
+                err_p99_px=float(np.percentile(err, 99)),
+                err_max_px=float(err.max()),
+                ending_apart=apart,
+                failed=int(np.count_nonzero(e == core.ENDING["failed"])),
+            )
             rows.append(row)
-            print(f"  {name:13s} {method:13s} tol {tol:7.0e}: {sec:7.2f} s, error p99 "
-                  f"{row['err_p99_px']:.2e} max {row['err_max_px']:.2e} px, {apart} pixels "
-                  f"end apart, {row['failed']} failed", flush=True)
+            print(
+                f"  {name:13s} {method:13s} tol {tol:7.0e}: {sec:7.2f} s, error p99 "
+                f"{row['err_p99_px']:.2e} max {row['err_max_px']:.2e} px, {apart} pixels "
+                f"end apart, {row['failed']} failed",
+                flush=True,
+            )
     return rows
 
 
@@ -186,18 +227,25 @@ def verdict(rows: list[dict]) -> list[str]:
     for name in dict.fromkeys(r["scene"] for r in rows):
         mine = [r for r in rows if r["scene"] == name]
         for level in (0.1, 0.01, 0.001):
-            ok = [r for r in mine if r["err_p99_px"] <= level
-                  and r["ending_apart"] <= 1e-4 * r["pixels"]]
+            ok = [
+                r
+                for r in mine
+                if r["err_p99_px"] <= level and r["ending_apart"] <= 1e-4 * r["pixels"]
+            ]
             if not ok:
                 lines.append(f"  {name}: 99% within {level:g} px: no run got there")
                 continue
             best = min(ok, key=lambda r: r["seconds"])
-            others = sorted({r["method"]: r for r in sorted(ok, key=lambda r: -r["seconds"])}
-                            .values(), key=lambda r: r["seconds"])
+            others = sorted(
+                {r["method"]: r for r in sorted(ok, key=lambda r: -r["seconds"])}.values(),
+                key=lambda r: r["seconds"],
+            )
             tail = ", ".join(f"{r['method']} {r['seconds']:.2f} s" for r in others[1:4])
-            lines.append(f"  {name}: 99% within {level:g} px: cheapest {best['method']} at "
-                         f"tolerance {best['tolerance']:g}, {best['seconds']:.2f} s "
-                         f"(next: {tail})")
+            lines.append(
+                f"  {name}: 99% within {level:g} px: cheapest {best['method']} at "
+                f"tolerance {best['tolerance']:g}, {best['seconds']:.2f} s "
+                f"(next: {tail})"
+            )
     return lines
 
 
@@ -212,13 +260,17 @@ def plot(rows: list[dict], path: str) -> None:
     for k, method in enumerate(dict.fromkeys(r["method"] for r in rows)):
         mine = [r for r in rows if r["method"] == method]
         t = [r["seconds"] for r in mine]
-        ax.loglog(t, [max(r["err_p99_px"], 1e-9) for r in mine], "-o", ms=3, color=f"C{k}",
-                  label=method)
+        ax.loglog(
+            t, [max(r["err_p99_px"], 1e-9) for r in mine], "-o", ms=3, color=f"C{k}", label=method
+        )
         ax.loglog(t, [max(r["err_max_px"], 1e-9) for r in mine], ":", color=f"C{k}", lw=0.8)
     name, n = rows[0]["scene"], rows[0]["pixels"]
     ax.axhline(0.1, color="0.5", lw=0.6)
-    ax.set(xlabel="trace time (s, one core)", ylabel="error against the reference (px)",
-           title=f"{name}, {n} pixels: solid = 99th percentile, dotted = max")
+    ax.set(
+        xlabel="trace time (s, one core)",
+        ylabel="error against the reference (px)",
+        title=f"{name}, {n} pixels: solid = 99th percentile, dotted = max",
+    )
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     fig.savefig(path, dpi=110, bbox_inches="tight")

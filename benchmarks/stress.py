@@ -44,8 +44,9 @@ def outcome(res, k: int | None = None) -> str:
     failed = np.atleast_1d(res.failed)
     captured = np.atleast_1d(res.captured) if res.captured is not None else failed * False
     idx = range(len(failed)) if k is None else [k]
-    words = ["flagged failed" if failed[i] else "captured" if captured[i] else "completed"
-             for i in idx]
+    words = [
+        "flagged failed" if failed[i] else "captured" if captured[i] else "completed" for i in idx
+    ]
     return ", ".join(words)
 
 
@@ -56,8 +57,10 @@ def image_check(out) -> str:
     failed = out.passes["ending"] == core.ENDING["failed"]
     magenta = bool(np.allclose(rgba[failed], core.FAILED_COLOR)) if failed.any() else True
     assert finite and magenta, "a NaN or an unflagged failed ray reached the image"
-    return (f"no NaN in the image ({rgba.shape[1]}x{rgba.shape[0]}), "
-            f"{int(failed.sum())} failed pixels drawn magenta, endings {out.summary['endings']}")
+    return (
+        f"no NaN in the image ({rgba.shape[1]}x{rgba.shape[0]}), "
+        f"{int(failed.sum())} failed pixels drawn magenta, endings {out.summary['endings']}"
+    )
 
 
 def schwarzschild_ray(b, r0: float = 30.0):
@@ -66,8 +69,9 @@ def schwarzschild_ray(b, r0: float = 30.0):
     f = 1 - RG / r0
     n = b.size
     q0 = np.stack([np.zeros(n), np.full(n, r0), np.full(n, np.pi / 2), np.zeros(n)], 1)
-    p0 = np.stack([-np.ones(n), -np.sqrt(np.maximum(1 / f**2 - b**2 / (f * r0**2), 0)),
-                   np.zeros(n), b], 1)
+    p0 = np.stack(
+        [-np.ones(n), -np.sqrt(np.maximum(1 / f**2 - b**2 / (f * r0**2), 0)), np.zeros(n), b], 1
+    )
     return q0, p0
 
 
@@ -97,12 +101,15 @@ def near_critical(delta: float = 1e-6, step: float = 0.01, steps: int = 6000):
     phi_in, _, _, _ = _schwarzschild_integrals(BC * (1 + delta), 30.0)
     phi_out, _, _, _ = _schwarzschild_integrals(BC * (1 + delta), float(res.q[0, 1]))
     exact = (phi_in + phi_out) / (2 * np.pi)
-    return report(f"near_critical (b = b_c (1 +- {delta:g}))",
-                  outcome=outcome(res), turns=np.round(turns, 6).tolist(),
-                  escaping_turns_exact=f"{exact:.6f} (orbit integral to the final r = "
-                                       f"{res.q[0, 1]:.3g})",
-                  drift=drift(H, q0, p0, res),
-                  seconds=round(time.perf_counter() - start, 2), data={"result": res})
+    return report(
+        f"near_critical (b = b_c (1 +- {delta:g}))",
+        outcome=outcome(res),
+        turns=np.round(turns, 6).tolist(),
+        escaping_turns_exact=f"{exact:.6f} (orbit integral to the final r = {res.q[0, 1]:.3g})",
+        drift=drift(H, q0, p0, res),
+        seconds=round(time.perf_counter() - start, 2),
+        data={"result": res},
+    )
 
 
 def horizon(size: int = 24):
@@ -121,16 +128,20 @@ def horizon(size: int = 24):
     qs, ps = schwarzschild_ray(b)
     rs = core.integrate(Hs, qs, ps, step=0.01, steps=4000, method="gauss4", adaptive=True)
     scene = core.Scene(model=hm.schwarzschild(rg=RG), background="procedural")
-    cam = core.Camera.perspective(position=(0, -1.5, 0), look_at=(0, 0, 0), up=(0, 0, 1),
-                                  fov_deg=120, width=size, height=size)
+    cam = core.Camera.perspective(
+        position=(0, -1.5, 0), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=120, width=size, height=size
+    )
     out = core.render(scene, cam, method="gauss4", tolerance=1e-6, passes=("ending",))
-    return report("horizon (rays grazing and crossing the horizon)",
-                  kerr_schild=outcome(res), final_r_over_r_plus=np.round(
-                      r_end / H.horizon, 4).tolist() if r_end is not None else "n/a",
-                  kerr_schild_drift=drift(H, q0, p0, res),
-                  boyer_lindquist_schwarzschild=outcome(rs),
-                  bl_drift=drift(Hs, qs, ps, rs),
-                  camera_at_1_5_rg=image_check(out), data={"result": res, "image": out})
+    return report(
+        "horizon (rays grazing and crossing the horizon)",
+        kerr_schild=outcome(res),
+        final_r_over_r_plus=np.round(r_end / H.horizon, 4).tolist() if r_end is not None else "n/a",
+        kerr_schild_drift=drift(H, q0, p0, res),
+        boyer_lindquist_schwarzschild=outcome(rs),
+        bl_drift=drift(Hs, qs, ps, rs),
+        camera_at_1_5_rg=image_check(out),
+        data={"result": res, "image": out},
+    )
 
 
 def _null_pt(H, q0, p0):
@@ -150,8 +161,9 @@ def spin(size: int = 32, a_over_m: float = 0.9999):
     """a/M = 0.9999: a small image (Kerr–Schild) and rays through the photon region (BL)."""
     a = a_over_m * M
     scene = core.Scene(model=hm.kerr(rg=RG, a=a, chart="kerr_schild"), background="procedural")
-    cam = core.Camera.perspective(position=(0, -30, 1), look_at=(0, 0, 0), up=(0, 0, 1),
-                                  fov_deg=25, width=size, height=size)
+    cam = core.Camera.perspective(
+        position=(0, -30, 1), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=25, width=size, height=size
+    )
     start = time.perf_counter()
     out = core.render(scene, cam, method="gauss4", tolerance=1e-6, passes=("ending",))
     from work_precision import _kerr_rays
@@ -159,11 +171,15 @@ def spin(size: int = 32, a_over_m: float = 0.9999):
     H = hm.kerr(rg=RG, a=a)
     q0, p0 = _kerr_rays(8, a, 30.0)
     res = core.integrate(H, q0, p0, step=0.01, steps=2500, method="gauss4", adaptive=True)
-    return report(f"spin (a/M = {a_over_m})", image=image_check(out),
-                  energy_error_max=out.summary["energy_error_max"],
-                  bl_photon_region_rays=outcome(res), bl_drift=drift(H, q0, p0, res),
-                  seconds=round(time.perf_counter() - start, 1),
-                  data={"result": res, "render": out})
+    return report(
+        f"spin (a/M = {a_over_m})",
+        image=image_check(out),
+        energy_error_max=out.summary["energy_error_max"],
+        bl_photon_region_rays=outcome(res),
+        bl_drift=drift(H, q0, p0, res),
+        seconds=round(time.perf_counter() - start, 1),
+        data={"result": res, "render": out},
+    )
 
 
 def pole(height: int = 41, tolerance: float = 1e-7):
@@ -175,8 +191,9 @@ def pole(height: int = 41, tolerance: float = 1e-7):
 def pole_charts(height: int = 41, tolerance: float = 1e-7):
     """A camera in the equatorial plane: the middle column of pixels (L_z = 0, through the
     axis) and its neighbours, traced in Boyer–Lindquist and in Kerr–Schild coordinates."""
-    cam = core.Camera.perspective(position=(0, -30, 0), look_at=(0, 0, 0), up=(0, 0, 1),
-                                  fov_deg=30, width=3, height=height)
+    cam = core.Camera.perspective(
+        position=(0, -30, 0), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=30, width=3, height=height
+    )
     o, d = cam.rays()
     results = {}
     for chart in ("boyer_lindquist", "kerr_schild"):
@@ -190,18 +207,23 @@ def pole_charts(height: int = 41, tolerance: float = 1e-7):
         a, b = results[chart, tolerance], results[chart, tolerance * 1e-2]
         esc = ((a.ending == 0) & (b.ending == 0)).reshape(height, 3)
         cols = np.where(esc, (_angles(a.direction, b.direction) / pix).reshape(height, 3), 0.0)
-        lines[chart] = (f"endings {np.bincount(a.ending, minlength=5).tolist()}; tolerance "
-                        f"{tolerance:g} against {tolerance * 1e-2:g}: on the axis column "
-                        f"{cols[:, 1].max():.2e} px, beside it {cols[:, [0, 2]].max():.2e} px")
+        lines[chart] = (
+            f"endings {np.bincount(a.ending, minlength=5).tolist()}; tolerance "
+            f"{tolerance:g} against {tolerance * 1e-2:g}: on the axis column "
+            f"{cols[:, 1].max():.2e} px, beside it {cols[:, [0, 2]].max():.2e} px"
+        )
     bl = results["boyer_lindquist", tolerance * 1e-2]
     ks = results["kerr_schild", tolerance * 1e-2]
     both = (bl.ending == 0) & (ks.ending == 0)
     between = _angles(bl.direction, ks.direction)[both] / pix
-    return report("pole: rays over the Kerr pole (a/M = 0.998) in both charts", **lines,
-                  charts=f"Boyer–Lindquist and Kerr–Schild escape directions differ by "
-                         f"{np.median(between):.2e} px (median), up to {between.max():.2e} px "
-                         "next to the shadow (the observers' frames differ at O(a/r^2))",
-                  data={"tracer": results})
+    return report(
+        "pole: rays over the Kerr pole (a/M = 0.998) in both charts",
+        **lines,
+        charts=f"Boyer–Lindquist and Kerr–Schild escape directions differ by "
+        f"{np.median(between):.2e} px (median), up to {between.max():.2e} px "
+        "next to the shadow (the observers' frames differ at O(a/r^2))",
+        data={"tracer": results},
+    )
 
 
 def pole_rays(steps: int = 700):
@@ -211,11 +233,14 @@ def pole_rays(steps: int = 700):
     p0 = np.array([[-1.0, 0.0, -3.0, 0.0], [-1.0, 0.0, -3.0, 1e-6]])
     p0[:, 1] = _null_pr(H, q0, p0)
     res = core.integrate(H, q0, p0, step=0.01, steps=steps, method="gauss4", adaptive=True)
-    return report("pole: Boyer–Lindquist rays over the pole",
-                  outcome=f"L_z = 0: {outcome(res, 0)}, L_z = 1e-6: {outcome(res, 1)}; "
-                          f"final theta {np.round(res.q[:, 2], 4).tolist()} (theta < 0: past "
-                          "the pole, the same points as theta > 0 with phi + pi)",
-                  drift=drift(H, q0, p0, res), data={"result": res, "q0": q0, "p0": p0})
+    return report(
+        "pole: Boyer–Lindquist rays over the pole",
+        outcome=f"L_z = 0: {outcome(res, 0)}, L_z = 1e-6: {outcome(res, 1)}; "
+        f"final theta {np.round(res.q[:, 2], 4).tolist()} (theta < 0: past "
+        "the pole, the same points as theta > 0 with phi + pi)",
+        drift=drift(H, q0, p0, res),
+        data={"result": res, "q0": q0, "p0": p0},
+    )
 
 
 def _angles(u, v):
@@ -253,15 +278,20 @@ def index_jump(steps_sizes=(0.05, 1e-2, 1e-3, 1e-4), methods=("gauss4", "rk4", "
             pz_snell = math.sqrt(1.3**2 - math.cos(alpha) ** 2)
             above = res.q[0, 2] > 0.6
             err = f"{abs(res.p[0, 2] - pz_snell):.1e}" if above else "(not through the layer)"
-            rows[f"{m} h={h:g}"] = (f"{outcome(res)}, |p_z - Snell| {err}, max |H - H0| "
-                                    f"{res.energy_error[0]:.1e}, p_x drift "
-                                    f"{abs(res.p[0, 0] - p0[0, 0]):.0e} "
-                                    f"({time.perf_counter() - start:.2f} s)")
-    scene = core.Scene(model=hm.medium(JUMP_INDEX, bounds=((-5, -5, -1), (5, 5, 2))),
-                       objects=[core.Plane(point=(0, 0, 1.5), normal=(0, 0, -1),
-                                           color=core.checker(8, 8))], background=(0, 0, 1))
-    cam = core.Camera.perspective(position=(0, -2, 0), look_at=(0, 0, 1.5), up=(0, 0, 1),
-                                  fov_deg=60, width=16, height=16)
+            rows[f"{m} h={h:g}"] = (
+                f"{outcome(res)}, |p_z - Snell| {err}, max |H - H0| "
+                f"{res.energy_error[0]:.1e}, p_x drift "
+                f"{abs(res.p[0, 0] - p0[0, 0]):.0e} "
+                f"({time.perf_counter() - start:.2f} s)"
+            )
+    scene = core.Scene(
+        model=hm.medium(JUMP_INDEX, bounds=((-5, -5, -1), (5, 5, 2))),
+        objects=[core.Plane(point=(0, 0, 1.5), normal=(0, 0, -1), color=core.checker(8, 8))],
+        background=(0, 0, 1),
+    )
+    cam = core.Camera.perspective(
+        position=(0, -2, 0), look_at=(0, 0, 1.5), up=(0, 0, 1), fov_deg=60, width=16, height=16
+    )
     out = core.render(scene, cam, method="gauss4", step=0.05, passes=("ending",))
     return report("index_jump (n from 1 to 1.3 within 1e-3)", **rows, image=image_check(out))
 
@@ -281,8 +311,10 @@ def stability_limit(method: str, hmax: float = 4.0, n: int = 4000) -> float:
     return float(h[bad[0] - 1]) if bad.size else math.inf
 
 
-def stability(steps: int = 2000, methods=("symplectic_euler", "stormer_verlet", "yoshida4",
-                                          "yoshida6", "rk4", "gauss4")):
+def stability(
+    steps: int = 2000,
+    methods=("symplectic_euler", "stormer_verlet", "yoshida4", "yoshida6", "rk4", "gauss4"),
+):
     """H = (p^2 + q^2)/2 at 0.99 and 1.01 times each method's stability limit, and a Kerr
     render at an absurd step (tau step 2)."""
     H = hm.from_expression("0.5*(p**2 + q**2)", q=["q"], p=["p"])
@@ -291,8 +323,10 @@ def stability(steps: int = 2000, methods=("symplectic_euler", "stormer_verlet", 
         limit = stability_limit(m)
         if not math.isfinite(limit):
             res = core.integrate(H, [1.0], [0.0], step=3.9, steps=steps, method=m)
-            rows[m] = (f"stable up to h = 4 (the scan's end); at h = 3.9: {outcome(res)}, max "
-                       f"|H - H0| {res.energy_error:.2e}")
+            rows[m] = (
+                f"stable up to h = 4 (the scan's end); at h = 3.9: {outcome(res)}, max "
+                f"|H - H0| {res.energy_error:.2e}"
+            )
             continue
         for f in (0.99, 1.01):
             with np.errstate(all="ignore"):
@@ -300,11 +334,15 @@ def stability(steps: int = 2000, methods=("symplectic_euler", "stormer_verlet", 
             grows = res.failed or not res.energy_error < 1e3
             rows[f"{m} h = {f:g} x {limit:.4g}"] = (
                 f"{outcome(res)} after {res.steps} steps, max |H - H0| {res.energy_error:.2e}"
-                f" ({'unstable' if grows else 'bounded'})")
-    scene = core.Scene(model=hm.kerr(rg=RG, a=0.45, chart="kerr_schild"),
-                       objects=[core.Sphere(center=(0, 8, 0), radius=1, color=(1, 0, 0, 1))])
-    cam = core.Camera.perspective(position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1),
-                                  fov_deg=40, width=16, height=16)
+                f" ({'unstable' if grows else 'bounded'})"
+            )
+    scene = core.Scene(
+        model=hm.kerr(rg=RG, a=0.45, chart="kerr_schild"),
+        objects=[core.Sphere(center=(0, 8, 0), radius=1, color=(1, 0, 0, 1))],
+    )
+    cam = core.Camera.perspective(
+        position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=40, width=16, height=16
+    )
     for m in ("rk4", "gauss4"):  # a tau step of 2: 2 r per step in s
         out = core.render(scene, cam, method=m, step=2.0, passes=("ending",))
         rows[f"render {m} at tau step 2"] = image_check(out)
@@ -342,15 +380,20 @@ def long(steps: int = 10_000_000, step: float = 0.01):
     H = Kepler()
     q0, p0 = np.array([0.5, 0.0]), np.array([0.0, math.sqrt(3.0)])  # e = 0.5, a = 1
     start = time.perf_counter()
-    res = core.integrate(H, q0, p0, step=step, steps=steps, method="stormer_verlet",
-                         energy_every=1000)
+    res = core.integrate(
+        H, q0, p0, step=step, steps=steps, method="stormer_verlet", energy_every=1000
+    )
     sec = time.perf_counter() - start
     d = drift(H, q0, p0, res)
-    return report(f"long ({steps:.0e} steps, one ray, stormer_verlet, Kepler e = 0.5)",
-                  outcome=outcome(res), orbits=round(steps * step / (2 * math.pi)),
-                  max_energy_error=f"{res.energy_error:.2e} (sampled every 1000 steps)",
-                  final_drift=d, seconds=f"{sec:.1f} ({1e6 * sec / steps:.1f} us per step)",
-                  data={"result": res})
+    return report(
+        f"long ({steps:.0e} steps, one ray, stormer_verlet, Kepler e = 0.5)",
+        outcome=outcome(res),
+        orbits=round(steps * step / (2 * math.pi)),
+        max_energy_error=f"{res.energy_error:.2e} (sampled every 1000 steps)",
+        final_drift=d,
+        seconds=f"{sec:.1f} ({1e6 * sec / steps:.1f} us per step)",
+        data={"result": res},
+    )
 
 
 def long_split(steps: int = 1_000_000, step: float = 0.25):
@@ -363,16 +406,20 @@ def long_split(steps: int = 1_000_000, step: float = 0.25):
     rows = {}
     for method in ("leapfrog", "blanes_moan4", "rk4"):
         start = time.perf_counter()
-        early, late = (core.integrate(H, q0, p0, step=step, steps=n, method=method,
-                                      adaptive=True, energy_every=100)
-                       for n in (steps // 100, steps))
+        early, late = (
+            core.integrate(
+                H, q0, p0, step=step, steps=n, method=method, adaptive=True, energy_every=100
+            )
+            for n in (steps // 100, steps)
+        )
         sec = time.perf_counter() - start
         growth = late.energy_error / early.energy_error
-        rows[method] = (f"|H - H0| {early.energy_error:.2e} after {steps // 100} steps, "
-                        f"{late.energy_error:.2e} after {steps} ({growth:.2f}x), "
-                        f"{outcome(late)}, {sec:.0f} s")
-    return report(f"long_split ({steps:.0e} steps of {step}, one ray, graded-index fibre)",
-                  **rows)
+        rows[method] = (
+            f"|H - H0| {early.energy_error:.2e} after {steps // 100} steps, "
+            f"{late.energy_error:.2e} after {steps} ({growth:.2f}x), "
+            f"{outcome(late)}, {sec:.0f} s"
+        )
+    return report(f"long_split ({steps:.0e} steps of {step}, one ray, graded-index fibre)", **rows)
 
 
 def n_zero(size: int = 12):
@@ -388,12 +435,16 @@ def n_zero(size: int = 12):
             res = core.integrate(H, q0, p0, step=1e-3, steps=3000, method="rk4")
         rows[f"n = {text}{' (literal)' if literal else ''}"] = (
             f"{outcome(res)} at z = {res.q[0, 2]:.3g} after {res.steps} steps, max |H - H0| "
-            f"{res.energy_error[0]:.1e}")
-    scene = core.Scene(model=hm.medium("z", bounds=((-3, -3, -1), (3, 3, 3))),
-                       objects=[core.Plane(point=(0, 0, -0.5), normal=(0, 0, 1),
-                                           color=(0.5, 0.5, 0.5, 1))], background=(0, 0, 1))
-    cam = core.Camera.perspective(position=(0, 0, 1), look_at=(0, 0, 0), up=(0, 1, 0),
-                                  fov_deg=10, width=size, height=size)
+            f"{res.energy_error[0]:.1e}"
+        )
+    scene = core.Scene(
+        model=hm.medium("z", bounds=((-3, -3, -1), (3, 3, 3))),
+        objects=[core.Plane(point=(0, 0, -0.5), normal=(0, 0, 1), color=(0.5, 0.5, 0.5, 1))],
+        background=(0, 0, 1),
+    )
+    cam = core.Camera.perspective(
+        position=(0, 0, 1), look_at=(0, 0, 0), up=(0, 1, 0), fov_deg=10, width=size, height=size
+    )
     with np.errstate(all="ignore"):
         out = core.render(scene, cam, method="rk4", step=0.01, passes=("ending",))
     return report("n_zero (an index going to zero)", **rows, image=image_check(out))
@@ -412,29 +463,45 @@ def far(size: int = 16, distance: float = 1e8):
     bend_exact = 2 * RG / b + (15 * math.pi / 16) * (RG / b) ** 2
     scene = core.Scene(model=hm.kerr(rg=RG, a=0.45, chart="kerr_schild"), background=(0, 0, 1))
     fov = math.degrees(4 * BC / distance)
-    cam = core.Camera.perspective(position=(0, -distance, 0), look_at=(0, 0, 0), up=(0, 0, 1),
-                                  fov_deg=fov, width=size, height=size)
+    cam = core.Camera.perspective(
+        position=(0, -distance, 0),
+        look_at=(0, 0, 0),
+        up=(0, 0, 1),
+        fov_deg=fov,
+        width=size,
+        height=size,
+    )
     out = core.render(scene, cam, method="gauss4", tolerance=1e-8, passes=("ending",))
     captured = int(np.count_nonzero(out.passes["ending"] == core.ENDING["captured"]))
     expect = math.pi * (size / 4) ** 2  # a disc of radius b_c: a quarter of the image width
-    return report(f"far (positions at {distance:.0e} rg)",
-                  ray=f"{outcome(res)}, from r = {distance:.0e} to r = {r_end:.3e}",
-                  deflection=f"{bend:.8e} rad against {bend_exact:.8e} (2nd order weak field)",
-                  drift=drift(H, q0, p0, res),
-                  shadow=f"{captured} captured pixels, about {expect:.0f} expected for a "
-                         f"disc of radius b_c (a/M = 0.9 shrinks and shifts it a little)",
-                  image=image_check(out),
-                  data={"result": res, "bend": bend, "bend_exact": bend_exact,
-                        "captured": captured, "expected": expect})
+    return report(
+        f"far (positions at {distance:.0e} rg)",
+        ray=f"{outcome(res)}, from r = {distance:.0e} to r = {r_end:.3e}",
+        deflection=f"{bend:.8e} rad against {bend_exact:.8e} (2nd order weak field)",
+        drift=drift(H, q0, p0, res),
+        shadow=f"{captured} captured pixels, about {expect:.0f} expected for a "
+        f"disc of radius b_c (a/M = 0.9 shrinks and shifts it a little)",
+        image=image_check(out),
+        data={
+            "result": res,
+            "bend": bend,
+            "bend_exact": bend_exact,
+            "captured": captured,
+            "expected": expect,
+        },
+    )
 
 
 def tao_render(size: int = 8):
     """tao2/tao4 in the renderer (they integrate the Poincaré-transformed K, where they are
     known to misbehave): how many rays end as plausible colours with a wrong H."""
-    scene = core.Scene(model=hm.kerr(rg=RG, a=0.45, chart="kerr_schild"),
-                       objects=[core.Sphere(center=(0, 8, 0), radius=1, color=(1, 0, 0, 1))])
-    cam = core.Camera.perspective(position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1),
-                                  fov_deg=40, width=size, height=size)
+    scene = core.Scene(
+        model=hm.kerr(rg=RG, a=0.45, chart="kerr_schild"),
+        objects=[core.Sphere(center=(0, 8, 0), radius=1, color=(1, 0, 0, 1))],
+    )
+    cam = core.Camera.perspective(
+        position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=40, width=size, height=size
+    )
     o, d = cam.rays()
     ref = Tracer(scene, TraceOptions(method="rk4", tolerance=1e-8), 30.0).trace(o, d)
     rows = {}
@@ -445,22 +512,36 @@ def tao_render(size: int = 8):
         wrong = drawn & ~(r.energy_error < 1e-3)
         esc = (r.ending == 0) & (ref.ending == 0)
         err = _angles(r.direction[esc], ref.direction[esc])
-        rows[m] = (f"{int(np.sum(~drawn))} flagged failed, {int(wrong.sum())} of "
-                   f"{int(drawn.sum())} drawn rays have |H - H0| > 1e-3 (NOT flagged); escape "
-                   f"directions off by {np.median(err):.2g} rad (median) against rk4")
+        rows[m] = (
+            f"{int(np.sum(~drawn))} flagged failed, {int(wrong.sum())} of "
+            f"{int(drawn.sum())} drawn rays have |H - H0| > 1e-3 (NOT flagged); escape "
+            f"directions off by {np.median(err):.2g} rad (median) against rk4"
+        )
         rgba = shade(r, core.Background("procedural"))  # the colours core.render gives them
-        out = core.RenderResult(rgba.reshape(size, size, 4),
-                                passes={"ending": r.ending.reshape(size, size)},
-                                summary={"endings": np.bincount(r.ending, minlength=5).tolist()})
+        out = core.RenderResult(
+            rgba.reshape(size, size, 4),
+            passes={"ending": r.ending.reshape(size, size)},
+            summary={"endings": np.bincount(r.ending, minlength=5).tolist()},
+        )
         rows[f"{m} image"] = image_check(out)
-    return report("tao_render (Tao's methods on the Poincaré-transformed K in the renderer)",
-                  **rows)
+    return report(
+        "tao_render (Tao's methods on the Poincaré-transformed K in the renderer)", **rows
+    )
 
 
-CASES = {"near_critical": near_critical, "horizon": horizon, "spin": spin, "pole": pole,
-         "index_jump": index_jump, "stability": stability, "long": long,
-         "long_split": long_split, "n_zero": n_zero,
-         "far": far, "tao_render": tao_render}
+CASES = {
+    "near_critical": near_critical,
+    "horizon": horizon,
+    "spin": spin,
+    "pole": pole,
+    "index_jump": index_jump,
+    "stability": stability,
+    "long": long,
+    "long_split": long_split,
+    "n_zero": n_zero,
+    "far": far,
+    "tao_render": tao_render,
+}
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -55,11 +55,30 @@ from core.trace import TraceOptions, Tracer
 
 OUT = os.path.join("out", "bench")
 RG, M = 1.0, 0.5
-ALL_METHODS = ("symplectic_euler", "stormer_verlet", "implicit_midpoint", "gauss4", "yoshida4",
-               "yoshida6", "yoshida8", "suzuki4", "suzuki6", "tao2", "tao4", "rk4")
+ALL_METHODS = (
+    "symplectic_euler",
+    "stormer_verlet",
+    "implicit_midpoint",
+    "gauss4",
+    "yoshida4",
+    "yoshida6",
+    "yoshida8",
+    "suzuki4",
+    "suzuki6",
+    "tao2",
+    "tao4",
+    "rk4",
+)
 QUICK_METHODS = ("stormer_verlet", "gauss4", "yoshida4", "tao4", "rk4")
-POINCARE_METHODS = ("stormer_verlet", "implicit_midpoint", "gauss4", "yoshida4", "yoshida6",
-                    "tao4", "rk4")
+POINCARE_METHODS = (
+    "stormer_verlet",
+    "implicit_midpoint",
+    "gauss4",
+    "yoshida4",
+    "yoshida6",
+    "tao4",
+    "rk4",
+)
 QUICK_POINCARE = ("gauss4", "yoshida4", "rk4")
 
 
@@ -84,18 +103,17 @@ class Problem:
     p0: np.ndarray
     S: np.ndarray
     T: np.ndarray | None
-    error: object                      # (q, p) final states -> per-ray error
-    steps: tuple                       # step counts tried, ascending
-    tols: tuple                        # dopri5 tolerances tried (error measure, levels:
-                                       # PROBLEM_INFO)
+    error: object  # (q, p) final states -> per-ray error
+    steps: tuple  # step counts tried, ascending
+    tols: tuple  # dopri5 tolerances tried (error measure, levels:
+    # PROBLEM_INFO)
 
 
 def _dop853(rhs, y0, t_end, rtol):
     """scipy DOP853 with dense output on a stacked system (one time for all rays)."""
     from scipy.integrate import solve_ivp
 
-    sol = solve_ivp(rhs, (0.0, t_end), y0, method="DOP853", rtol=rtol, atol=rtol,
-                    dense_output=True)
+    sol = solve_ivp(rhs, (0.0, t_end), y0, method="DOP853", rtol=rtol, atol=rtol, dense_output=True)
     if not sol.success:
         raise RuntimeError(f"reference integration failed: {sol.message}")
     return sol
@@ -119,9 +137,17 @@ def volterra(n: int, t_end: float, quick: bool) -> Problem:
         return np.hypot(q[:, 0] - qr, p[:, 0] - pr)
 
     steps = tuple(2000 * 2**k for k in range(0, 4 if quick else 7))  # h = 0.5 (Fig. 4) down
-    return Problem("volterra", hm.from_expression("p*q*(p + q - 1)", q=["q"], p=["p"]), q0, p0,
-                   np.full(n, t_end), None, error, steps,
-                   (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11))
+    return Problem(
+        "volterra",
+        hm.from_expression("p*q*(p + q - 1)", q=["q"], p=["p"]),
+        q0,
+        p0,
+        np.full(n, t_end),
+        None,
+        error,
+        steps,
+        (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
+    )
 
 
 def _schwarzschild_integrals(b: float, r0: float):
@@ -140,8 +166,8 @@ def _schwarzschild_integrals(b: float, r0: float):
     umax = mp.findroot(G, mp.mpf(real[0]))
     u0 = 1 / mp.mpf(r0)
     w0 = mp.sqrt(umax - u0)
-    d1 = 2 * umax - 3 * RG * umax**2          # -G'(umax) > 0
-    d2 = -1 + 3 * RG * umax                   # G''(umax) / 2
+    d1 = 2 * umax - 3 * RG * umax**2  # -G'(umax) > 0
+    d2 = -1 + 3 * RG * umax  # G''(umax) / 2
 
     def integral(weight):
         # G(umax - x) = x (d1 + d2 x - rg x^2) exactly: the 1/sqrt endpoint cancels
@@ -174,8 +200,17 @@ def schwarzschild(n: int, quick: bool, r0: float = 30.0) -> Problem:
         return np.where(p[:, 1] > 0, err, np.pi)  # not on its way out: off by half a turn
 
     steps = tuple(64 * 2**k for k in range(0, 8 if quick else 11))
-    return Problem("schwarzschild", hm.schwarzschild(rg=RG), q0, p0, S, T, error, steps,
-                   (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11))
+    return Problem(
+        "schwarzschild",
+        hm.schwarzschild(rg=RG),
+        q0,
+        p0,
+        S,
+        T,
+        error,
+        steps,
+        (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
+    )
 
 
 def _kerr_rays(n: int, a: float, r0: float):
@@ -205,7 +240,7 @@ def kerr(n: int, quick: bool, a: float = 0.499, r0: float = 30.0) -> Problem:
         # reference time lambda with d s / d lambda = Delta / r^2 (-> 1 far out, so that rays
         # that are out early do not run away exponentially); tau of the Poincaré runs
         # (g = Delta / r) is carried along: d tau / d lambda = 1 / r
-        q, p = y[:4 * n].reshape(n, 4), y[4 * n:8 * n].reshape(n, 4)
+        q, p = y[: 4 * n].reshape(n, 4), y[4 * n : 8 * n].reshape(n, 4)
         dq, dp = H.gradient(q, p)
         r = q[:, 1]
         gg = ((r * r - RG * r + a * a) / (r * r))[:, None]
@@ -214,10 +249,10 @@ def kerr(n: int, quick: bool, a: float = 0.499, r0: float = 30.0) -> Problem:
     y0 = np.concatenate([q0.ravel(), p0.ravel(), np.zeros(2 * n)])
     sol = _dop853(rhs, y0, 400.0, 1e-12)
     lam = np.array([_last_crossing(sol, i, n, r0) for i in range(n)])
-    ends = np.array([sol.sol(t) for t in lam])          # (n, 10n)
+    ends = np.array([sol.sol(t) for t in lam])  # (n, 10n)
     rows = np.arange(n)
-    q_ref = ends[rows][:, :4 * n].reshape(n, n, 4)[rows, rows]
-    p_ref = ends[rows][:, 4 * n:8 * n].reshape(n, n, 4)[rows, rows]
+    q_ref = ends[rows][:, : 4 * n].reshape(n, n, 4)[rows, rows]
+    p_ref = ends[rows][:, 4 * n : 8 * n].reshape(n, n, 4)[rows, rows]
     S = ends[rows, 8 * n + rows]
     T = ends[rows, 9 * n + rows]
     _, vel = H.gradient(q_ref, p_ref)  # dq/ds
@@ -231,8 +266,17 @@ def kerr(n: int, quick: bool, a: float = 0.499, r0: float = 30.0) -> Problem:
         return np.where(p[:, 1] > 0, err, np.pi)
 
     steps = tuple(128 * 2**k for k in range(0, 7 if quick else 10))
-    return Problem("kerr", H, q0, p0, S, T, error, steps,
-                   (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11))
+    return Problem(
+        "kerr",
+        H,
+        q0,
+        p0,
+        S,
+        T,
+        error,
+        steps,
+        (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
+    )
 
 
 def _last_crossing(sol, i: int, n: int, r0: float) -> float:
@@ -261,7 +305,7 @@ def mirage(n: int, quick: bool, x_end: float = 20.0) -> Problem:
         return m**-2, -2 * m**-3 * 0.02 * np.exp(-z / 0.15)
 
     def rhs(t, y):
-        q, p = y[:3 * n].reshape(n, 3), y[3 * n:].reshape(n, 3)
+        q, p = y[: 3 * n].reshape(n, 3), y[3 * n :].reshape(n, 3)
         nz, dn = index(q[:, 2])
         dp = np.zeros_like(p)
         dp[:, 2] = -0.5 * dn * np.einsum("ij,ij->i", p, p)
@@ -269,14 +313,23 @@ def mirage(n: int, quick: bool, x_end: float = 20.0) -> Problem:
 
     sol = _dop853(rhs, np.concatenate([q0.ravel(), p0.ravel()]), 1.2 * x_end, 1e-13)
     S = np.array([_crossing_x(sol, i, x_end) for i in range(n)])
-    q_ref = np.array([sol.sol(s)[3 * i:3 * i + 3] for i, s in enumerate(S)])
+    q_ref = np.array([sol.sol(s)[3 * i : 3 * i + 3] for i, s in enumerate(S)])
 
     def error(q, p):
         return np.linalg.norm(q - q_ref, axis=1)
 
     steps = tuple(25 * 2**k for k in range(0, 7 if quick else 10))
-    return Problem("mirage", H, q0, p0, S, None, error, steps,
-                   (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11))
+    return Problem(
+        "mirage",
+        H,
+        q0,
+        p0,
+        S,
+        None,
+        error,
+        steps,
+        (1e-4, 1e-6, 1e-8, 1e-10) if quick else (1e-3, 1e-5, 1e-7, 1e-9, 1e-11),
+    )
 
 
 def _crossing_x(sol, i: int, x_end: float) -> float:
@@ -338,16 +391,31 @@ def run_one(prob: Problem, method: str, mode: str, param, copies: int = 1) -> Ru
         res = core.integrate(prob.H, q0, p0, method=method, **kw)
     seconds = time.perf_counter() - start
     with np.errstate(all="ignore"):
-        err = np.concatenate([prob.error(res.q[k * n:(k + 1) * n], res.p[k * n:(k + 1) * n])
-                              for k in range(copies)])
+        err = np.concatenate(
+            [
+                prob.error(res.q[k * n : (k + 1) * n], res.p[k * n : (k + 1) * n])
+                for k in range(copies)
+            ]
+        )
     err = np.where(np.asarray(res.failed) | ~np.isfinite(err), np.inf, err)
-    return Run(prob.name, method, mode, float(param), len(err), float(np.mean(res.steps)),
-               seconds, float(np.max(err)), float(np.median(err)),
-               float(np.nanmax(res.energy_error)), int(np.sum(res.failed)))
+    return Run(
+        prob.name,
+        method,
+        mode,
+        float(param),
+        len(err),
+        float(np.mean(res.steps)),
+        seconds,
+        float(np.max(err)),
+        float(np.median(err)),
+        float(np.nanmax(res.energy_error)),
+        int(np.sum(res.failed)),
+    )
 
 
-def curve(prob: Problem, method: str, mode: str, budget: float, copies: int = 1,
-          floor: float = 1e-13):
+def curve(
+    prob: Problem, method: str, mode: str, budget: float, copies: int = 1, floor: float = 1e-13
+):
     """Runs of one method/mode over the problem's steps (or tolerances) within a time budget."""
     params = prob.tols if mode == "tol" else prob.steps
     runs, spent = [], 0.0
@@ -357,9 +425,12 @@ def curve(prob: Problem, method: str, mode: str, budget: float, copies: int = 1,
         run = run_one(prob, method, mode, param, copies)
         runs.append(run)
         spent += run.seconds
-        print(f"  {prob.name:13s} {run.label:24s} {mode:8s} {param:>9g}: error {run.error_max:9.2e}"
-              f" in {run.seconds:7.3f} s ({run.ns_per_ray_step:8.0f} ns/ray-step)"
-              + (f", {run.failed} failed" if run.failed else ""), flush=True)
+        print(
+            f"  {prob.name:13s} {run.label:24s} {mode:8s} {param:>9g}: error {run.error_max:9.2e}"
+            f" in {run.seconds:7.3f} s ({run.ns_per_ray_step:8.0f} ns/ray-step)"
+            + (f", {run.failed} failed" if run.failed else ""),
+            flush=True,
+        )
         if run.error_max < floor:
             break
     return runs
@@ -385,8 +456,11 @@ def cheapest(runs: list[Run], level: float, key: str = "error_max"):
     best = {}
     for label in dict.fromkeys(r.label for r in runs):
         # a run with failed rays reaches no level (their energy is NaN, not counted in the drift)
-        pts = sorted((r.seconds, getattr(r, key) if not r.failed else math.inf)
-                     for r in runs if r.label == label)
+        pts = sorted(
+            (r.seconds, getattr(r, key) if not r.failed else math.inf)
+            for r in runs
+            if r.label == label
+        )
         prev = None
         for t, e in pts:
             if e <= level:
@@ -401,8 +475,7 @@ def cheapest(runs: list[Run], level: float, key: str = "error_max"):
 
 ENERGY_LEVELS = {"volterra": (1e-6, 1e-9, 1e-12)}
 """|H - H0| levels of the energy verdict (the seed's claim for long runs: bounded H)."""
-_WHAT = {"error_max": "max error", "error_median": "median error",
-         "energy_drift": "max |H - H0|"}
+_WHAT = {"error_max": "max error", "error_median": "median error", "energy_drift": "max |H - H0|"}
 
 
 def verdicts(name: str, runs: list[Run]) -> list[str]:
@@ -430,8 +503,10 @@ def verdict(name: str, runs: list[Run], key: str = "error_max", levels=None) -> 
         if sym and non:
             s, n = sym[0], non[0]
             who = "symplectic wins" if s[1] < n[1] else "symplectic does NOT win"
-            text += (f"; best symplectic {s[0]} {s[1]:.3g} s vs best non-symplectic {n[0]} "
-                     f"{n[1]:.3g} s ({who}, x{max(s[1], n[1]) / min(s[1], n[1]):.2g})")
+            text += (
+                f"; best symplectic {s[0]} {s[1]:.3g} s vs best non-symplectic {n[0]} "
+                f"{n[1]:.3g} s ({who}, x{max(s[1], n[1]) / min(s[1], n[1]):.2g})"
+            )
         elif non:
             text += "; no symplectic method got there within the budget"
         else:
@@ -444,16 +519,23 @@ def plot_problem(name: str, runs: list[Run], path: str) -> None:
     """Log-log error (max and median over the rays) against wall time, a line per method."""
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(15, 6), sharex=True, sharey=True)
-    for ax, key, what in zip(axes, ("error_max", "error_median"), ("max", "median"),
-                             strict=True):
+    for ax, key, what in zip(axes, ("error_max", "error_median"), ("max", "median"), strict=True):
         for k, label in enumerate(dict.fromkeys(r.label for r in runs)):
             pts = [(r.seconds, min(getattr(r, key), 10.0)) for r in runs if r.label == label]
             style = "--" if "/" in label else ("-." if label == "dopri5" else "-")
-            ax.loglog(*zip(*pts, strict=True), style, marker="o", ms=3,
-                      color=plt.get_cmap("tab20")(k % 20), label=label)
-        ax.set(xlabel="wall time (s)",
-               ylabel=f"{what} error over the rays: {PROBLEM_INFO[name][0]}",
-               title=f"{name}: {what} over the rays (failed or > 10: drawn at 10)")
+            ax.loglog(
+                *zip(*pts, strict=True),
+                style,
+                marker="o",
+                ms=3,
+                color=plt.get_cmap("tab20")(k % 20),
+                label=label,
+            )
+        ax.set(
+            xlabel="wall time (s)",
+            ylabel=f"{what} error over the rays: {PROBLEM_INFO[name][0]}",
+            title=f"{name}: {what} over the rays (failed or > 10: drawn at 10)",
+        )
         _plain_ticks(ax)
         ax.grid(True, which="major", alpha=0.3)
     axes[0].legend(fontsize=7, ncol=2)
@@ -526,20 +608,25 @@ class AdaptiveDopri5(Method):
 
 def kerr_scene() -> core.Scene:
     """The README's Kerr scene: a/M = 0.9 (Kerr–Schild), a red sphere behind the hole."""
-    return core.Scene(model=hm.kerr(rg=RG, a=0.45, chart="kerr_schild"),
-                      objects=[core.Sphere(center=(0, 8, 0), radius=1, color=(1, 0, 0, 1))],
-                      background="procedural")
+    return core.Scene(
+        model=hm.kerr(rg=RG, a=0.45, chart="kerr_schild"),
+        objects=[core.Sphere(center=(0, 8, 0), radius=1, color=(1, 0, 0, 1))],
+        background="procedural",
+    )
 
 
-def trace_image(size: int, method, tolerance: float, step=None, region_radius=None,
-                chunk: int = 8192):
+def trace_image(
+    size: int, method, tolerance: float, step=None, region_radius=None, chunk: int = 8192
+):
     """Trace every pixel of the Kerr scene; -> (ending, direction, steps, seconds)."""
     scene = kerr_scene()
-    cam = core.Camera.perspective(position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1),
-                                  fov_deg=40, width=size, height=size)
+    cam = core.Camera.perspective(
+        position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=40, width=size, height=size
+    )
     extent = float(np.linalg.norm(cam.frame.position - scene.center))
-    options = TraceOptions(method=method, tolerance=tolerance, step=step,
-                           region_radius=region_radius)
+    options = TraceOptions(
+        method=method, tolerance=tolerance, step=step, region_radius=region_radius
+    )
     tracer = Tracer(scene, options, extent)
     n = cam.n_pixels
     ending, steps = np.empty(n, np.int8), np.empty(n, np.int64)
@@ -588,19 +675,23 @@ def image_reference(size: int, out: str):
 def image_runs(quick: bool):
     """(label, method name or class, tolerances, outer step, region radius) to compare."""
     if quick:
-        return [("rk4", "rk4", (1e-3, 1e-5, 1e-7), None, REGION),
-                ("gauss4", "gauss4", (1e-5, 1e-7), None, REGION),
-                ("yoshida4", "yoshida4", (1e-4, 1e-6), None, REGION),
-                ("dopri5", "dopri5", (1e-4, 1e-6, 1e-8), None, REGION),
-                ("dopri5_adaptive", AdaptiveDopri5, (1e-4, 1e-8), 0.1, REGION),
-                ("rk4, default region", "rk4", (1e-4, 1e-6, 1e-8), None, None)]
-    return [("rk4", "rk4", (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8), None, REGION),
-            ("gauss4", "gauss4", (1e-4, 1e-5, 1e-6, 1e-7, 1e-8), None, REGION),
-            ("yoshida4", "yoshida4", (1e-4, 1e-6, 1e-8), None, REGION),
-            ("yoshida6", "yoshida6", (1e-4, 1e-6), None, REGION),
-            ("dopri5", "dopri5", (1e-4, 1e-5, 1e-6, 1e-7, 1e-8), None, REGION),
-            ("dopri5_adaptive", AdaptiveDopri5, (1e-4, 1e-6, 1e-8, 1e-10), 0.1, REGION),
-            ("rk4, default region", "rk4", (1e-4, 1e-6, 1e-8), None, None)]
+        return [
+            ("rk4", "rk4", (1e-3, 1e-5, 1e-7), None, REGION),
+            ("gauss4", "gauss4", (1e-5, 1e-7), None, REGION),
+            ("yoshida4", "yoshida4", (1e-4, 1e-6), None, REGION),
+            ("dopri5", "dopri5", (1e-4, 1e-6, 1e-8), None, REGION),
+            ("dopri5_adaptive", AdaptiveDopri5, (1e-4, 1e-8), 0.1, REGION),
+            ("rk4, default region", "rk4", (1e-4, 1e-6, 1e-8), None, None),
+        ]
+    return [
+        ("rk4", "rk4", (1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8), None, REGION),
+        ("gauss4", "gauss4", (1e-4, 1e-5, 1e-6, 1e-7, 1e-8), None, REGION),
+        ("yoshida4", "yoshida4", (1e-4, 1e-6, 1e-8), None, REGION),
+        ("yoshida6", "yoshida6", (1e-4, 1e-6), None, REGION),
+        ("dopri5", "dopri5", (1e-4, 1e-5, 1e-6, 1e-7, 1e-8), None, REGION),
+        ("dopri5_adaptive", AdaptiveDopri5, (1e-4, 1e-6, 1e-8, 1e-10), 0.1, REGION),
+        ("rk4, default region", "rk4", (1e-4, 1e-6, 1e-8), None, None),
+    ]
 
 
 def image_level(size: int, quick: bool, out: str):
@@ -613,18 +704,28 @@ def image_level(size: int, quick: bool, out: str):
             meth = method(tol=tol) if isinstance(method, type) else method
             e, d, s, sec = trace_image(size, meth, tol, step, region)
             disp, mismatched = displacement(ref, (e, d), pixel)
-            row = dict(method=label, tolerance=tol, size=size, region_rg=region or "default",
-                       seconds=round(sec, 3),
-                       steps=int(s.sum()), ns_per_ray_step=round(1e9 * sec / max(s.sum(), 1)),
-                       disp_median_px=float(np.median(disp)),
-                       disp_p99_px=float(np.percentile(disp, 99)),
-                       disp_max_px=float(disp.max()), mismatched_pixels=mismatched,
-                       failed=int(np.count_nonzero(e == core.ENDING["failed"])))
+            row = dict(
+                method=label,
+                tolerance=tol,
+                size=size,
+                region_rg=region or "default",
+                seconds=round(sec, 3),
+                steps=int(s.sum()),
+                ns_per_ray_step=round(1e9 * sec / max(s.sum(), 1)),
+                disp_median_px=float(np.median(disp)),
+                disp_p99_px=float(np.percentile(disp, 99)),
+                disp_max_px=float(disp.max()),
+                mismatched_pixels=mismatched,
+                failed=int(np.count_nonzero(e == core.ENDING["failed"])),
+            )
             rows.append(row)
-            print(f"  image {label:16s} tol {tol:7.0e}: {sec:7.1f} s, displacement median "
-                  f"{row['disp_median_px']:.2e} p99 {row['disp_p99_px']:.2e} max "
-                  f"{row['disp_max_px']:.2e} px, {mismatched} pixels end differently, "
-                  f"{row['failed']} failed", flush=True)
+            print(
+                f"  image {label:16s} tol {tol:7.0e}: {sec:7.1f} s, displacement median "
+                f"{row['disp_median_px']:.2e} p99 {row['disp_p99_px']:.2e} max "
+                f"{row['disp_max_px']:.2e} px, {mismatched} pixels end differently, "
+                f"{row['failed']} failed",
+                flush=True,
+            )
     _write_csv(os.path.join(out, "image_error.csv"), rows)
     _plot_image(rows, size, os.path.join(out, "image_error.png"))
     return rows, ref_seconds
@@ -636,12 +737,21 @@ def _plot_image(rows, size: int, path: str) -> None:
     for k, label in enumerate(dict.fromkeys(r["method"] for r in rows)):
         rr = [r for r in rows if r["method"] == label]
         t = [r["seconds"] for r in rr]
-        ax.loglog(t, [max(r["disp_max_px"], 1e-8) for r in rr], "-o", ms=3, color=f"C{k}",
-                  label=f"{label}")
+        ax.loglog(
+            t,
+            [max(r["disp_max_px"], 1e-8) for r in rr],
+            "-o",
+            ms=3,
+            color=f"C{k}",
+            label=f"{label}",
+        )
         ax.loglog(t, [max(r["disp_p99_px"], 1e-8) for r in rr], ":", color=f"C{k}", lw=0.8)
-    ax.set(xlabel="trace time (s)", ylabel="pixel displacement against the reference (px)",
-           title=f"Kerr a/M = 0.9 scene, {size}x{size}: solid = max over pixels, dotted = "
-                 "99th percentile")
+    ax.set(
+        xlabel="trace time (s)",
+        ylabel="pixel displacement against the reference (px)",
+        title=f"Kerr a/M = 0.9 scene, {size}x{size}: solid = max over pixels, dotted = "
+        "99th percentile",
+    )
     _plain_ticks(ax)
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
@@ -654,13 +764,20 @@ def _image_verdict(rows) -> list[str]:
     pixels ending differently (the max is set by a few pixels on the shadow's edge)."""
     lines = []
     for level in (0.1, 0.01, 0.001):
-        ok = [r for r in rows if r["disp_p99_px"] <= level and r["region_rg"] != "default"
-              and r["mismatched_pixels"] <= 1e-4 * r["size"] ** 2]
+        ok = [
+            r
+            for r in rows
+            if r["disp_p99_px"] <= level
+            and r["region_rg"] != "default"
+            and r["mismatched_pixels"] <= 1e-4 * r["size"] ** 2
+        ]
         if ok:
             r = min(ok, key=lambda r: r["seconds"])
-            lines.append(f"  image: 99% of pixels within {level:g} px: cheapest {r['method']} "
-                         f"at tolerance {r['tolerance']:g}, {r['seconds']:.1f} s (max "
-                         f"{r['disp_max_px']:.2g} px)")
+            lines.append(
+                f"  image: 99% of pixels within {level:g} px: cheapest {r['method']} "
+                f"at tolerance {r['tolerance']:g}, {r['seconds']:.1f} s (max "
+                f"{r['disp_max_px']:.2g} px)"
+            )
         else:
             lines.append(f"  image: 99% of pixels within {level:g} px: no run got there")
     return lines
@@ -690,9 +807,12 @@ def _write_csv(path: str, rows: list[dict]) -> None:
 def build_problems(names, quick: bool):
     """The chosen problems (batch size 16 in quick mode, 128 otherwise)."""
     n = 16 if quick else 128
-    makers = {"volterra": lambda: volterra(n, 300.0 if quick else 1000.0, quick),
-              "schwarzschild": lambda: schwarzschild(n, quick),
-              "kerr": lambda: kerr(n, quick), "mirage": lambda: mirage(n, quick)}
+    makers = {
+        "volterra": lambda: volterra(n, 300.0 if quick else 1000.0, quick),
+        "schwarzschild": lambda: schwarzschild(n, quick),
+        "kerr": lambda: kerr(n, quick),
+        "mirage": lambda: mirage(n, quick),
+    }
     return [makers[name]() for name in names if name in makers]
 
 
@@ -712,18 +832,30 @@ def run_problem(prob: Problem, quick: bool, budget: float, copies: int) -> list[
 def main(argv: list[str] | None = None) -> None:
     """Run the chosen parts and write CSVs, plots and verdicts under --out."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true",
-                        help="fewer methods, steps and rays; a 64x64 image")
+    parser.add_argument(
+        "--quick", action="store_true", help="fewer methods, steps and rays; a 64x64 image"
+    )
     parser.add_argument("--only", default="volterra,schwarzschild,kerr,mirage,image")
-    parser.add_argument("--budget", type=float, default=None,
-                        help="seconds per method curve (default 3 quick, 25 full)")
+    parser.add_argument(
+        "--budget",
+        type=float,
+        default=None,
+        help="seconds per method curve (default 3 quick, 25 full)",
+    )
     parser.add_argument("--image-size", type=int, default=None)
-    parser.add_argument("--copies", type=int, default=None,
-                        help="copies of each problem's rays per timed batch (default 1 "
-                             "quick, 8 full: 1024 rays, a render chunk's regime)")
+    parser.add_argument(
+        "--copies",
+        type=int,
+        default=None,
+        help="copies of each problem's rays per timed batch (default 1 "
+        "quick, 8 full: 1024 rays, a render chunk's regime)",
+    )
     parser.add_argument("--out", default=OUT)
-    parser.add_argument("--from-csv", action="store_true",
-                        help="only redraw the plots and verdicts from the CSVs in --out")
+    parser.add_argument(
+        "--from-csv",
+        action="store_true",
+        help="only redraw the plots and verdicts from the CSVs in --out",
+    )
     args = parser.parse_args(argv)
     os.makedirs(args.out, exist_ok=True)
     if args.from_csv:
@@ -731,8 +863,11 @@ def main(argv: list[str] | None = None) -> None:
     names = [n for n in args.only.split(",") if n]
     budget = args.budget or (3.0 if args.quick else 25.0)
     copies = args.copies or (1 if args.quick else 8)
-    mode = "QUICK mode: 16 rays, fewer methods and steps, 64x64 image" if args.quick else \
-        f"full mode: 128 rays x {copies} copies, every method, 256x256 image"
+    mode = (
+        "QUICK mode: 16 rays, fewer methods and steps, 64x64 image"
+        if args.quick
+        else f"full mode: 128 rays x {copies} copies, every method, 256x256 image"
+    )
     print(f"work-precision ({mode}; budget {budget:g} s per curve)")
     start = time.perf_counter()
     all_runs, found, tput = [], [], []
@@ -747,17 +882,23 @@ def main(argv: list[str] | None = None) -> None:
             tput.append(dict(problem=prob.name, method=m, ns_per_ray_step=round(ns, 1)))
     if all_runs:
         rerun = {r.problem for r in all_runs}  # other problems' rows in the CSVs are kept
-        _write_csv(os.path.join(args.out, "work_precision.csv"),
-                   _kept_rows(os.path.join(args.out, "work_precision.csv"), rerun) +
-                   [dict(vars(r), label=r.label, ns_per_ray_step=round(r.ns_per_ray_step, 1))
-                    for r in all_runs])
+        _write_csv(
+            os.path.join(args.out, "work_precision.csv"),
+            _kept_rows(os.path.join(args.out, "work_precision.csv"), rerun)
+            + [
+                dict(vars(r), label=r.label, ns_per_ray_step=round(r.ns_per_ray_step, 1))
+                for r in all_runs
+            ],
+        )
         tput = _kept_rows(os.path.join(args.out, "throughput.csv"), rerun) + tput
         _write_csv(os.path.join(args.out, "throughput.csv"), tput)
         _print_throughput(tput)
     if "image" in names:
         size = args.image_size or (64 if args.quick else 256)
-        print(f"image: Kerr scene {size}x{size}" + (" (QUICK mode: 64x64, fewer methods and "
-                                                    "tolerances)" if args.quick else ""))
+        print(
+            f"image: Kerr scene {size}x{size}"
+            + (" (QUICK mode: 64x64, fewer methods and tolerances)" if args.quick else "")
+        )
         rows, _ = image_level(size, args.quick, args.out)
         found += _image_verdict(rows)
     print("verdict (cheapest method at each accuracy):")
@@ -773,10 +914,22 @@ def replot(out: str) -> None:
     if os.path.exists(path):
         names = [f.name for f in fields(Run)]
         with open(path) as f:
-            runs = [Run(**{k: (v if k in ("problem", "method", "mode") else
-                               int(v) if k in ("rays", "failed") else float(v))
-                           for k, v in row.items() if k in names})
-                    for row in csv.DictReader(f)]
+            runs = [
+                Run(
+                    **{
+                        k: (
+                            v
+                            if k in ("problem", "method", "mode")
+                            else int(v)
+                            if k in ("rays", "failed")
+                            else float(v)
+                        )
+                        for k, v in row.items()
+                        if k in names
+                    }
+                )
+                for row in csv.DictReader(f)
+            ]
         for name in dict.fromkeys(r.problem for r in runs):
             mine = [r for r in runs if r.problem == name]
             plot_problem(name, mine, os.path.join(out, f"wp_{name}.png"))
@@ -788,8 +941,10 @@ def replot(out: str) -> None:
     path = os.path.join(out, "image_error.csv")
     if os.path.exists(path):
         with open(path) as f:
-            rows = [{k: (v if k in ("method", "region_rg") else float(v)) for k, v in r.items()}
-                    for r in csv.DictReader(f)]
+            rows = [
+                {k: (v if k in ("method", "region_rg") else float(v)) for k, v in r.items()}
+                for r in csv.DictReader(f)
+            ]
         _plot_image(rows, int(rows[0]["size"]), os.path.join(out, "image_error.png"))
         found += _image_verdict(rows)
     print("verdict (cheapest method at each accuracy):")
@@ -803,8 +958,7 @@ def _print_throughput(rows) -> None:
     print("ns per ray-step (batch of 4096 rays; 1024 in quick mode):")
     print(f"  {'method':18s}" + "".join(f"{p:>15s}" for p in problems))
     for m in methods:
-        print(f"  {m:18s}" + "".join(f"{table.get((p, m), float('nan')):15.0f}"
-                                     for p in problems))
+        print(f"  {m:18s}" + "".join(f"{table.get((p, m), float('nan')):15.0f}" for p in problems))
 
 
 if __name__ == "__main__":

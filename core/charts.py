@@ -62,7 +62,7 @@ class SpheroidalChart:
     def to_coords(self, X):
         """(r, theta, phi) of local Cartesian positions (3, N)."""
         x, y, z = X
-        a2 = self.a ** 2
+        a2 = self.a**2
         rho2 = x * x + y * y + z * z - a2
         r = np.sqrt(0.5 * (rho2 + np.sqrt(rho2 * rho2 + 4 * a2 * z * z)))
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -74,13 +74,13 @@ class SpheroidalChart:
     def to_cartesian(self, S):
         """Local Cartesian positions of (r, theta, phi) (3, N)."""
         r, theta, phi = S
-        rho = np.sqrt(r * r + self.a ** 2) * np.sin(theta)
+        rho = np.sqrt(r * r + self.a**2) * np.sin(theta)
         return np.stack([rho * np.cos(phi), rho * np.sin(phi), r * np.cos(theta)])
 
     def jacobian(self, S):
         """d(x, y, z)/d(r, theta, phi) as (N, 3, 3)."""
         r, theta, phi = S
-        R = np.sqrt(r * r + self.a ** 2)
+        R = np.sqrt(r * r + self.a**2)
         st, ct, sp, cp = np.sin(theta), np.cos(theta), np.sin(phi), np.cos(phi)
         J = np.empty((r.shape[0], 3, 3))
         J[:, 0, 0] = r / R * st * cp
@@ -167,6 +167,7 @@ def chart_for(model: Hamiltonian) -> CartesianChart | SpheroidalChart | Isotropi
             raise ValueError(f"a spacetime model needs 4 coordinates (t, x, y, z), got {model.dim}")
         return CartesianChart(time_index=0)
     if model.dim != 3:
-        raise ValueError("to render, a model needs coordinates (x, y, z) or (t, x, y, z); "
-                         f"got {model.coords}")
+        raise ValueError(
+            f"to render, a model needs coordinates (x, y, z) or (t, x, y, z); got {model.coords}"
+        )
     return CartesianChart(time_index=None)

@@ -20,11 +20,11 @@ steps take hours). The add-on's Tolerance property has the same range."""
 
 TIME_SCALE_REFUSED = {
     name: f"method '{name}' cannot render a black hole (or any model with a Poincaré time "
-          "scale g(q)): Tao's method binds two copies of each ray with a fixed strength, and "
-          "on the time-transformed Hamiltonian K = g (H - H0) that the renderer integrates "
-          "the copies drift apart and the rays fail (on a Kerr frame, every one); choose "
-          "gauss4 (the default), a Yoshida or Suzuki composition or rk4 (media, metrics "
-          "without a time scale and core.integrate still accept it)"
+    "scale g(q)): Tao's method binds two copies of each ray with a fixed strength, and "
+    "on the time-transformed Hamiltonian K = g (H - H0) that the renderer integrates "
+    "the copies drift apart and the rays fail (on a Kerr frame, every one); choose "
+    "gauss4 (the default), a Yoshida or Suzuki composition or rk4 (media, metrics "
+    "without a time scale and core.integrate still accept it)"
     for name in ("tao2", "tao4")
 }
 """Methods that core.render refuses on time-scaled models, with the reason shown."""
@@ -53,8 +53,15 @@ def _scalar(name: str, value: Any, what: str) -> float:
         raise ValueError(f"{name} must be {what}, got {value!r}") from None
 
 
-def check_range(name: str, value: Any, lo: float = -math.inf, hi: float = math.inf, *,
-                lo_open: bool = False, hi_open: bool = False) -> float:
+def check_range(
+    name: str,
+    value: Any,
+    lo: float = -math.inf,
+    hi: float = math.inf,
+    *,
+    lo_open: bool = False,
+    hi_open: bool = False,
+) -> float:
     """A finite number within [lo, hi] (ends excluded where open) -> float, else ValueError."""
     what = "a finite number" + _interval(lo, hi, lo_open, hi_open)
     x = _scalar(name, value, what)
@@ -108,11 +115,11 @@ def check_box(name: str, bounds: Any) -> tuple[np.ndarray, np.ndarray] | None:
     """None, or (lo, hi): two finite 3-vectors with lo < hi in every axis, else ValueError."""
     if bounds is None:
         return None
-    lo, hi = (check_vector(f"{name} {end}", v) for end, v in zip(("lo", "hi"), bounds,
-                                                                   strict=True))
+    lo, hi = (check_vector(f"{name} {end}", v) for end, v in zip(("lo", "hi"), bounds, strict=True))
     if np.any(hi <= lo):
-        raise ValueError(f"{name} must have lo < hi in every axis, got lo {lo.tolist()}, "
-                         f"hi {hi.tolist()}")
+        raise ValueError(
+            f"{name} must have lo < hi in every axis, got lo {lo.tolist()}, hi {hi.tolist()}"
+        )
     return lo, hi
 
 
@@ -141,8 +148,9 @@ def check_render_options(tolerance: Any, step: Any, max_steps: Any) -> None:
     check_int("max_steps", max_steps)
 
 
-def check_integrate_options(step: Any, steps: Any, tol: Any, record_every: Any,
-                            energy_every: Any, max_steps: Any) -> None:
+def check_integrate_options(
+    step: Any, steps: Any, tol: Any, record_every: Any, energy_every: Any, max_steps: Any
+) -> None:
     """The numeric options of core.integrate (ValueError naming the bad one).
 
     ``step`` may be negative (integration backwards) or per ray, never zero or non-finite.

@@ -242,10 +242,24 @@ def arctan2(y, x):
 
 
 FUNCTIONS: dict[str, Callable[..., Any]] = {
-    "sqrt": sqrt, "exp": exp, "log": log, "sin": sin, "cos": cos, "tan": tan,
-    "arcsin": arcsin, "arccos": arccos, "arctan": arctan, "arctan2": arctan2,
-    "asin": arcsin, "acos": arccos, "atan": arctan, "atan2": arctan2,
-    "sinh": sinh, "cosh": cosh, "tanh": tanh, "abs": absolute,
+    "sqrt": sqrt,
+    "exp": exp,
+    "log": log,
+    "sin": sin,
+    "cos": cos,
+    "tan": tan,
+    "arcsin": arcsin,
+    "arccos": arccos,
+    "arctan": arctan,
+    "arctan2": arctan2,
+    "asin": arcsin,
+    "acos": arccos,
+    "atan": arctan,
+    "atan2": arctan2,
+    "sinh": sinh,
+    "cosh": cosh,
+    "tanh": tanh,
+    "abs": absolute,
 }
 """Every function the expression language may call, by name (with common aliases)."""
 

@@ -37,19 +37,37 @@ about three frames per level, well inside Python's limit of 1000 frames."""
 MAX_EXPONENT = 1_000.0
 """Largest accepted |constant exponent| (x**c)."""
 CONSTANTS = {"pi": math.pi, "e": math.e}
-_FOLD_ERRORS: dict[str, Any] = {"over": "raise", "divide": "raise", "invalid": "raise",
-                                 "under": "ignore"}
+_FOLD_ERRORS: dict[str, Any] = {
+    "over": "raise",
+    "divide": "raise",
+    "invalid": "raise",
+    "under": "ignore",
+}
 """Folding a constant refuses overflow, division by zero and NaN; underflow to 0 is fine."""
 
 _BINARY = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.Pow: "**"}
 _REFUSED = {
-    ast.Attribute: "attribute access", ast.Subscript: "subscripts", ast.Lambda: "lambdas",
-    ast.ListComp: "comprehensions", ast.SetComp: "comprehensions",
-    ast.DictComp: "comprehensions", ast.GeneratorExp: "comprehensions",
-    ast.Compare: "comparisons", ast.BoolOp: "boolean operators", ast.IfExp: "conditionals",
-    ast.List: "lists", ast.Tuple: "tuples", ast.Dict: "dicts", ast.Set: "sets",
-    ast.JoinedStr: "strings", ast.Starred: "starred arguments", ast.NamedExpr: "assignments",
-    ast.Await: "await", ast.Yield: "yield", ast.YieldFrom: "yield", ast.Slice: "slices",
+    ast.Attribute: "attribute access",
+    ast.Subscript: "subscripts",
+    ast.Lambda: "lambdas",
+    ast.ListComp: "comprehensions",
+    ast.SetComp: "comprehensions",
+    ast.DictComp: "comprehensions",
+    ast.GeneratorExp: "comprehensions",
+    ast.Compare: "comparisons",
+    ast.BoolOp: "boolean operators",
+    ast.IfExp: "conditionals",
+    ast.List: "lists",
+    ast.Tuple: "tuples",
+    ast.Dict: "dicts",
+    ast.Set: "sets",
+    ast.JoinedStr: "strings",
+    ast.Starred: "starred arguments",
+    ast.NamedExpr: "assignments",
+    ast.Await: "await",
+    ast.Yield: "yield",
+    ast.YieldFrom: "yield",
+    ast.Slice: "slices",
 }
 
 
@@ -81,8 +99,9 @@ class Expression:
         return self.evaluate(env)
 
 
-def compile_expression(text: str, names: Iterable[str],
-                       parameters: Mapping[str, float] | None = None) -> Expression:
+def compile_expression(
+    text: str, names: Iterable[str], parameters: Mapping[str, float] | None = None
+) -> Expression:
     """Check ``text`` against the whitelist and compile it.
 
     ``names`` are the variables it may read (values come at evaluation time);
@@ -91,16 +110,18 @@ def compile_expression(text: str, names: Iterable[str],
     if not isinstance(text, str):
         raise ExpressionError(f"expected text, got {type(text).__name__}")
     if len(text) > MAX_LENGTH:
-        raise ExpressionError(f"expression is too long ({len(text)} > {MAX_LENGTH} characters)",
-                              1, text)
+        raise ExpressionError(
+            f"expression is too long ({len(text)} > {MAX_LENGTH} characters)", 1, text
+        )
     if not text.strip():
         raise ExpressionError("expression is empty", 1, text)
     _check_ascii(text)
     tree = _parse(text)
     count = sum(1 for _ in ast.walk(tree))
     if count > MAX_NODES:
-        raise ExpressionError(f"expression is too large ({count} > {MAX_NODES} syntax nodes)",
-                              1, text)
+        raise ExpressionError(
+            f"expression is too large ({count} > {MAX_NODES} syntax nodes)", 1, text
+        )
     _check_depth(tree.body)
     consts = dict(CONSTANTS)
     consts.update({k: float(v) for k, v in (parameters or {}).items()})
@@ -127,9 +148,12 @@ def _check_ascii(text: str) -> None:
     char = text[bad]
     name = unicodedata.name(char, "unnamed character")
     column = bad - (text.rfind("\n", 0, bad) + 1) + 1
-    raise ExpressionError(f"non-ASCII character '{char}' (U+{ord(char):04X} {name}) not "
-                          "allowed: type names, digits and operators in plain ASCII",
-                          column, text)
+    raise ExpressionError(
+        f"non-ASCII character '{char}' (U+{ord(char):04X} {name}) not "
+        "allowed: type names, digits and operators in plain ASCII",
+        column,
+        text,
+    )
 
 
 def _parse(text: str) -> ast.Expression:
@@ -140,8 +164,9 @@ def _parse(text: str) -> ast.Expression:
         column = err.offset if err.offset else None
         raise ExpressionError(f"syntax error: {err.msg}", column, text) from None
     except (RecursionError, MemoryError):  # the parser's own stack (deep nesting)
-        raise ExpressionError(f"expression is nested too deeply to parse (at most "
-                              f"{MAX_DEPTH} levels)", 1, text) from None
+        raise ExpressionError(
+            f"expression is nested too deeply to parse (at most {MAX_DEPTH} levels)", 1, text
+        ) from None
     except (ValueError, OverflowError) as err:
         raise ExpressionError(f"cannot parse expression: {err}", 1, text) from None
 
@@ -157,7 +182,8 @@ def _check_depth(root: ast.AST) -> None:
             raise ExpressionError(
                 f"expression is nested too deeply (more than {MAX_DEPTH} levels; a chain of "
                 f"n operators such as + counts n): group long sums in parentheses",
-                node.col_offset + 1)  # an ast.expr always has a position
+                node.col_offset + 1,
+            )  # an ast.expr always has a position
         stack.extend((child, depth + 1) for child in ast.iter_child_nodes(node))
 
 
@@ -311,7 +337,7 @@ def _apply(symbol: str, a, b):
         return a * b
     if symbol == "/":
         return a / b
-    return dual.power(a, b) if not isinstance(b, dual.Dual) else a ** b
+    return dual.power(a, b) if not isinstance(b, dual.Dual) else a**b
 
 
 def _binary_closure(symbol: str, left: _Node, right: _Node) -> Evaluator:
@@ -353,8 +379,10 @@ def _pow_general(base, exponent):
     if isinstance(exponent, dual.Dual):
         return dual.exp(exponent * dual.log(base))
     if isinstance(base, dual.Dual):
-        return dual.Dual(np.power(base.v, exponent),
-                         dual._scale(base.d, exponent * np.power(base.v, exponent - 1.0)))
+        return dual.Dual(
+            np.power(base.v, exponent),
+            dual._scale(base.d, exponent * np.power(base.v, exponent - 1.0)),
+        )
     return np.power(base, exponent)
 
 
@@ -374,9 +402,12 @@ class Program:
         return [out.evaluate(env) for out in self.outputs]
 
 
-def compile_program(outputs: Sequence[str], variables: Sequence[str],
-                    parameters: Mapping[str, float] | None = None,
-                    definitions: Sequence[tuple[str, str]] | Mapping[str, str] = ()) -> Program:
+def compile_program(
+    outputs: Sequence[str],
+    variables: Sequence[str],
+    parameters: Mapping[str, float] | None = None,
+    definitions: Sequence[tuple[str, str]] | Mapping[str, str] = (),
+) -> Program:
     """Compile outputs over ``variables`` that may use named ``definitions`` (in order)."""
     items = list(definitions.items()) if isinstance(definitions, Mapping) else list(definitions)
     reserved = set(variables) | set(CONSTANTS) | set(parameters or {}) | set(dual.FUNCTIONS)
@@ -390,8 +421,9 @@ def compile_program(outputs: Sequence[str], variables: Sequence[str],
         compiled_defs.append((name, expr))
         depends[name] = frozenset().union(*(depends[n] for n in expr.names))
         known.append(name)
-    outs = tuple(_compile_labelled(t, known, parameters, f"output {i + 1}")
-                 for i, t in enumerate(outputs))
+    outs = tuple(
+        _compile_labelled(t, known, parameters, f"output {i + 1}") for i, t in enumerate(outputs)
+    )
     deps = tuple(frozenset().union(*(depends[n] for n in o.names)) for o in outs)
     return Program(tuple(compiled_defs), outs, deps)
 

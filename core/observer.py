@@ -121,7 +121,8 @@ def _diagnose(model, chart, Q: np.ndarray, ginv: np.ndarray, bad: np.ndarray) ->
         return CoordinateAxisError(
             "the camera is on the polar axis (theta = 0 or pi) of the model's spherical / "
             "Boyer–Lindquist coordinates, where they are singular: move it off the axis "
-            "(x = y = 0 in the centre's frame), or use the Kerr–Schild chart")
+            "(x = y = 0 in the centre's frame), or use the Kerr–Schild chart"
+        )
     inside = _inside_horizon(model, Q)
     if inside.any():
         return _no_rest(model, Q[:, inside])
@@ -143,7 +144,8 @@ def _signature(model, q: np.ndarray, w: np.ndarray) -> MetricSignatureError:
     hint = " (a metric written as (+, -, -, -) must be negated)" if np.sum(w < 0) == 3 else ""
     return MetricSignatureError(
         f"the metric has signature ({signs}) at the camera ({_where(model, q)}); SymRay "
-        f"needs (-, +, +, +): one time coordinate and three space coordinates{hint}")
+        f"needs (-, +, +, +): one time coordinate and three space coordinates{hint}"
+    )
 
 
 def _singular(model, q: np.ndarray) -> SingularMetricError:
@@ -151,7 +153,8 @@ def _singular(model, q: np.ndarray) -> SingularMetricError:
     return SingularMetricError(
         f"the inverse metric g^ij is singular at the camera ({_where(model, q)}): not "
         "finite, or of determinant 0 (e.g. all entries zero); a metric must be invertible "
-        "where the rays start")
+        "where the rays start"
+    )
 
 
 def _no_rest(model, Q: np.ndarray) -> InsideHorizonError:
@@ -159,11 +162,13 @@ def _no_rest(model, Q: np.ndarray) -> InsideHorizonError:
     if _inside_horizon(model, Q).any() or model.rg > 0:
         return InsideHorizonError(
             f"the camera ({_where(model, Q[:, 0])}) is inside the black hole's horizon: no "
-            "light from there reaches the outside; move it further from the centre")
+            "light from there reaches the outside; move it further from the centre"
+        )
     return InsideHorizonError(
         f"no observer can stay at rest at the camera ({_where(model, Q[:, 0])}): the metric's "
         "time direction is not timelike there (inside a horizon or an ergoregion of the "
-        "metric?); move the camera")
+        "metric?); move the camera"
+    )
 
 
 def _inside_horizon(model, Q: np.ndarray) -> np.ndarray:
@@ -191,8 +196,9 @@ def check_camera(tracer, position) -> None:
     """
     if not tracer.curved:
         return
-    X = (np.asarray(position, dtype=np.float64).reshape(1, 3) - tracer.scene.center) \
-        @ tracer.rotation
+    X = (
+        np.asarray(position, dtype=np.float64).reshape(1, 3) - tracer.scene.center
+    ) @ tracer.rotation
     _, inside = tracer.region.entry(X, np.array([[0.0, 0.0, 1.0]]))
     if not inside[0]:
         return

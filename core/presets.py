@@ -53,21 +53,45 @@ def mirage_scene(index: str | None, board_z: tuple[float, float]) -> Scene:
         c[f <= 1 / 3, :3] = 1.0
         return c
 
-    board = Plane(point=(20, 0, 0.5 * (z0 + z1)), normal=(-1, 0, 0), u_axis=(0, 1, 0),
-                  extent=(1.0, z1 - z0), color=paint)
-    ground = Plane(point=(0, 0, 0), normal=(0, 0, 1), u_axis=(1, 0, 0), extent=(400, 400),
-                   color=checker(200, 200, (0.35, 0.3, 0.25, 1), (0.3, 0.25, 0.2, 1)))
-    poles = [Plane(point=(x, y, 0.6), normal=(-1, 0, 0), u_axis=(0, 1, 0),
-                   extent=(0.08, 1.2), color=(0.25, 0.12, 0.05, 1))
-             for x, y in ((12.0, -1.0), (32.0, 1.6))]
+    board = Plane(
+        point=(20, 0, 0.5 * (z0 + z1)),
+        normal=(-1, 0, 0),
+        u_axis=(0, 1, 0),
+        extent=(1.0, z1 - z0),
+        color=paint,
+    )
+    ground = Plane(
+        point=(0, 0, 0),
+        normal=(0, 0, 1),
+        u_axis=(1, 0, 0),
+        extent=(400, 400),
+        color=checker(200, 200, (0.35, 0.3, 0.25, 1), (0.3, 0.25, 0.2, 1)),
+    )
+    poles = [
+        Plane(
+            point=(x, y, 0.6),
+            normal=(-1, 0, 0),
+            u_axis=(0, 1, 0),
+            extent=(0.08, 1.2),
+            color=(0.25, 0.12, 0.05, 1),
+        )
+        for x, y in ((12.0, -1.0), (32.0, 1.6))
+    ]
     model = None if index is None else medium(index, literal=True, bounds=MIRAGE_BOX)
     return Scene(model=model, objects=[board, *poles, ground], background=(0.3, 0.45, 0.95))
 
 
-def mirage_view(name: str, width: int, height: int,
-                with_medium: bool = True) -> tuple[Scene, Camera]:
+def mirage_view(
+    name: str, width: int, height: int, with_medium: bool = True
+) -> tuple[Scene, Camera]:
     """The scene and camera of a MIRAGE_VIEWS view (``fov`` spans the larger dimension)."""
     index, cz, tilt, board, fov = MIRAGE_VIEWS[name]
-    cam = Camera.perspective(position=(0, 0, cz), look_at=(1, 0, cz + tilt), up=(0, 0, 1),
-                             fov_deg=fov, width=width, height=height)
+    cam = Camera.perspective(
+        position=(0, 0, cz),
+        look_at=(1, 0, cz + tilt),
+        up=(0, 0, 1),
+        fov_deg=fov,
+        width=width,
+        height=height,
+    )
     return mirage_scene(index if with_medium else None, board), cam

@@ -42,12 +42,22 @@ class RenderResult:
     cancelled: bool = False
 
 
-def render(scene: Scene, camera, *, method: Any = None, tolerance: float = 1e-8,
-           step: float | None = None, max_steps: int = 20_000,
-           passes: Sequence[str] = ALL_PASSES, chunk_size: int = 16_384,
-           workers: int | None = None, parallel: str = "auto", cores: int | None = None,
-           progress: Callable[[int, int], None] | None = None,
-           should_cancel: Callable[[], bool] | None = None) -> RenderResult:
+def render(
+    scene: Scene,
+    camera,
+    *,
+    method: Any = None,
+    tolerance: float = 1e-8,
+    step: float | None = None,
+    max_steps: int = 20_000,
+    passes: Sequence[str] = ALL_PASSES,
+    chunk_size: int = 16_384,
+    workers: int | None = None,
+    parallel: str = "auto",
+    cores: int | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    should_cancel: Callable[[], bool] | None = None,
+) -> RenderResult:
     """Render ``scene`` seen by ``camera`` (docs/design.md, "Rendering in the core").
 
     The image is traced in chunks of at most ``chunk_size`` rays by ``workers`` forked
@@ -64,8 +74,11 @@ def render(scene: Scene, camera, *, method: Any = None, tolerance: float = 1e-8,
     if tracer.curved:
         checks.check_render_method(tracer.method, time_scaled(tracer.model))
     check_camera(tracer, camera.frame.position)
-    background = scene.background if isinstance(scene.background, Background) else \
-        Background(scene.background)
+    background = (
+        scene.background
+        if isinstance(scene.background, Background)
+        else Background(scene.background)
+    )
     n = camera.n_pixels
     kind, count = workers_module.choose(parallel, workers, n, cores)
     with_error = "error" in passes and tracer.curved
@@ -92,8 +105,7 @@ def render(scene: Scene, camera, *, method: Any = None, tolerance: float = 1e-8,
         if progress is not None:
             progress(done, n)
     was_cancelled = done < n or cancelled()
-    result = image.result(camera, passes, time.perf_counter() - start_time, was_cancelled,
-                          tracer)
+    result = image.result(camera, passes, time.perf_counter() - start_time, was_cancelled, tracer)
     result.summary["parallel"] = f"{count} {kind}" if kind != "inline" else "inline"
     return result
 
@@ -139,7 +151,7 @@ def _doubling_error(coarse: RayResults, fine: RayResults, origins, order: int) -
     vec_c = np.where(escaped[:, None], coarse.direction, coarse.position - origins)
     vec_f = np.where(escaped[:, None], fine.direction, fine.position - origins)
     with np.errstate(all="ignore"):
-        err = _angle(vec_c, vec_f) / (2.0 ** order - 1.0)
+        err = _angle(vec_c, vec_f) / (2.0**order - 1.0)
     err = np.where(coarse.ending == fine.ending, err, np.pi)
     err = np.where(fine.ending == ENDING["captured"], 0.0, err)
     bad = (fine.ending == ENDING["failed"]) | (fine.ending == ENDING["max_steps"])
@@ -195,22 +207,30 @@ class _Buffers:
         # no estimate (no error pass, nothing integrated, every ray failed): None, never 0
         integrated = self.energy[finite] if tracer.curved else self.energy[:0]
         return {
-            "time_s": seconds, "rays": int(np.count_nonzero(traced)),
-            "steps": int(self.steps.sum()), "failed": counts["failed"],
+            "time_s": seconds,
+            "rays": int(np.count_nonzero(traced)),
+            "steps": int(self.steps.sum()),
+            "failed": counts["failed"],
             "error_median": float(np.median(errs)) if errs.size else None,
             "error_max": float(np.max(errs)) if errs.size else None,
             # |H - H0| at the end of the rays that colour a pixel (a captured ray's last
             # step inside the horizon says nothing about the image)
             "energy_error_max": float(np.max(integrated)) if integrated.size else None,
-            "endings": counts, "step": tracer.step,
+            "endings": counts,
+            "step": tracer.step,
             "region_radius": None if tracer.region is None else tracer.region.radius,
             "method": tracer.method.name if tracer.curved else "straight",
         }
 
 
-_SUMMARY_FIELDS = (("time_s", "{:.2f} s"), ("rays", "{} rays"), ("steps", "{} steps"),
-                   ("failed", "{} failed"), ("error_median", "median error {:.3g}"),
-                   ("error_max", "max error {:.3g}"))
+_SUMMARY_FIELDS = (
+    ("time_s", "{:.2f} s"),
+    ("rays", "{} rays"),
+    ("steps", "{} steps"),
+    ("failed", "{} failed"),
+    ("error_median", "median error {:.3g}"),
+    ("error_max", "max error {:.3g}"),
+)
 
 
 def summary_text(summary: dict) -> str:
@@ -221,8 +241,9 @@ def summary_text(summary: dict) -> str:
             continue
         value = summary[key]
         try:
-            parts.append(fmt.format(value) if value is not None else
-                         re.sub(r"\{[^}]*\}", "n/a", fmt))
+            parts.append(
+                fmt.format(value) if value is not None else re.sub(r"\{[^}]*\}", "n/a", fmt)
+            )
         except (TypeError, ValueError):
             parts.append(f"{key} {value}")
     return ", ".join(parts)
@@ -248,8 +269,7 @@ def _scene_extent(scene: Scene, camera) -> float:
     """Largest distance from the model's centre to the camera or to any object's bounds."""
     far = np.linalg.norm(camera.frame.position - scene.center)
     objects = scene.objects
-    bounds = [objects.bounds] if isinstance(objects, Intersector) else \
-        [o.bounds for o in objects]
+    bounds = [objects.bounds] if isinstance(objects, Intersector) else [o.bounds for o in objects]
     bounds += [(v.lo, v.hi) for v in scene.volumes]
     for lo, hi in bounds:
         corners = np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T

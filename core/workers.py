@@ -63,12 +63,12 @@ def available_cores() -> int:
 
 def can_fork() -> bool:
     """Whether worker processes can be forked here (Linux; fork is unsafe on macOS)."""
-    return sys.platform.startswith("linux") and \
-        "fork" in multiprocessing.get_all_start_methods()
+    return sys.platform.startswith("linux") and "fork" in multiprocessing.get_all_start_methods()
 
 
-def choose(parallel: str, workers: int | None, n_rays: int,
-           cores: int | None = None) -> tuple[str, int]:
+def choose(
+    parallel: str, workers: int | None, n_rays: int, cores: int | None = None
+) -> tuple[str, int]:
     """-> ("processes" | "threads" | "inline", worker count) for an image of n_rays.
 
     Default worker count: one process per core (``cores``, default: the available ones),
@@ -82,7 +82,8 @@ def choose(parallel: str, workers: int | None, n_rays: int,
         raise ValueError(f"cores must be at least 1, not {cores}")
     cores = cores or available_cores()
     use_processes = can_fork() and (
-        parallel == "processes" or (parallel == "auto" and n_rays >= PROCESS_MIN_RAYS))
+        parallel == "processes" or (parallel == "auto" and n_rays >= PROCESS_MIN_RAYS)
+    )
     kind = "processes" if use_processes else "threads"
     count = workers or (cores if use_processes else min(2, cores))
     if count == 1 and parallel == "auto":
@@ -107,8 +108,13 @@ class CancelLatch:
         return self._event.is_set()
 
 
-def run_chunks(job: Callable[[Span, Cancel], T], spans: Iterable[Span], kind: str,
-               workers: int, cancelled: CancelLatch) -> Iterator[tuple[Span, T]]:
+def run_chunks(
+    job: Callable[[Span, Cancel], T],
+    spans: Iterable[Span],
+    kind: str,
+    workers: int,
+    cancelled: CancelLatch,
+) -> Iterator[tuple[Span, T]]:
     """Run job(span, cancel) for every span; yield (span, result) as each one finishes.
 
     ``kind`` and ``workers`` come from ``choose``. Threads and inline jobs poll
@@ -136,14 +142,21 @@ def run_chunks(job: Callable[[Span, Cancel], T], spans: Iterable[Span], kind: st
         else:
             try:
                 with pool:
-                    yield from _bounded(lambda span: pool.submit(_run_job, token, span),
-                                        spans, limit, cancelled, stop.set, started)
+                    yield from _bounded(
+                        lambda span: pool.submit(_run_job, token, span),
+                        spans,
+                        limit,
+                        cancelled,
+                        stop.set,
+                        started,
+                    )
             finally:
                 _JOBS.pop(token, None)
             return
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        yield from _bounded(lambda span: pool.submit(job, span, cancelled), spans, limit,
-                            cancelled, lambda: None)
+        yield from _bounded(
+            lambda span: pool.submit(job, span, cancelled), spans, limit, cancelled, lambda: None
+        )
 
 
 class _PoolUnavailable(Exception):
@@ -160,14 +173,16 @@ def _start_processes(token: int, job, first: Span, workers: int, n_spans: int):
     try:
         stop = context.Event()
         _JOBS[token] = (job, stop)
-        pool = ProcessPoolExecutor(max_workers=min(workers, n_spans), mp_context=context,
-                                   initializer=_keep_freed_memory)
+        pool = ProcessPoolExecutor(
+            max_workers=min(workers, n_spans), mp_context=context, initializer=_keep_freed_memory
+        )
         with warnings.catch_warnings():
             # Python >= 3.12 warns when a process with threads forks: a lock another
             # thread holds at that moment stays locked in the child. The workers only
             # run numpy and the tracer (no such lock) and leave with os._exit.
-            warnings.filterwarnings("ignore", message=r".*fork\(\) may lead to deadlocks",
-                                    category=DeprecationWarning)
+            warnings.filterwarnings(
+                "ignore", message=r".*fork\(\) may lead to deadlocks", category=DeprecationWarning
+            )
             future = pool.submit(_run_job, token, first)  # forks every worker
     except (OSError, NotImplementedError) as exc:  # no /dev/shm for semaphores, fork: ENOMEM
         _JOBS.pop(token, None)
@@ -204,15 +219,20 @@ def _run_job(token: int, span: Span):
     return job(span, stop.is_set)
 
 
-def _bounded(submit: Callable[[Span], Future], spans: list[Span], limit: int,
-             cancelled: Cancel, stop: Callable[[], None],
-             started: dict[Future, Span] | None = None) -> Iterator[tuple[Span, Any]]:
+def _bounded(
+    submit: Callable[[Span], Future],
+    spans: list[Span],
+    limit: int,
+    cancelled: Cancel,
+    stop: Callable[[], None],
+    started: dict[Future, Span] | None = None,
+) -> Iterator[tuple[Span, Any]]:
     """Yield finished chunks' (span, result), keeping at most ``limit`` submitted and not
     yet yielded (``started``: those already submitted, first in ``spans``; emptied as
     they finish). Polls ``cancelled`` in between; on cancellation, an error or an early
     close: call ``stop`` and drop what has not begun."""
     futures = started if started is not None else {}
-    waiting = iter(spans[len(futures):])
+    waiting = iter(spans[len(futures) :])
     try:
         while True:
             for span in itertools.islice(waiting, max(limit - len(futures), 0)):

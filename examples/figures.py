@@ -47,16 +47,29 @@ OUT = os.path.join("out", "figures")
 
 def checker_board(y: float, size: float, cells: int = 8, z: float = 0.0) -> core.Plane:
     """A square checkerboard facing -y (towards cameras placed at negative y)."""
-    return core.Plane(point=(0, y, z), normal=(0, -1, 0), u_axis=(1, 0, 0), extent=(size, size),
-                      color=core.checker(cells, cells, (0.9, 0.8, 0.2, 1), (0.1, 0.2, 0.6, 1)))
+    return core.Plane(
+        point=(0, y, z),
+        normal=(0, -1, 0),
+        u_axis=(1, 0, 0),
+        extent=(size, size),
+        color=core.checker(cells, cells, (0.9, 0.8, 0.2, 1), (0.1, 0.2, 0.6, 1)),
+    )
 
 
 def textured_spheres() -> list[core.Sphere]:
     """Two checkered spheres (longitude x latitude cells), left-front and right-back."""
-    return [core.Sphere(center=(-4.0, -2.0, 1.2), radius=1.3,
-                        color=core.checker(12, 6, (0.9, 0.2, 0.2, 1), (0.95, 0.95, 0.95, 1))),
-            core.Sphere(center=(4.5, 3.0, -1.0), radius=1.1,
-                        color=core.checker(12, 6, (0.2, 0.8, 0.3, 1), (0.1, 0.1, 0.1, 1)))]
+    return [
+        core.Sphere(
+            center=(-4.0, -2.0, 1.2),
+            radius=1.3,
+            color=core.checker(12, 6, (0.9, 0.2, 0.2, 1), (0.95, 0.95, 0.95, 1)),
+        ),
+        core.Sphere(
+            center=(4.5, 3.0, -1.0),
+            radius=1.1,
+            color=core.checker(12, 6, (0.2, 0.8, 0.3, 1), (0.1, 0.1, 0.1, 1)),
+        ),
+    ]
 
 
 def sky() -> core.Background:
@@ -66,8 +79,14 @@ def sky() -> core.Background:
 
 def camera(position, look_at, fov_deg: float, width: int, height: int) -> core.Camera:
     """A perspective camera with z up."""
-    return core.Camera.perspective(position=position, look_at=look_at, up=(0, 0, 1),
-                                   fov_deg=fov_deg, width=width, height=height)
+    return core.Camera.perspective(
+        position=position,
+        look_at=look_at,
+        up=(0, 0, 1),
+        fov_deg=fov_deg,
+        width=width,
+        height=height,
+    )
 
 
 def negative_mass(rg: float = -1.0) -> hm.MetricHamiltonian:
@@ -78,17 +97,29 @@ def negative_mass(rg: float = -1.0) -> hm.MetricHamiltonian:
     xs = ("x", "y", "z")
     inv = [["-1 - f"] + [f"f*{c}/r" for c in xs]]
     for i in xs:
-        inv.append([f"f*{i}/r"] + [("1 - " if i == j else "-") + f"f*{min(i, j)}*{max(i, j)}/r**2"
-                                   for j in xs])
-    return hm.metric(inverse=inv, coords=("t", "x", "y", "z"), parameters={"rg": rg},
-                     definitions=[("r", "sqrt(x**2 + y**2 + z**2)"), ("f", "rg/r")],
-                     time_scale="sqrt(x**2 + y**2 + z**2)")
+        inv.append(
+            [f"f*{i}/r"]
+            + [("1 - " if i == j else "-") + f"f*{min(i, j)}*{max(i, j)}/r**2" for j in xs]
+        )
+    return hm.metric(
+        inverse=inv,
+        coords=("t", "x", "y", "z"),
+        parameters={"rg": rg},
+        definitions=[("r", "sqrt(x**2 + y**2 + z**2)"), ("f", "rg/r")],
+        time_scale="sqrt(x**2 + y**2 + z**2)",
+    )
 
 
 def force_volume() -> core.Volume:
     """A thin glowing slab in the plane z = 0, coloured by the Newtonian force M / r^2."""
-    cmap = core.colormap([(0.0, (0.05, 0.0, 0.3)), (0.35, (0.6, 0.0, 0.6)),
-                          (0.65, (1.0, 0.4, 0.0)), (1.0, (1.0, 1.0, 0.6))])
+    cmap = core.colormap(
+        [
+            (0.0, (0.05, 0.0, 0.3)),
+            (0.35, (0.6, 0.0, 0.6)),
+            (0.65, (1.0, 0.4, 0.0)),
+            (1.0, (1.0, 1.0, 0.6)),
+        ]
+    )
 
     def density(p):
         return np.where(np.hypot(p[:, 0], p[:, 1]) > 1.5 * RG, 1.0, 0.0)
@@ -98,8 +129,9 @@ def force_volume() -> core.Volume:
         level = np.clip((np.log10(M / r**2) + 3.0) / 2.5, 0.0, 1.0)  # 1e-3 .. 10^-0.5
         return 2.0 * cmap(level) * density(p)[:, None]
 
-    return core.Volume(lo=(-12, -12, -0.15), hi=(12, 12, 0.15), density=density,
-                       emission=emission, absorption=0.6)
+    return core.Volume(
+        lo=(-12, -12, -0.15), hi=(12, 12, 0.15), density=density, emission=emission, absorption=0.6
+    )
 
 
 # ----------------------------------------------------------------------------------
@@ -116,8 +148,10 @@ def render(name: str, scene: core.Scene, cam: core.Camera, method: str, **option
 
     out = core.render(scene, cam, method=method, progress=progress, **options)
     s = out.summary
-    print(f"\r  {name}: {s['rays']} rays, {s['steps']} steps, {time.perf_counter() - start:.1f}"
-          f" s, endings {s['endings']}")
+    print(
+        f"\r  {name}: {s['rays']} rays, {s['steps']} steps, {time.perf_counter() - start:.1f}"
+        f" s, endings {s['endings']}"
+    )
     assert np.isfinite(out.rgba).all(), f"{name}: non-finite pixel"
     return out
 
@@ -131,8 +165,14 @@ def size_hw(size: int) -> tuple[int, int]:
 # data behind the figures (used by the tests at tiny sizes)
 
 
-def mirage_paths(index: str, eye_z: float, angles, x_end: float = 25.0, step: float = 0.05,
-                 method: str = "gauss4"):
+def mirage_paths(
+    index: str,
+    eye_z: float,
+    angles,
+    x_end: float = 25.0,
+    step: float = 0.05,
+    method: str = "gauss4",
+):
     """Ray paths (x, z) from an eye at height eye_z through a literal-form medium.
 
     Rays start at (0, 0, eye_z) with elevation `angles` (radians); returns the recorded
@@ -165,8 +205,9 @@ def blackhole_paths(impacts, x0: float = -20.0, tau_steps: int = 3000, step: flo
     pr = -np.sqrt(np.maximum(1.0 / f**2 - b**2 / (f * r0**2), 0.0))  # H = 0
     q0 = np.stack([np.zeros_like(b), r0, np.full_like(b, np.pi / 2), phi0], 1)
     p0 = np.stack([-np.ones_like(b), pr, np.zeros_like(b), -b], 1)
-    res = core.integrate(H, q0, p0, step=step, steps=tau_steps, method="gauss4", adaptive=True,
-                         record_every=2)
+    res = core.integrate(
+        H, q0, p0, step=step, steps=tau_steps, method="gauss4", adaptive=True, record_every=2
+    )
     r, phi = res.trajectory.q[..., 1], res.trajectory.q[..., 3]
     return np.stack([r * np.cos(phi), r * np.sin(phi)], -1), np.asarray(res.captured)
 
@@ -177,8 +218,9 @@ def volterra_run(method: str, step: float, steps: int, record_every: int = 10):
     q0 = np.array(VOLTERRA_Q0)[:, None]
     p0 = np.array(VOLTERRA_P0)[:, None]
     start = time.perf_counter()
-    res = core.integrate(H, q0, p0, step=step, steps=steps, method=method,
-                         record_every=record_every, energy_every=0)
+    res = core.integrate(
+        H, q0, p0, step=step, steps=steps, method=method, record_every=record_every, energy_every=0
+    )
     seconds = time.perf_counter() - start
     tr = res.trajectory
     q, p = tr.q[..., 0], tr.p[..., 0]
@@ -206,8 +248,15 @@ def bardeen_shadow(a: float, n: int = 400):
     return np.concatenate([-xi, -xi[::-1]]), np.concatenate([beta, -beta[::-1]])
 
 
-def kerr_shadow(a: float, width: int, height: int, distance: float = 1000.0,
-                fov_deg: float = 0.6, method: str = "gauss4", tolerance: float = 1e-6):
+def kerr_shadow(
+    a: float,
+    width: int,
+    height: int,
+    distance: float = 1000.0,
+    fov_deg: float = 0.6,
+    method: str = "gauss4",
+    tolerance: float = 1e-6,
+):
     """Render the shadow of a Kerr hole (rg = 1) seen edge-on from `distance` (camera on -y).
 
     Returns the render result and the pixel angle (radians).
@@ -221,30 +270,39 @@ def kerr_shadow(a: float, width: int, height: int, distance: float = 1000.0,
 def shadow_edges(ending: np.ndarray, pixel: float, distance: float):
     """Left and right shadow edges on the middle row(s), in rg on the sky."""
     h, w = ending.shape
-    rows = ending[(h - 1) // 2:h // 2 + 1] == core.ENDING["captured"]
+    rows = ending[(h - 1) // 2 : h // 2 + 1] == core.ENDING["captured"]
     cols = np.flatnonzero(rows.any(axis=0))
     to_rg = pixel * distance
     return (cols.min() - w / 2) * to_rg, (cols.max() + 1 - w / 2) * to_rg
 
 
-def mirage_view(name: str, width: int, height: int, method: str, step: float = 0.05,
-                with_medium: bool = True):
+def mirage_view(
+    name: str, width: int, height: int, method: str, step: float = 0.05, with_medium: bool = True
+):
     """Render a mirage view (fig10 or fig11), or the same view without the medium."""
     index, cz, tilt, board, fov = MIRAGE_VIEWS[name]
     scene = mirage_scene(index if with_medium else None, board)
     if width < height:  # a column (tests): keep the figure's vertical field of view
         fov = math.degrees(2 * math.atan(math.tan(math.radians(fov) / 2) * 3 / 4))
     cam = camera((0, 0, cz), (1, 0, cz + tilt), fov, width, height)  # = presets.mirage_view
-    return render(f"{name} {'medium' if with_medium else 'no medium'}", scene, cam, method,
-                  step=step)
+    return render(
+        f"{name} {'medium' if with_medium else 'no medium'}", scene, cam, method, step=step
+    )
 
 
 def column_letters(rgb: np.ndarray) -> str:
     """A column of pixels read top to bottom as band letters R, G, W, '.' sky, '_' ground."""
     import itertools
 
-    letters = np.where(rgb.sum(1) > 2.5, "W", np.where(rgb[:, 0] > 0.5, "R", np.where(
-        rgb[:, 1] > 0.5, "G", np.where(rgb[:, 2] > 0.7, ".", "_"))))
+    letters = np.where(
+        rgb.sum(1) > 2.5,
+        "W",
+        np.where(
+            rgb[:, 0] > 0.5,
+            "R",
+            np.where(rgb[:, 1] > 0.5, "G", np.where(rgb[:, 2] > 0.7, ".", "_")),
+        ),
+    )
     return "".join(k for k, _ in itertools.groupby("".join(letters)))
 
 
@@ -279,21 +337,37 @@ def fig02b(args) -> str:
     """Mirage ray paths: bent up over hot ground (Eq. 17), bent down above an inversion (Eq. 18)."""
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.8))
-    cases = [(MIRAGE_EQ17_INDEX, 0.4, np.linspace(-0.06, 0.0, 16), (0.1, 0.7),
-              "Eq. 17: inferior mirage (hot ground)"),
-             (MIRAGE_EQ18_INDEX, 0.9, np.linspace(-0.01, 0.03, 17), (0.2, 0.9),
-              "Eq. 18: Vince's phenomenon (inversion at 1.1 m)")]
+    cases = [
+        (
+            MIRAGE_EQ17_INDEX,
+            0.4,
+            np.linspace(-0.06, 0.0, 16),
+            (0.1, 0.7),
+            "Eq. 17: inferior mirage (hot ground)",
+        ),
+        (
+            MIRAGE_EQ18_INDEX,
+            0.9,
+            np.linspace(-0.01, 0.03, 17),
+            (0.2, 0.9),
+            "Eq. 18: Vince's phenomenon (inversion at 1.1 m)",
+        ),
+    ]
     for ax, (index, eye, angles, board, title) in zip(axes, cases, strict=True):
-        path, grounded = mirage_paths(index, eye, angles, x_end=25.0, step=0.05,
-                                      method=args.method)
+        path, grounded = mirage_paths(index, eye, angles, x_end=25.0, step=0.05, method=args.method)
         for k in range(path.shape[1]):
             x, z = path[:, k, 0], path[:, k, 2]
             keep = np.cumsum(z < 0) == 0
             ax.plot(x[keep], z[keep], color="0.6" if grounded[k] else "C0", lw=0.8)
         ax.add_patch(plt.Rectangle((20, board[0]), 0.3, board[1] - board[0], color="C3"))
         ax.axhline(0, color="k", lw=1)
-        ax.set(xlim=(0, 25), ylim=(-0.05, 1.6 if eye > 0.5 else 1.0), xlabel="x (m)",
-               ylabel="z (m)", title=title)
+        ax.set(
+            xlim=(0, 25),
+            ylim=(-0.05, 1.6 if eye > 0.5 else 1.0),
+            xlabel="x (m)",
+            ylabel="z (m)",
+            title=title,
+        )
         ax.plot([0], [eye], "ko")
     fig.suptitle("Fig. 2b: ray paths from the eye (literal H = n|p|²/2; grey: reach the ground)")
     return _save(fig, "fig02b_mirage_paths", args.out)
@@ -312,9 +386,15 @@ def fig03(args) -> str:
     t = np.linspace(0, 2 * np.pi, 200)
     ax.fill(RG * np.cos(t), RG * np.sin(t), color="k")
     ax.plot(1.5 * RG * np.cos(t), 1.5 * RG * np.sin(t), "k--", lw=0.7, label="photon sphere")
-    ax.set(xlim=(-12, 12), ylim=(-12, 12), aspect="equal", xlabel="x / rg", ylabel="y / rg",
-           title="Fig. 3: light paths near a black hole\n(red: captured, b < 3√3/2 rg; two "
-                 "rays at b_c (1 ± 1e-3) wind around)")
+    ax.set(
+        xlim=(-12, 12),
+        ylim=(-12, 12),
+        aspect="equal",
+        xlabel="x / rg",
+        ylabel="y / rg",
+        title="Fig. 3: light paths near a black hole\n(red: captured, b < 3√3/2 rg; two "
+        "rays at b_c (1 ± 1e-3) wind around)",
+    )
     ax.legend(loc="lower right")
     return _save(fig, "fig03_blackhole_paths", args.out)
 
@@ -322,13 +402,17 @@ def fig03(args) -> str:
 def _volterra_runs(args):
     """The runs behind Figs. 4 and 5 (step 0.5; rk4 and gauss4 ten times 4500 steps)."""
     long = 10 * 4500
-    runs = {"rk4": volterra_run("rk4", 0.5, long, record_every=5),
-            "gauss4": volterra_run("gauss4", 0.5, long, record_every=5),
-            "yoshida4": volterra_run("yoshida4", 0.5, 4500, record_every=5),
-            "tao4": volterra_run("tao4", 0.5, 4500, record_every=5)}
+    runs = {
+        "rk4": volterra_run("rk4", 0.5, long, record_every=5),
+        "gauss4": volterra_run("gauss4", 0.5, long, record_every=5),
+        "yoshida4": volterra_run("yoshida4", 0.5, 4500, record_every=5),
+        "tao4": volterra_run("tao4", 0.5, 4500, record_every=5),
+    }
     for name, run in runs.items():
-        print(f"  volterra {name}: {len(run[0]) * 5 - 5} steps in {run[4]:.1f} s, "
-              f"max |H - H0| {np.abs(run[3]).max():.2e}")
+        print(
+            f"  volterra {name}: {len(run[0]) * 5 - 5} steps in {run[4]:.1f} s, "
+            f"max |H - H0| {np.abs(run[3]).max():.2e}"
+        )
     return runs
 
 
@@ -337,13 +421,24 @@ def fig04_05(args) -> list[str]:
     plt = _plt()
     runs = _volterra_runs(args)
     fig, axes = plt.subplots(1, 3, figsize=(13, 4.3), sharex=True, sharey=True)
-    panels = [("rk4", 900, "rk4, 4500 steps"), ("rk4", None, "rk4, 45 000 steps"),
-              ("gauss4", None, "gauss4 (symplectic, order 4), 45 000 steps")]
+    panels = [
+        ("rk4", 900, "rk4, 4500 steps"),
+        ("rk4", None, "rk4, 45 000 steps"),
+        ("gauss4", None, "gauss4 (symplectic, order 4), 45 000 steps"),
+    ]
     for ax, (name, upto, title) in zip(axes, panels, strict=True):
         s, q, p, _, _ = runs[name]
         for k in range(q.shape[1]):
-            ax.scatter(q[:upto, k], p[:upto, k], c=s[:upto], s=0.2, cmap="viridis",
-                       vmin=0, vmax=s[-1], rasterized=True)
+            ax.scatter(
+                q[:upto, k],
+                p[:upto, k],
+                c=s[:upto],
+                s=0.2,
+                cmap="viridis",
+                vmin=0,
+                vmax=s[-1],
+                rasterized=True,
+            )
         ax.plot(VOLTERRA_Q0, VOLTERRA_P0, "r.")
         ax.set(title=title, xlabel="q", aspect="equal", xlim=(0, 0.85), ylim=(0, 0.85))
     axes[0].set_ylabel("p")
@@ -354,8 +449,11 @@ def fig04_05(args) -> list[str]:
         label = name + (" (ω = 5: unstable at this step)" if name == "tao4" else "")
         ax.loglog(s[1:] / 0.5, np.abs(dH[1:, 0]) + 1e-17, lw=0.7, color=f"C{k}", label=label)
     ax.axvline(4500, color="k", ls=":", lw=0.8)
-    ax.set(xlabel="steps (of 0.5)", ylabel="|H - H0| (outer orbit, H0 = -0.008)",
-           title="Fig. 5: H over time: rk4 drifts linearly, symplectic methods stay bounded")
+    ax.set(
+        xlabel="steps (of 0.5)",
+        ylabel="|H - H0| (outer orbit, H0 = -0.008)",
+        title="Fig. 5: H over time: rk4 drifts linearly, symplectic methods stay bounded",
+    )
     ax.legend()
     paths.append(_save(fig, "fig05_volterra_energy", args.out))
     return paths
@@ -373,11 +471,14 @@ def fig06(args) -> str:
     w, h = size_hw(args.size)
     cam = camera((0, -20, 2), (0, 0, 0), 45, w, h)
     objs = [checker_board(10.0, 16.0), *textured_spheres()]
-    straight = render("fig06 Eq. 13", lens_scene(hm.minkowski("cartesian"), objs), cam,
-                      args.method)
-    curved = render("fig06 Eq. 14", lens_scene(hm.minkowski("spherical"), objs,
-                                               region_radius=8.0), cam, args.method,
-                    tolerance=1e-4)
+    straight = render("fig06 Eq. 13", lens_scene(hm.minkowski("cartesian"), objs), cam, args.method)
+    curved = render(
+        "fig06 Eq. 14",
+        lens_scene(hm.minkowski("spherical"), objs, region_radius=8.0),
+        cam,
+        args.method,
+        tolerance=1e-4,
+    )
     diff = np.abs(straight.rgba - curved.rgba)[..., :3].max(axis=-1)
     print(f"  fig06: max |difference| {diff.max():.2e}")
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
@@ -397,10 +498,13 @@ def fig07(args) -> list[str]:
     w, h = size_hw(args.size)
     cam = camera((0, -20, 0), (0, 0, 0), 40, w, h)
     paths = []
-    for tag, model, title in [("a_convex", hm.schwarzschild(rg=RG), "rg = 1: convex lens"),
-                              ("b_concave", negative_mass(-0.25 * RG), "rg = -0.25: concave lens")]:
-        out = render(f"fig07{tag[0]}", lens_scene(model), cam, args.method,
-                     tolerance=args.tolerance)
+    for tag, model, title in [
+        ("a_convex", hm.schwarzschild(rg=RG), "rg = 1: convex lens"),
+        ("b_concave", negative_mass(-0.25 * RG), "rg = -0.25: concave lens"),
+    ]:
+        out = render(
+            f"fig07{tag[0]}", lens_scene(model), cam, args.method, tolerance=args.tolerance
+        )
         fig, ax = plt.subplots(figsize=(5, 4))
         _show(ax, out.rgba, f"Fig. 7{tag[0]}: Schwarzschild, {title}")
         paths.append(_save(fig, f"fig07{tag}", args.out))
@@ -413,11 +517,14 @@ def fig08(args) -> str:
     w, h = size_hw(args.size)
     cam = camera((0, -22, 3.5), (0, 0, 0), 45, w, h)
     fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-    for ax, (model, title) in zip(axes, [(None, "(a) flat space"),
-                                         (hm.schwarzschild(rg=RG), "(b) with the black hole")],
-                                  strict=True):
-        scene = core.Scene(model=model, objects=textured_spheres(), volumes=[force_volume()],
-                           background=sky())
+    for ax, (model, title) in zip(
+        axes,
+        [(None, "(a) flat space"), (hm.schwarzschild(rg=RG), "(b) with the black hole")],
+        strict=True,
+    ):
+        scene = core.Scene(
+            model=model, objects=textured_spheres(), volumes=[force_volume()], background=sky()
+        )
         out = render(f"fig08 {title}", scene, cam, args.method, tolerance=args.tolerance)
         _show(ax, out.rgba, title)
     fig.suptitle("Fig. 8: textured spheres and a volume board coloured by the force M/r²")
@@ -437,14 +544,16 @@ def _fig_mirage(args, name: str, title: str) -> str:
 
 def fig10(args) -> str:
     """The inferior mirage: the board's top reappears inverted below it, with mirrored sky."""
-    return _fig_mirage(args, "fig10", "Fig. 10: inferior mirage (Eq. 17): an inverted image "
-                                      "below the board")
+    return _fig_mirage(
+        args, "fig10", "Fig. 10: inferior mirage (Eq. 17): an inverted image below the board"
+    )
 
 
 def fig11(args) -> str:
     """Vince's phenomenon: an inverted ghost of the board above it."""
-    return _fig_mirage(args, "fig11", "Fig. 11: Vince's phenomenon (Eq. 18): an inverted "
-                                      "ghost above the board")
+    return _fig_mirage(
+        args, "fig11", "Fig. 11: Vince's phenomenon (Eq. 18): an inverted ghost above the board"
+    )
 
 
 def fig12(args) -> str:
@@ -456,23 +565,42 @@ def fig12(args) -> str:
     for ax, a in zip(axes, (0.0, 0.499), strict=True):
         # at most 1e-7: rays skimming the near-extremal horizon on the prograde edge drift off
         # the light cone at 1e-6 and are flagged failed (2 pixels at 128 px; none at 1e-7)
-        out, pix = kerr_shadow(a, w, h, distance=distance, fov_deg=fov, method=args.method,
-                               tolerance=min(args.tolerance, 1e-7))
+        out, pix = kerr_shadow(
+            a,
+            w,
+            h,
+            distance=distance,
+            fov_deg=fov,
+            method=args.method,
+            tolerance=min(args.tolerance, 1e-7),
+        )
         half_w, half_h = 0.5 * w * pix * distance, 0.5 * h * pix * distance
-        ax.imshow(np.clip(core.imageio.linear_to_srgb(out.rgba[..., :3]), 0, 1),
-                  extent=(-half_w, half_w, -half_h, half_h))
+        ax.imshow(
+            np.clip(core.imageio.linear_to_srgb(out.rgba[..., :3]), 0, 1),
+            extent=(-half_w, half_w, -half_h, half_h),
+        )
         x, y = bardeen_shadow(a)
         ax.plot(x, y, "c--", lw=1, label="Bardeen (1973), far observer")
         ax.axvline(0, color="w", lw=0.4)
         ax.set(title=f"a/M = {a / M:g}", xlabel="x on the sky (rg)", ylabel="z on the sky (rg)")
         ax.legend(loc="lower left", fontsize=7)
-    fig.suptitle("Kerr (Eq. 12): the rotating hole's shadow (spin along +z, seen edge-on "
-                 "from 200 rg)")
+    fig.suptitle(
+        "Kerr (Eq. 12): the rotating hole's shadow (spin along +z, seen edge-on from 200 rg)"
+    )
     return _save(fig, "fig12_kerr_shadow", args.out)
 
 
-FIGURES = {"fig02b": fig02b, "fig03": fig03, "fig04": fig04_05, "fig06": fig06,
-           "fig07": fig07, "fig08": fig08, "fig10": fig10, "fig11": fig11, "fig12": fig12}
+FIGURES = {
+    "fig02b": fig02b,
+    "fig03": fig03,
+    "fig04": fig04_05,
+    "fig06": fig06,
+    "fig07": fig07,
+    "fig08": fig08,
+    "fig10": fig10,
+    "fig11": fig11,
+    "fig12": fig12,
+}
 
 
 def main(argv: list[str] | None = None) -> None:

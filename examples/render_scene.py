@@ -30,7 +30,7 @@ CAMERA_DISTANCE = 30.0
 def parse_args(argv: list[str]) -> argparse.Namespace:
     """Options after '--' (inside Blender) or all of them (plain Python)."""
     if "--" in argv:
-        argv = argv[argv.index("--") + 1:]
+        argv = argv[argv.index("--") + 1 :]
     elif bpy.app.binary_path:  # inside Blender without '--': Blender's own options only
         argv = []
     else:  # plain Python with the bpy module
@@ -60,8 +60,10 @@ def enable_extension() -> None:
     try:
         bpy.ops.preferences.addon_enable(module=MODULE)
     except (RuntimeError, ModuleNotFoundError) as err:
-        sys.exit(f"render_scene: the SymRay extension is not installed ({err}); run "
-                 "'make render', or install dist/symray-*.zip first")
+        sys.exit(
+            f"render_scene: the SymRay extension is not installed ({err}); run "
+            "'make render', or install dist/symray-*.zip first"
+        )
     if not hasattr(bpy.types.Scene, "symray"):
         sys.exit("render_scene: the SymRay extension could not be enabled")
 
@@ -85,9 +87,16 @@ def board_object(scene: bpy.types.Scene) -> bpy.types.Object:
     """The textured board behind the hole: a square in the XZ plane at y = BOARD_DISTANCE."""
     half = BOARD_SIZE / 2
     mesh = bpy.data.meshes.new("Board")
-    mesh.from_pydata([(-half, BOARD_DISTANCE, -half), (half, BOARD_DISTANCE, -half),
-                      (half, BOARD_DISTANCE, half), (-half, BOARD_DISTANCE, half)],
-                     [], [(0, 3, 2, 1)])
+    mesh.from_pydata(
+        [
+            (-half, BOARD_DISTANCE, -half),
+            (half, BOARD_DISTANCE, -half),
+            (half, BOARD_DISTANCE, half),
+            (-half, BOARD_DISTANCE, half),
+        ],
+        [],
+        [(0, 3, 2, 1)],
+    )
     uv = mesh.uv_layers.new(name="UVMap")
     for loop, (u, v) in zip(uv.data, [(0, 0), (0, 1), (1, 1), (1, 0)], strict=True):
         loop.uv = (u, v)

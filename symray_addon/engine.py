@@ -36,8 +36,9 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
     bl_use_shading_nodes_custom = False
     bl_use_eevee_viewport = True
 
-    def update_render_passes(self, scene: bpy.types.Scene | None = None,
-                             renderlayer: bpy.types.ViewLayer | None = None) -> None:
+    def update_render_passes(
+        self, scene: bpy.types.Scene | None = None, renderlayer: bpy.types.ViewLayer | None = None
+    ) -> None:
         """Declare the passes so view layers and the compositor know them."""
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
         for _core_name, name in enabled_passes(scene.symray):
@@ -66,8 +67,9 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
         """render() itself; raises on any failure."""
         scene = depsgraph.scene
         self.update_stats("", "SymRay: reading the scene")
-        job = render_job.prepare(scene, depsgraph, use_border=True,
-                                 camera_object=self.camera_override)
+        job = render_job.prepare(
+            scene, depsgraph, use_border=True, camera_object=self.camera_override
+        )
         passes = enabled_passes(scene.symray)
         for _core_name, name in passes:
             self.add_pass(name, 1, "X")
@@ -95,8 +97,13 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
 
         return progress
 
-    def _write_result(self, depsgraph: bpy.types.Depsgraph, job: render_job.RenderJob,
-                      result: Any, passes: list[tuple[str, str]]) -> None:
+    def _write_result(
+        self,
+        depsgraph: bpy.types.Depsgraph,
+        job: render_job.RenderJob,
+        result: Any,
+        passes: list[tuple[str, str]],
+    ) -> None:
         """Copy the image and passes into Blender's render result; nothing on a failure."""
         view_layer = depsgraph.view_layer.name if depsgraph.view_layer else ""
         # Coordinates are relative to the render region (border), which is what we traced.
@@ -119,8 +126,12 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
 # COMPAT_ENGINES: camera, output, format, colour management, mesh data, ...) except
 # Freestyle, which SymRay does not draw; plus the EEVEE material and world surface panels,
 # which edit the Principled BSDF / Background nodes SymRay reads.
-EXTRA_PANELS = ("EEVEE_MATERIAL_PT_context_material", "EEVEE_MATERIAL_PT_surface",
-                "EEVEE_WORLD_PT_surface", "DATA_PT_lens")
+EXTRA_PANELS = (
+    "EEVEE_MATERIAL_PT_context_material",
+    "EEVEE_MATERIAL_PT_surface",
+    "EEVEE_WORLD_PT_surface",
+    "DATA_PT_lens",
+)
 EXCLUDED_PREFIXES = ("RENDER_PT_freestyle", "VIEWLAYER_PT_freestyle", "MATERIAL_PT_freestyle")
 _added_to: list[type] = []
 

@@ -14,15 +14,15 @@ def border_of(render: bpy.types.RenderSettings) -> tuple[float, float, float, fl
     """The render region (min_x, max_x, min_y, max_y) if border rendering is on, else None."""
     if not render.use_border:
         return None
-    border = (render.border_min_x, render.border_max_x, render.border_min_y,
-              render.border_max_y)
+    border = (render.border_min_x, render.border_max_x, render.border_min_y, render.border_max_y)
     if border == (0.0, 1.0, 0.0, 1.0):
         return None
     return border
 
 
-def camera_kwargs(scene: bpy.types.Scene, camera_object: bpy.types.Object,
-                  use_border: bool = True) -> dict[str, Any]:
+def camera_kwargs(
+    scene: bpy.types.Scene, camera_object: bpy.types.Object, use_border: bool = True
+) -> dict[str, Any]:
     """Keyword arguments of ``core.Camera.blender`` for ``camera_object`` seen by ``scene``.
 
     Pass an evaluated camera object (``obj.evaluated_get(depsgraph)``) to see animation and

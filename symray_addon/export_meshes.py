@@ -24,9 +24,16 @@ GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
 class BVHIntersector:
     """Straight-segment queries against triangles in a BVH (core Intersector protocol)."""
 
-    def __init__(self, vertices: np.ndarray, triangles: np.ndarray, tri_object: np.ndarray,
-                 tri_material: np.ndarray, tri_uv: np.ndarray,
-                 materials: Sequence[MaterialSampler], names: Sequence[str] = ()) -> None:
+    def __init__(
+        self,
+        vertices: np.ndarray,
+        triangles: np.ndarray,
+        tri_object: np.ndarray,
+        tri_material: np.ndarray,
+        tri_uv: np.ndarray,
+        materials: Sequence[MaterialSampler],
+        names: Sequence[str] = (),
+    ) -> None:
         """Build from world-space ``vertices`` (V, 3) and ``triangles`` (T, 3) indices.
 
         ``tri_object`` (T,) object ids, ``tri_material`` (T,) indices into ``materials``,
@@ -51,17 +58,24 @@ class BVHIntersector:
         d11, d12, d22 = (np.einsum("ij,ij->i", u, v) for u, v in ((e1, e1), (e1, e2), (e2, e2)))
         den = d11 * d22 - d12 * d12
         den = np.where(den == 0.0, 1.0, den)[:, None]
-        self._bary = np.stack([(d22[:, None] * e1 - d12[:, None] * e2) / den,
-                               (d11[:, None] * e2 - d12[:, None] * e1) / den], axis=1)
-        self._tree = BVHTree.FromPolygons(self.vertices.tolist(), self.triangles.tolist(),
-                                          all_triangles=True, epsilon=0.0)
+        self._bary = np.stack(
+            [
+                (d22[:, None] * e1 - d12[:, None] * e2) / den,
+                (d11[:, None] * e2 - d12[:, None] * e1) / den,
+            ],
+            axis=1,
+        )
+        self._tree = BVHTree.FromPolygons(
+            self.vertices.tolist(), self.triangles.tolist(), all_triangles=True, epsilon=0.0
+        )
 
     def __len__(self) -> int:
         """Number of triangles."""
         return len(self.triangles)
 
-    def ray_cast(self, origin: Sequence[float], direction: Sequence[float],
-                 distance: float) -> tuple:
+    def ray_cast(
+        self, origin: Sequence[float], direction: Sequence[float], distance: float
+    ) -> tuple:
         """``BVHTree.ray_cast`` on the underlying tree (location, normal, index, distance)."""
         return self._tree.ray_cast(origin, direction, distance)
 
@@ -73,21 +87,37 @@ class BVHIntersector:
         d = b - a
         length = np.sqrt(np.einsum("ij,ij->i", d, d))
         lo, hi = self.bounds
-        candidate = (np.all(np.maximum(a, b) >= lo, axis=1)
-                     & np.all(np.minimum(a, b) <= hi, axis=1) & (length > 0.0))
+        candidate = (
+            np.all(np.maximum(a, b) >= lo, axis=1)
+            & np.all(np.minimum(a, b) <= hi, axis=1)
+            & (length > 0.0)
+        )
         rows = np.flatnonzero(candidate)
         # one ray_cast per segment; keep only (face index, distance), None on a miss: the
         # hit point and the face normal follow in numpy (Vectors are costly to convert)
         cast = self._tree.ray_cast
-        found = np.array([cast(origin, direction, limit)[2:] for origin, direction, limit in
-                          zip(a[rows].tolist(), d[rows].tolist(), length[rows].tolist(),
-                              strict=True)], dtype=np.float64).reshape(-1, 2)
+        found = np.array(
+            [
+                cast(origin, direction, limit)[2:]
+                for origin, direction, limit in zip(
+                    a[rows].tolist(), d[rows].tolist(), length[rows].tolist(), strict=True
+                )
+            ],
+            dtype=np.float64,
+        ).reshape(-1, 2)
         hit = ~np.isnan(found[:, 0])
-        return self._hits(n, a, d, length, rows[hit], found[hit, 0].astype(np.int64),
-                          found[hit, 1])
+        return self._hits(n, a, d, length, rows[hit], found[hit, 0].astype(np.int64), found[hit, 1])
 
-    def _hits(self, n: int, a: np.ndarray, d: np.ndarray, length: np.ndarray,
-              rows: np.ndarray, face: np.ndarray, dist: np.ndarray) -> Hits:
+    def _hits(
+        self,
+        n: int,
+        a: np.ndarray,
+        d: np.ndarray,
+        length: np.ndarray,
+        rows: np.ndarray,
+        face: np.ndarray,
+        dist: np.ndarray,
+    ) -> Hits:
         """Hits for ``n`` segments a -> a + d from the faces and distances of ``rows``."""
         hits = Hits.miss(n)
         if len(rows):
@@ -108,8 +138,11 @@ class BVHIntersector:
         r = point - self.vertices[self.triangles[face, 0]]
         w = np.einsum("mkj,mj->mk", self._bary[face], r)  # (M, 2): w1, w2
         corners = self.tri_uv[face]  # (M, 3, 2)
-        return corners[:, 0] + w[:, :1] * (corners[:, 1] - corners[:, 0]) + \
-            w[:, 1:] * (corners[:, 2] - corners[:, 0])
+        return (
+            corners[:, 0]
+            + w[:, :1] * (corners[:, 1] - corners[:, 0])
+            + w[:, 1:] * (corners[:, 2] - corners[:, 0])
+        )
 
     def _color(self, face: np.ndarray, uv: np.ndarray) -> np.ndarray:
         """Material colours (M, 4) at the given hits."""
@@ -197,5 +230,12 @@ def build_intersector(depsgraph: bpy.types.Depsgraph) -> BVHIntersector | None:
         offset += len(co)
     if not tris:
         return None
-    return BVHIntersector(np.concatenate(verts), np.concatenate(tris), np.concatenate(objects),
-                          np.concatenate(mats), np.concatenate(uvs), samplers, names)
+    return BVHIntersector(
+        np.concatenate(verts),
+        np.concatenate(tris),
+        np.concatenate(objects),
+        np.concatenate(mats),
+        np.concatenate(uvs),
+        samplers,
+        names,
+    )

@@ -51,8 +51,9 @@ def _wrap(i: np.ndarray, n: int, extension: str) -> np.ndarray:
     return np.mod(i, n)
 
 
-def sample_image(image: np.ndarray, uv: np.ndarray, closest: bool = False,
-                 extension: str = "REPEAT") -> np.ndarray:
+def sample_image(
+    image: np.ndarray, uv: np.ndarray, closest: bool = False, extension: str = "REPEAT"
+) -> np.ndarray:
     """Sample an (h, w, 4) bottom-up image at ``uv`` (M, 2), bilinear or closest, as float64."""
     h, w = image.shape[:2]
     x = uv[:, 0] * w - 0.5
@@ -67,8 +68,12 @@ def sample_image(image: np.ndarray, uv: np.ndarray, closest: bool = False,
         xa, ya = x0.astype(np.int64), y0.astype(np.int64)
         xa_, xb_ = _wrap(xa, w, extension), _wrap(xa + 1, w, extension)
         ya_, yb_ = _wrap(ya, h, extension), _wrap(ya + 1, h, extension)
-        out = ((1 - fx) * (1 - fy) * image[ya_, xa_] + fx * (1 - fy) * image[ya_, xb_]
-               + (1 - fx) * fy * image[yb_, xa_] + fx * fy * image[yb_, xb_])
+        out = (
+            (1 - fx) * (1 - fy) * image[ya_, xa_]
+            + fx * (1 - fy) * image[ya_, xb_]
+            + (1 - fx) * fy * image[yb_, xa_]
+            + fx * fy * image[yb_, xb_]
+        )
     if extension == "CLIP":
         outside = (uv[:, 0] < 0) | (uv[:, 0] > 1) | (uv[:, 1] < 0) | (uv[:, 1] > 1)
         out[outside] = 0.0
@@ -142,6 +147,9 @@ def material_sampler(material: bpy.types.Material | None) -> MaterialSampler:
     pixels = image_pixels(source.image)
     if pixels is None:
         return MaterialSampler(np.array(MISSING_TEXTURE_COLOR))
-    return MaterialSampler(np.array([1.0, 1.0, 1.0, alpha]), pixels,
-                           closest=source.interpolation == "Closest",
-                           extension=source.extension)
+    return MaterialSampler(
+        np.array([1.0, 1.0, 1.0, alpha]),
+        pixels,
+        closest=source.interpolation == "Closest",
+        extension=source.extension,
+    )

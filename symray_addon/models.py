@@ -70,8 +70,9 @@ def build_model(settings: Any, metric_source: str) -> Any | None:
         spin, rg = float(settings.spin), float(settings.rg)
         return hm.kerr(rg=rg, a=spin * rg / 2.0, chart="kerr_schild")
     if model == "MEDIUM":
-        index = _expression(settings.refractive_index, validation.INDEX_NAMES,
-                            "refractive index n(x, y, z)")
+        index = _expression(
+            settings.refractive_index, validation.INDEX_NAMES, "refractive index n(x, y, z)"
+        )
         bounds = None
         if settings.use_medium_bounds:
             lo, hi = np.array(settings.medium_min), np.array(settings.medium_max)
@@ -84,12 +85,16 @@ def build_model(settings: Any, metric_source: str) -> Any | None:
             spec = validation.parse_metric(metric_source)
         except expressions.ExpressionError as err:
             raise expressions.ExpressionError(f"Invalid metric: {err}", None) from None
-        return hm.metric(inverse=[list(row) for row in spec.rows],
-                         coords=validation.METRIC_NAMES, definitions=list(spec.definitions))
+        return hm.metric(
+            inverse=[list(row) for row in spec.rows],
+            coords=validation.METRIC_NAMES,
+            definitions=list(spec.definitions),
+        )
     if model == "CUSTOM":
         text = _expression(settings.hamiltonian, validation.HAMILTONIAN_NAMES, "Hamiltonian")
-        return hm.from_expression(text, q=list(validation.HAMILTONIAN_COORDS),
-                                  p=list(validation.HAMILTONIAN_MOMENTA))
+        return hm.from_expression(
+            text, q=list(validation.HAMILTONIAN_COORDS), p=list(validation.HAMILTONIAN_MOMENTA)
+        )
     raise ValueError(f"Unknown SymRay model '{model}'")
 
 
@@ -104,8 +109,10 @@ def check_observer(model: Any | None, where: Placement, camera_position: np.ndar
     local = where.rotation.T @ (np.asarray(camera_position, dtype=np.float64) - where.center)
     r = float(model.radius_at(local.reshape(3, 1))[0])
     if r <= r_plus * (1.0 + 1e-9):
-        raise ValueError(f"The camera is inside the black hole's horizon (r = {r:.4g} <= "
-                         f"r+ = {r_plus:.4g}): move it further from the centre object")
+        raise ValueError(
+            f"The camera is inside the black hole's horizon (r = {r:.4g} <= "
+            f"r+ = {r_plus:.4g}): move it further from the centre object"
+        )
 
 
 OBSERVER_MODELS = frozenset({"SCHWARZSCHILD", "KERR", "METRIC"})
@@ -123,26 +130,41 @@ def check_camera(settings: Any, model: Any, where: Placement, camera_position: A
     check_scene_camera(scene, camera_position, validation.typed_float(settings.tolerance))
 
 
-def camera_problem(settings: Any, metric_source: str, center_matrix: Any | None,
-                   camera_position: Any) -> str:
+def camera_problem(
+    settings: Any, metric_source: str, center_matrix: Any | None, camera_position: Any
+) -> str:
     """The message check_camera raises, "" if none (or if the settings themselves are
     invalid: their own messages say so). Cached: the panel asks at every redraw."""
     if settings.model not in OBSERVER_MODELS or validation.settings_problems(settings):
         return ""
     center = None if center_matrix is None else tuple(map(tuple, center_matrix))
-    return _camera_problem(settings.model, float(settings.rg), float(settings.spin),
-                           float(settings.tolerance), metric_source, center,
-                           tuple(float(v) for v in camera_position))
+    return _camera_problem(
+        settings.model,
+        float(settings.rg),
+        float(settings.spin),
+        float(settings.tolerance),
+        metric_source,
+        center,
+        tuple(float(v) for v in camera_position),
+    )
 
 
 @functools.lru_cache(maxsize=16)
-def _camera_problem(model: str, rg: float, spin: float, tolerance: float, metric_source: str,
-                    center: tuple | None, camera: tuple) -> str:
+def _camera_problem(
+    model: str,
+    rg: float,
+    spin: float,
+    tolerance: float,
+    metric_source: str,
+    center: tuple | None,
+    camera: tuple,
+) -> str:
     """camera_problem on plain (hashable) values."""
     settings = SimpleNamespace(model=model, rg=rg, spin=spin, tolerance=tolerance)
     try:
-        check_camera(settings, build_model(settings, metric_source), placement(center),
-                     np.array(camera))
+        check_camera(
+            settings, build_model(settings, metric_source), placement(center), np.array(camera)
+        )
     except expressions.ExpressionError:
         return ""  # shown with the expression
     except (ValueError, ArithmeticError) as err:

@@ -75,8 +75,7 @@ class RenderTask:
         return self.result
 
 
-def finish(operator: bpy.types.Operator, result: Any, image_name: str,
-           exr_path: str) -> set[str]:
+def finish(operator: bpy.types.Operator, result: Any, image_name: str, exr_path: str) -> set[str]:
     """Write a finished render (EXR first, then the image); report and return the status."""
     if result is None or getattr(result, "cancelled", False):
         operator.report({"WARNING"}, "SymRay render cancelled; the previous image is unchanged")

@@ -47,8 +47,10 @@ def check_writable(path: str) -> str:
     if not path.strip():
         raise OSError("EXR path is empty")
     if path.strip().startswith("//") and not bpy.data.filepath:
-        raise OSError(f"EXR path '{path}' is relative to the .blend file ('//'), which is not "
-                      "saved yet: save the file first, or choose an absolute path")
+        raise OSError(
+            f"EXR path '{path}' is relative to the .blend file ('//'), which is not "
+            "saved yet: save the file first, or choose an absolute path"
+        )
     raw = bpy.path.abspath(path)
     if os.path.isdir(raw) or raw.endswith(("/", "\\")):
         raise OSError(f"EXR path '{raw}' is a folder, not a file")
@@ -161,8 +163,9 @@ def save_render_atomic(image: bpy.types.Image, path: str, scene: bpy.types.Scene
             raise OSError(f"Cannot write '{path}': {err}") from None
 
 
-def write_exr(path: str, rgba: np.ndarray,
-              passes: Mapping[str, np.ndarray] | None = None) -> list[str]:
+def write_exr(
+    path: str, rgba: np.ndarray, passes: Mapping[str, np.ndarray] | None = None
+) -> list[str]:
     """Write ``rgba`` (and ``passes``, see module doc) as OpenEXR; returns the files written.
 
     ``path`` may be relative to the .blend ('//'); OSError if a file cannot be written.
@@ -174,8 +177,9 @@ def write_exr(path: str, rgba: np.ndarray,
     try:
         with _scratch_scene() as scene:
             set_exr_format(scene.render.image_settings)
-            color = bpy.data.images.new("SymRay EXR", width=w, height=h, alpha=True,
-                                        float_buffer=True)
+            color = bpy.data.images.new(
+                "SymRay EXR", width=w, height=h, alpha=True, float_buffer=True
+            )
             images.append(color)
             _fill(color, rgba)
             save_render_atomic(color, target, scene)
@@ -187,8 +191,9 @@ def write_exr(path: str, rgba: np.ndarray,
                 for channel, name in enumerate(PASS_CHANNELS):
                     if name in present:
                         data[..., channel] = passes[name]
-                extra = bpy.data.images.new("SymRay EXR Passes", width=w, height=h,
-                                            alpha=True, float_buffer=True)
+                extra = bpy.data.images.new(
+                    "SymRay EXR Passes", width=w, height=h, alpha=True, float_buffer=True
+                )
                 images.append(extra)
                 _fill(extra, data)
                 save_render_atomic(extra, passes_path(target), scene)

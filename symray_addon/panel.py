@@ -21,8 +21,9 @@ def _error_lines(layout: bpy.types.UILayout, message: str) -> None:
         col.label(text=line, icon="ERROR" if i == 0 else "BLANK1")
 
 
-def _expression(layout: bpy.types.UILayout, settings: bpy.types.PropertyGroup, prop: str,
-                error: str) -> None:
+def _expression(
+    layout: bpy.types.UILayout, settings: bpy.types.PropertyGroup, prop: str, error: str
+) -> None:
     """An expression field, red with its message below while it is invalid."""
     row = layout.row()
     row.alert = bool(error)
@@ -40,8 +41,9 @@ def render_problems(scene: bpy.types.Scene) -> list[str]:
     if problems or scene.camera is None:
         return problems
     center = settings.center.matrix_world if settings.center is not None else None
-    problem = models.camera_problem(settings, properties.metric_source(settings), center,
-                                    scene.camera.matrix_world.translation)
+    problem = models.camera_problem(
+        settings, properties.metric_source(settings), center, scene.camera.matrix_world.translation
+    )
     return [problem] if problem else []
 
 

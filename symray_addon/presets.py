@@ -29,14 +29,26 @@ PRESETS: dict[str, tuple[str, str, dict[str, object]]] = {
     "MIRAGE_EQ17": (
         "Mirage (Eq. 17)",
         "Refractive index of the seed's Eq. 17 with its literal Hamiltonian H = n|p|^2/2",
-        {"model": "MEDIUM", "refractive_index": MIRAGE_EQ17_INDEX, "index_form": "SEED",
-         "use_medium_bounds": False, "method": "AUTO", "tolerance": 1e-6},
+        {
+            "model": "MEDIUM",
+            "refractive_index": MIRAGE_EQ17_INDEX,
+            "index_form": "SEED",
+            "use_medium_bounds": False,
+            "method": "AUTO",
+            "tolerance": 1e-6,
+        },
     ),
     "MIRAGE_EQ18": (
         "Mirage (Eq. 18)",
         "Refractive index of the seed's Eq. 18 with its literal Hamiltonian H = n|p|^2/2",
-        {"model": "MEDIUM", "refractive_index": MIRAGE_EQ18_INDEX, "index_form": "SEED",
-         "use_medium_bounds": False, "method": "AUTO", "tolerance": 1e-6},
+        {
+            "model": "MEDIUM",
+            "refractive_index": MIRAGE_EQ18_INDEX,
+            "index_form": "SEED",
+            "use_medium_bounds": False,
+            "method": "AUTO",
+            "tolerance": 1e-6,
+        },
     ),
 }
 """identifier -> (label, description, settings to assign to scene.symray)."""

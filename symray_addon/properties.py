@@ -27,20 +27,35 @@ METHOD_ITEMS = [
     ("yoshida8", "Yoshida 8", "8th order composition"),
     ("suzuki4", "Suzuki 4", "4th order fractal composition"),
     ("suzuki6", "Suzuki 6", "6th order fractal composition"),
-    ("tao2", "Tao 2", "2nd order, explicit for non-separable H (extended phase space); "
-     "media and metrics only: it cannot trace black holes"),
-    ("tao4", "Tao 4", "4th order, explicit for non-separable H (extended phase space); "
-     "media and metrics only: it cannot trace black holes"),
+    (
+        "tao2",
+        "Tao 2",
+        "2nd order, explicit for non-separable H (extended phase space); "
+        "media and metrics only: it cannot trace black holes",
+    ),
+    (
+        "tao4",
+        "Tao 4",
+        "4th order, explicit for non-separable H (extended phase space); "
+        "media and metrics only: it cannot trace black holes",
+    ),
     ("rk4", "Runge–Kutta 4", "Non-symplectic reference, 4th order"),
     ("dopri5", "Dormand–Prince 5", "Non-symplectic reference, adaptive"),
     # appended (Blender stores an enum by its position: the items above keep theirs)
-    ("leapfrog", "Leapfrog", "2nd order, explicit splitting (needs a model with a split: "
-     "Schwarzschild, media)"),
+    (
+        "leapfrog",
+        "Leapfrog",
+        "2nd order, explicit splitting (needs a model with a split: Schwarzschild, media)",
+    ),
     ("blanes_moan4", "Blanes–Moan 4", "4th order, explicit splitting (Schwarzschild, media)"),
     ("blanes_moan6", "Blanes–Moan 6", "6th order, explicit splitting (Schwarzschild, media)"),
-    ("AUTO", "Automatic", "The measured cheapest for the model: Blanes–Moan 6 for "
-     "Schwarzschild, Blanes–Moan 4 for media (explicit symplectic splittings), "
-     "Gauss–Legendre 4 otherwise"),
+    (
+        "AUTO",
+        "Automatic",
+        "The measured cheapest for the model: Blanes–Moan 6 for "
+        "Schwarzschild, Blanes–Moan 4 for media (explicit symplectic splittings), "
+        "Gauss–Legendre 4 otherwise",
+    ),
 ]
 
 INDEX_FORM_ITEMS = [
@@ -56,27 +71,40 @@ BACKGROUND_ITEMS = [
 
 # Blender 5 warns when a path property holding '//' does not declare it supports that
 # (4.2 does not know the option; 5.0 is the first version it is known to be in)
-_PATH_OPTIONS = {"ANIMATABLE"} | ({"PATH_SUPPORTS_BLEND_RELATIVE"}
-                                 if bpy.app.version >= (5, 0, 0) else set())
+_PATH_OPTIONS = {"ANIMATABLE"} | (
+    {"PATH_SUPPORTS_BLEND_RELATIVE"} if bpy.app.version >= (5, 0, 0) else set()
+)
 
 PARALLEL_ITEMS = [
-    ("AUTO", "Auto", "Worker processes where the OS can fork them (Linux), threads "
-     "elsewhere and for the smallest images"),
-    ("PROCESSES", "Processes", "Forked worker processes: every core works (Linux; "
-     "threads elsewhere)"),
-    ("THREADS", "Threads", "Threads in Blender's process: they share Python's lock, so "
-     "two cores give about 1.2x"),
+    (
+        "AUTO",
+        "Auto",
+        "Worker processes where the OS can fork them (Linux), threads "
+        "elsewhere and for the smallest images",
+    ),
+    (
+        "PROCESSES",
+        "Processes",
+        "Forked worker processes: every core works (Linux; threads elsewhere)",
+    ),
+    (
+        "THREADS",
+        "Threads",
+        "Threads in Blender's process: they share Python's lock, so two cores give about 1.2x",
+    ),
 ]
 
 # Each expression property -> (validator, name of its error property).
 _EXPRESSIONS = {
     "refractive_index": (
         lambda s: validation.check_expression(s.refractive_index, validation.INDEX_NAMES),
-        "refractive_index_error"),
+        "refractive_index_error",
+    ),
     "metric": (lambda s: validation.check_metric(metric_source(s)), "metric_error"),
     "hamiltonian": (
         lambda s: validation.check_expression(s.hamiltonian, validation.HAMILTONIAN_NAMES),
-        "hamiltonian_error"),
+        "hamiltonian_error",
+    ),
 }
 
 
@@ -123,91 +151,169 @@ class SymRaySettings(bpy.types.PropertyGroup):
     """SymRay settings of one scene (``scene.symray``)"""
 
     model: bpy.props.EnumProperty(  # type: ignore[valid-type]
-        name="Model", items=MODEL_ITEMS, default="SCHWARZSCHILD",
-        description="What bends the light")
+        name="Model", items=MODEL_ITEMS, default="SCHWARZSCHILD", description="What bends the light"
+    )
     center: bpy.props.PointerProperty(  # type: ignore[valid-type]
-        name="Centre", type=bpy.types.Object, poll=_center_poll,
+        name="Centre",
+        type=bpy.types.Object,
+        poll=_center_poll,
         description="Empty placing the model: its position is the black hole's centre, its "
-                    "local Z the spin axis, its local axes the frame of n(x, y, z) and g^ij; "
-                    "none = the world origin")
+        "local Z the spin axis, its local axes the frame of n(x, y, z) and g^ij; "
+        "none = the world origin",
+    )
     rg: bpy.props.FloatProperty(  # type: ignore[valid-type]
-        name="Schwarzschild Radius", default=1.0, min=1e-6, soft_max=100.0,
-        subtype="DISTANCE", description="rg = 2GM/c² of the black hole, in scene units")
+        name="Schwarzschild Radius",
+        default=1.0,
+        min=1e-6,
+        soft_max=100.0,
+        subtype="DISTANCE",
+        description="rg = 2GM/c² of the black hole, in scene units",
+    )
     spin: bpy.props.FloatProperty(  # type: ignore[valid-type]
-        name="Spin a/M", default=0.9, min=-1e6, max=1e6, soft_min=-1.0, soft_max=1.0,
-        description="Kerr spin parameter a/M; |a/M| <= 1 (1 = extremal)")
+        name="Spin a/M",
+        default=0.9,
+        min=-1e6,
+        max=1e6,
+        soft_min=-1.0,
+        soft_max=1.0,
+        description="Kerr spin parameter a/M; |a/M| <= 1 (1 = extremal)",
+    )
     refractive_index: bpy.props.StringProperty(  # type: ignore[valid-type]
-        name="Refractive Index", default=presets.MIRAGE_EQ17_INDEX,
+        name="Refractive Index",
+        default=presets.MIRAGE_EQ17_INDEX,
         update=_validator("refractive_index"),
         description="n(x, y, z) in the centre's local frame; + - * / **, sin, exp, sqrt, pi "
-                    "(plain ASCII, at most 100 nested operations)")
+        "(plain ASCII, at most 100 nested operations)",
+    )
     refractive_index_error: bpy.props.StringProperty(  # type: ignore[valid-type]
-        name="Refractive Index Error", default="")
+        name="Refractive Index Error", default=""
+    )
     index_form: bpy.props.EnumProperty(  # type: ignore[valid-type]
-        name="Hamiltonian", items=INDEX_FORM_ITEMS, default="PHYSICAL",
-        description="Optical Hamiltonian built from n")
+        name="Hamiltonian",
+        items=INDEX_FORM_ITEMS,
+        default="PHYSICAL",
+        description="Optical Hamiltonian built from n",
+    )
     use_medium_bounds: bpy.props.BoolProperty(  # type: ignore[valid-type]
-        name="Bounded Medium", default=True,
-        description="Outside the box the medium is uniform and rays travel straight")
+        name="Bounded Medium",
+        default=True,
+        description="Outside the box the medium is uniform and rays travel straight",
+    )
     medium_min: bpy.props.FloatVectorProperty(  # type: ignore[valid-type]
-        name="Box Min", size=3, default=(-10.0, -10.0, -10.0), subtype="XYZ",
-        description="Lower corner of the medium's box, in the centre's local frame")
+        name="Box Min",
+        size=3,
+        default=(-10.0, -10.0, -10.0),
+        subtype="XYZ",
+        description="Lower corner of the medium's box, in the centre's local frame",
+    )
     medium_max: bpy.props.FloatVectorProperty(  # type: ignore[valid-type]
-        name="Box Max", size=3, default=(10.0, 10.0, 10.0), subtype="XYZ",
-        description="Upper corner of the medium's box, in the centre's local frame")
+        name="Box Max",
+        size=3,
+        default=(10.0, 10.0, 10.0),
+        subtype="XYZ",
+        description="Upper corner of the medium's box, in the centre's local frame",
+    )
     metric: bpy.props.StringProperty(  # type: ignore[valid-type]
-        name="Inverse Metric", default=presets.MINKOWSKI_METRIC, update=_validator("metric"),
+        name="Inverse Metric",
+        default=presets.MINKOWSKI_METRIC,
+        update=_validator("metric"),
         description="g^ij(t, x, y, z): 4 rows separated by ';', entries by ','; "
-                    "'name = expr;' statements before the rows define helpers")
+        "'name = expr;' statements before the rows define helpers",
+    )
     metric_text: bpy.props.PointerProperty(  # type: ignore[valid-type]
-        name="Metric Text", type=bpy.types.Text, update=_validator("metric"),
+        name="Metric Text",
+        type=bpy.types.Text,
+        update=_validator("metric"),
         description="Text data-block holding the inverse metric (one row or definition per "
-                    "line); overrides the one-line field")
+        "line); overrides the one-line field",
+    )
     metric_error: bpy.props.StringProperty(  # type: ignore[valid-type]
-        name="Metric Error", default="")
+        name="Metric Error", default=""
+    )
     hamiltonian: bpy.props.StringProperty(  # type: ignore[valid-type]
-        name="Hamiltonian", default="0.5*(p_x**2 + p_y**2 + p_z**2)",
+        name="Hamiltonian",
+        default="0.5*(p_x**2 + p_y**2 + p_z**2)",
         update=_validator("hamiltonian"),
         description="H(x, y, z, p_x, p_y, p_z) in the centre's local frame (plain ASCII, "
-                    "at most 100 nested operations)")
+        "at most 100 nested operations)",
+    )
     hamiltonian_error: bpy.props.StringProperty(  # type: ignore[valid-type]
-        name="Hamiltonian Error", default="")
+        name="Hamiltonian Error", default=""
+    )
     method: bpy.props.EnumProperty(  # type: ignore[valid-type]
-        name="Method", items=METHOD_ITEMS, default="AUTO",
-        description="Integrator for Hamilton's equations")
+        name="Method",
+        items=METHOD_ITEMS,
+        default="AUTO",
+        description="Integrator for Hamilton's equations",
+    )
     tolerance: bpy.props.FloatProperty(  # type: ignore[valid-type]
-        name="Tolerance", default=1e-6, min=1e-14, max=0.1, precision=6, step=0.0001,
+        name="Tolerance",
+        default=1e-6,
+        min=1e-14,
+        max=0.1,
+        precision=6,
+        step=0.0001,
         description="Target accuracy of the rays' directions (radians), 1e-14 to 0.1; sets "
-                    "the integration step")
+        "the integration step",
+    )
     max_steps: bpy.props.IntProperty(  # type: ignore[valid-type]
-        name="Max Steps", default=20000, min=1, max=100_000_000,
-        description="Steps after which a ray is given up (ending 'max_steps')")
+        name="Max Steps",
+        default=20000,
+        min=1,
+        max=100_000_000,
+        description="Steps after which a ray is given up (ending 'max_steps')",
+    )
     parallel: bpy.props.EnumProperty(  # type: ignore[valid-type]
-        name="Parallel", items=PARALLEL_ITEMS, default="AUTO",
-        description="How the image's chunks share the cores")
+        name="Parallel",
+        items=PARALLEL_ITEMS,
+        default="AUTO",
+        description="How the image's chunks share the cores",
+    )
     workers: bpy.props.IntProperty(  # type: ignore[valid-type]
-        name="Workers", default=0, min=0, max=256,
+        name="Workers",
+        default=0,
+        min=0,
+        max=256,
         description="Worker processes or threads (0 = automatic: one process per "
-                    "thread Blender renders with, or two threads)")
+        "thread Blender renders with, or two threads)",
+    )
     pass_error: bpy.props.BoolProperty(  # type: ignore[valid-type]
-        name="Error", default=True, update=_update_passes,
-        description="Per-pixel error estimate (radians): 'SymRay Error' pass")
+        name="Error",
+        default=True,
+        update=_update_passes,
+        description="Per-pixel error estimate (radians): 'SymRay Error' pass",
+    )
     pass_steps: bpy.props.BoolProperty(  # type: ignore[valid-type]
-        name="Steps", default=True, update=_update_passes,
-        description="Integration steps per pixel: 'SymRay Steps' pass")
+        name="Steps",
+        default=True,
+        update=_update_passes,
+        description="Integration steps per pixel: 'SymRay Steps' pass",
+    )
     pass_ending: bpy.props.BoolProperty(  # type: ignore[valid-type]
-        name="Ending", default=False, update=_update_passes,
-        description="How each ray ended (core.ENDING code): 'SymRay Ending' pass")
+        name="Ending",
+        default=False,
+        update=_update_passes,
+        description="How each ray ended (core.ENDING code): 'SymRay Ending' pass",
+    )
     background: bpy.props.EnumProperty(  # type: ignore[valid-type]
-        name="Background", items=BACKGROUND_ITEMS, default="AUTO",
-        description="What rays that escape to infinity see")
+        name="Background",
+        items=BACKGROUND_ITEMS,
+        default="AUTO",
+        description="What rays that escape to infinity see",
+    )
     image_name: bpy.props.StringProperty(  # type: ignore[valid-type]
-        name="Image", default="SymRay Result",
-        description="Image the SymRay Render operator writes (created if missing)")
+        name="Image",
+        default="SymRay Result",
+        description="Image the SymRay Render operator writes (created if missing)",
+    )
     exr_path: bpy.props.StringProperty(  # type: ignore[valid-type]
-        name="EXR Path", default="", subtype="FILE_PATH", options=_PATH_OPTIONS,
+        name="EXR Path",
+        default="",
+        subtype="FILE_PATH",
+        options=_PATH_OPTIONS,
         description="Also write the operator's result as OpenEXR here (empty = no EXR; "
-                    "'//' = next to the .blend, which must be saved)")
+        "'//' = next to the .blend, which must be saved)",
+    )
 
     def passes(self) -> tuple[str, ...]:
         """Names of the core passes to compute (core.render.ALL_PASSES switched on here:

@@ -45,8 +45,12 @@ def _evaluated(obj: bpy.types.Object, depsgraph: bpy.types.Depsgraph) -> bpy.typ
     return obj if obj.is_evaluated else obj.evaluated_get(depsgraph)
 
 
-def prepare(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, use_border: bool = False,
-            camera_object: bpy.types.Object | None = None) -> RenderJob:
+def prepare(
+    scene: bpy.types.Scene,
+    depsgraph: bpy.types.Depsgraph,
+    use_border: bool = False,
+    camera_object: bpy.types.Object | None = None,
+) -> RenderJob:
     """Check the inputs and build core.Scene, core.Camera and the render options.
 
     ``camera_object`` overrides the scene camera. Raises ValueError (bad settings, no
@@ -72,8 +76,10 @@ def prepare(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, use_border: 
 
     intersector = export_meshes.build_intersector(depsgraph)
     if intersector is None and model is None:
-        raise ValueError("Nothing to render: the scene has no visible mesh objects and the "
-                         "model is Flat (choose a model or add objects)")
+        raise ValueError(
+            "Nothing to render: the scene has no visible mesh objects and the "
+            "model is Flat (choose a model or add objects)"
+        )
     core_scene = core.Scene(
         model=model,
         center=tuple(where.center),
@@ -100,11 +106,13 @@ def prepare(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, use_border: 
     return RenderJob(core_scene, camera, options, camera.width, camera.height, transparent)
 
 
-def run(job: RenderJob, progress: Progress | None = None,
-        should_cancel: Cancel | None = None) -> Any:
+def run(
+    job: RenderJob, progress: Progress | None = None, should_cancel: Cancel | None = None
+) -> Any:
     """Trace ``job`` with core.render; no bpy is touched (safe in a worker thread)."""
-    result = core.render(job.scene, job.camera, progress=progress,
-                         should_cancel=should_cancel, **job.options)
+    result = core.render(
+        job.scene, job.camera, progress=progress, should_cancel=should_cancel, **job.options
+    )
     if job.transparent and not getattr(result, "cancelled", False):
         ending = result.passes.get("ending")
         if ending is not None:
@@ -135,11 +143,15 @@ def failure_message(err: BaseException) -> str:
     if isinstance(err, (ValueError, OSError)):
         return str(err)
     if isinstance(err, MemoryError):
-        return ("SymRay ran out of memory: lower the resolution, the number of workers "
-                "or Max Steps; nothing was written")
+        return (
+            "SymRay ran out of memory: lower the resolution, the number of workers "
+            "or Max Steps; nothing was written"
+        )
     if isinstance(err, BrokenProcessPool):
-        return ("A SymRay worker process stopped unexpectedly (killed, or out of memory); "
-                "nothing was written")
+        return (
+            "A SymRay worker process stopped unexpectedly (killed, or out of memory); "
+            "nothing was written"
+        )
     traceback.print_exception(err)
     if isinstance(err, RecursionError):
         return "SymRay failed: Python's recursion limit was reached; nothing was written"

@@ -100,8 +100,9 @@ def _located(text: str, problem: str, offset: int | None) -> expressions.Express
     return expressions.ExpressionError(f"line {line}: {problem}", column)
 
 
-def _shifted(text: str, err: expressions.ExpressionError, offset: int,
-             label: str) -> expressions.ExpressionError:
+def _shifted(
+    text: str, err: expressions.ExpressionError, offset: int, label: str
+) -> expressions.ExpressionError:
     """The error of a piece starting at ``offset`` of ``text``, relocated and labelled."""
     where = None if err.column is None else offset + err.column - 1
     return _located(text, f"{label}: {err.problem}", where)
@@ -127,7 +128,8 @@ def parse_metric(text: str) -> MetricSpec:  # noqa: C901
     """
     if len(text) > expressions.MAX_LENGTH:
         raise expressions.ExpressionError(
-            f"metric is too long ({len(text)} > {expressions.MAX_LENGTH} characters)")
+            f"metric is too long ({len(text)} > {expressions.MAX_LENGTH} characters)"
+        )
     known = list(METRIC_NAMES)
     definitions: list[tuple[str, str]] = []
     rows: list[tuple[str, ...]] = []
@@ -136,8 +138,7 @@ def parse_metric(text: str) -> MetricSpec:  # noqa: C901
         if definition is not None:
             name, expr, shift = definition
             if rows:
-                raise _located(text, f"definition '{name}' must come before the metric rows",
-                               start)
+                raise _located(text, f"definition '{name}' must come before the metric rows", start)
             if name in known or name in expressions.CONSTANTS:
                 raise _located(text, f"'{name}' is already defined or reserved", start)
             try:
@@ -152,8 +153,10 @@ def parse_metric(text: str) -> MetricSpec:  # noqa: C901
         entries = _split_top_level(piece, ",", start)
         if len(entries) != METRIC_SIZE:
             raise _located(
-                text, f"metric row {row_number} has {len(entries)} entries, needs {METRIC_SIZE}",
-                start)
+                text,
+                f"metric row {row_number} has {len(entries)} entries, needs {METRIC_SIZE}",
+                start,
+            )
         row = []
         for j, (estart, entry) in enumerate(entries):
             lead = len(entry) - len(entry.lstrip())
@@ -166,13 +169,15 @@ def parse_metric(text: str) -> MetricSpec:  # noqa: C901
     if len(rows) != METRIC_SIZE:
         raise expressions.ExpressionError(
             f"metric has {len(rows)} rows, needs {METRIC_SIZE} (rows are separated by ';' "
-            "or new lines, entries by ',')")
+            "or new lines, entries by ',')"
+        )
     for i in range(METRIC_SIZE):
         for j in range(i):
             if rows[i][j].replace(" ", "") != rows[j][i].replace(" ", ""):
                 raise expressions.ExpressionError(
                     f"metric must be symmetric: g^{i}{j} = '{rows[i][j]}' but "
-                    f"g^{j}{i} = '{rows[j][i]}'")
+                    f"g^{j}{i} = '{rows[j][i]}'"
+                )
     return MetricSpec(tuple(definitions), tuple(rows))
 
 
@@ -192,7 +197,7 @@ def typed_float(value: float) -> float:
 
 
 def spin_problem(spin: Any) -> str:
-    """"" for a Kerr spin a/M in [-1, 1], else the message."""
+    """ "" for a Kerr spin a/M in [-1, 1], else the message."""
     try:
         spin = checks.check_range("Spin a/M", spin)
     except ValueError as err:
@@ -205,8 +210,10 @@ def spin_problem(spin: Any) -> str:
 def _check_split(method: str, model: str) -> None:
     """ValueError if an explicit splitting is chosen for a model that offers no split."""
     if isinstance(METHODS.get(method), Splitting) and model not in SPLIT_MODELS:
-        raise ValueError(f"method '{method}' is an explicit splitting: only Schwarzschild and "
-                         "media offer the split it needs; choose Automatic or gauss4")
+        raise ValueError(
+            f"method '{method}' is an explicit splitting: only Schwarzschild and "
+            "media offer the split it needs; choose Automatic or gauss4"
+        )
 
 
 def _settings_checks(settings: Any) -> list[Callable[[], Any]]:

@@ -62,8 +62,9 @@ def _environment(node: bpy.types.Node, strength: float) -> Background | None:
         return None
     top_first = np.ascontiguousarray(pixels[::-1])
     interpolation = "closest" if node.interpolation == "Closest" else "linear"
-    return Background(top_first, strength=strength, matrix=_mapping_matrix(node),
-                      interpolation=interpolation)
+    return Background(
+        top_first, strength=strength, matrix=_mapping_matrix(node), interpolation=interpolation
+    )
 
 
 def world_background(scene: bpy.types.Scene, mode: str = "AUTO") -> Any:

@@ -19,8 +19,15 @@ import zipfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
-ALLOWED_TOP = {"__init__.py", "blender_manifest.toml", "core", "symray_addon", "README.md",
-               "LICENSE", "LICENSE.txt"}
+ALLOWED_TOP = {
+    "__init__.py",
+    "blender_manifest.toml",
+    "core",
+    "symray_addon",
+    "README.md",
+    "LICENSE",
+    "LICENSE.txt",
+}
 
 
 def blender_ext_script() -> Path:
@@ -47,10 +54,16 @@ def check_contents(path: Path) -> list[str]:
         names = archive.namelist()
     stray = sorted({n.split("/")[0] for n in names} - ALLOWED_TOP)
     if stray:
-        sys.exit(f"build_extension: unexpected entries in {path.name}: {stray} "
-                 "(extend [build] paths_exclude_pattern in blender_manifest.toml)")
-    for required in ("__init__.py", "blender_manifest.toml", "core/__init__.py",
-                     "symray_addon/__init__.py"):
+        sys.exit(
+            f"build_extension: unexpected entries in {path.name}: {stray} "
+            "(extend [build] paths_exclude_pattern in blender_manifest.toml)"
+        )
+    for required in (
+        "__init__.py",
+        "blender_manifest.toml",
+        "core/__init__.py",
+        "symray_addon/__init__.py",
+    ):
         if required not in names:
             sys.exit(f"build_extension: {path.name} lacks {required}")
     return names
@@ -61,10 +74,22 @@ def build(output_dir: Path) -> Path:
     output_dir.mkdir(parents=True, exist_ok=True)
     tool = blender_ext_script()
     target = output_dir / zip_name()
-    subprocess.run([sys.executable, str(tool), "build", "--source-dir", str(REPO),
-                    "--output-filepath", str(target)], check=True, stdout=subprocess.DEVNULL)
-    subprocess.run([sys.executable, str(tool), "validate", str(target)], check=True,
-                   stdout=subprocess.DEVNULL)
+    subprocess.run(
+        [
+            sys.executable,
+            str(tool),
+            "build",
+            "--source-dir",
+            str(REPO),
+            "--output-filepath",
+            str(target),
+        ],
+        check=True,
+        stdout=subprocess.DEVNULL,
+    )
+    subprocess.run(
+        [sys.executable, str(tool), "validate", str(target)], check=True, stdout=subprocess.DEVNULL
+    )
     check_contents(target)
     return target
 

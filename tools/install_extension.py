@@ -28,7 +28,8 @@ def install(zip_path: Path) -> str:
     addon_utils = importlib.import_module("addon_utils")  # importable once bpy is
 
     result = bpy.ops.extensions.package_install_files(
-        filepath=str(zip_path), repo="user_default", enable_on_install=True)
+        filepath=str(zip_path), repo="user_default", enable_on_install=True
+    )
     if result != {"FINISHED"}:
         sys.exit(f"install_extension: installing {zip_path} failed: {result}")
     if not addon_utils.check(MODULE)[1]:
@@ -45,8 +46,11 @@ def main() -> None:
     parser.add_argument("zip", type=Path)
     args = parser.parse_args()
     if "BLENDER_USER_RESOURCES" not in os.environ:
-        print("install_extension: BLENDER_USER_RESOURCES is not set; installing into your "
-              "own Blender user folder", file=sys.stderr)
+        print(
+            "install_extension: BLENDER_USER_RESOURCES is not set; installing into your "
+            "own Blender user folder",
+            file=sys.stderr,
+        )
     module = install(args.zip.resolve())
     print(f"installed and enabled {module} in {os.environ.get('BLENDER_USER_RESOURCES', '~')}")
 

@@ -163,8 +163,9 @@ class Method:
         """A copy of this method with some constructor options replaced."""
         unknown = set(options) - set(self.options)
         if unknown:
-            raise TypeError(f"{self.name}: unknown option(s) {sorted(unknown)}; "
-                            f"it takes {sorted(self.options)}")
+            raise TypeError(
+                f"{self.name}: unknown option(s) {sorted(unknown)}; it takes {sorted(self.options)}"
+            )
         return type(self)(**{**self.options, **options})
 
     def __repr__(self) -> str:

@@ -44,8 +44,9 @@ def _increment(new: np.ndarray, old: np.ndarray, scale: np.ndarray) -> np.ndarra
     return d.max(axis=0)
 
 
-def _assess(err: np.ndarray, prev: np.ndarray | None, tol: float,
-            newton_cost: float) -> tuple[np.ndarray, np.ndarray]:
+def _assess(
+    err: np.ndarray, prev: np.ndarray | None, tol: float, newton_cost: float
+) -> tuple[np.ndarray, np.ndarray]:
     """(converged, hand over to Newton) per ray from this and the previous increment."""
     if prev is None:
         return err <= tol, ~np.isfinite(err)
@@ -65,8 +66,9 @@ has settled (converged or handed to Newton). Until then settled rays are evaluat
 so every ray gets exactly the iterations it would get on its own."""
 
 
-def solve(phi: Phi, W0: np.ndarray, scale: np.ndarray,
-          opts: SolverOptions) -> tuple[np.ndarray, np.ndarray]:
+def solve(
+    phi: Phi, W0: np.ndarray, scale: np.ndarray, opts: SolverOptions
+) -> tuple[np.ndarray, np.ndarray]:
     """Solve W = phi(W) per ray from the predictor W0; -> (W (k, N), converged (N,) bool)."""
     k, N = W0.shape
     # ~3 Newton iterations, each 2k + 1 phi evaluations (the finite-difference Jacobian) and
@@ -75,9 +77,9 @@ def solve(phi: Phi, W0: np.ndarray, scale: np.ndarray,
     newton_cost = 6.0 * (2 * k + 1)
     ok = np.zeros(N, dtype=bool)
     to_newton = np.zeros(N, dtype=bool)
-    W_all: Any = None                  # every ray's iterate, once the batch was narrowed
+    W_all: Any = None  # every ray's iterate, once the batch was narrowed
     ids, W, sc, prev = None, W0, scale, None
-    active = np.ones(N, dtype=bool)    # rays of the current batch still iterating
+    active = np.ones(N, dtype=bool)  # rays of the current batch still iterating
     for _ in range(opts.max_iter):
         Wn = phi(W, ids)
         if not active.all():
@@ -119,8 +121,9 @@ def solve(phi: Phi, W0: np.ndarray, scale: np.ndarray,
     return W_all, ok
 
 
-def newton(phi: Phi, W: np.ndarray, idx: np.ndarray, scale: np.ndarray,
-           opts: SolverOptions) -> tuple[np.ndarray, np.ndarray]:
+def newton(
+    phi: Phi, W: np.ndarray, idx: np.ndarray, scale: np.ndarray, opts: SolverOptions
+) -> tuple[np.ndarray, np.ndarray]:
     """Newton's method on W - phi(W) = 0 for the rays idx; -> (W (k, M), converged (M,))."""
     M = idx.size
     ok = np.zeros(M, dtype=bool)
@@ -148,11 +151,11 @@ def fd_jacobian(phi: Phi, W: np.ndarray, idx: np.ndarray, scale: np.ndarray) -> 
     """(M, k, k) Jacobian of W - phi(W) by central differences, all 2k perturbations in one call."""
     k, M = W.shape
     d = _FD_STEP * scale
-    E = np.eye(k)[:, :, None] * d[None]                     # E[j, r] = delta_jr d_r
-    pert = np.concatenate((W[None] + E, W[None] - E))        # (2k, k, M)
+    E = np.eye(k)[:, :, None] * d[None]  # E[j, r] = delta_jr d_r
+    pert = np.concatenate((W[None] + E, W[None] - E))  # (2k, k, M)
     pert = pert.transpose(1, 0, 2).reshape(k, 2 * k * M)
     out = phi(pert, np.tile(idx, 2 * k)).reshape(k, 2 * k, M)
-    dphi = (out[:, :k] - out[:, k:]) / (2.0 * d[None])       # dphi[r, j] = d phi_r / d W_j
+    dphi = (out[:, :k] - out[:, k:]) / (2.0 * d[None])  # dphi[r, j] = d phi_r / d W_j
     J = -dphi.transpose(2, 0, 1)
     J[:, np.arange(k), np.arange(k)] += 1.0
     return J

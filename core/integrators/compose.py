@@ -21,8 +21,15 @@ YOSHIDA4 = (1.0 / (2.0 - _CBRT2), -_CBRT2 / (2.0 - _CBRT2))
 # Yoshida 1990, solution A: w1, w2, w3 (w0 = 1 - 2 sum).
 YOSHIDA6_W = (-1.17767998417887, 0.235573213359357, 0.784513610477560)
 # Yoshida 1990, solution D: w1 .. w7 (w0 = 1 - 2 sum).
-YOSHIDA8_W = (0.102799849391985, -1.96061023297549, 1.93813913762276, -0.158240635368243,
-              -1.44485223686048, 0.253693336566229, 0.914844246229740)
+YOSHIDA8_W = (
+    0.102799849391985,
+    -1.96061023297549,
+    1.93813913762276,
+    -0.158240635368243,
+    -1.44485223686048,
+    0.253693336566229,
+    0.914844246229740,
+)
 
 BASES: dict[str, type[Method]] = {
     "stormer_verlet": StormerVerlet,
@@ -75,9 +82,14 @@ def resolve_base(base: str | Method) -> Method:
 class Composition(Method):
     """Symmetric composition of a symmetric 2nd-order base step (default Störmer–Verlet)."""
 
-    def __init__(self, name: str, weights: tuple[float, ...], order: int,
-                 base: str | Method = "stormer_verlet",
-                 error_constant: float | None = None) -> None:
+    def __init__(
+        self,
+        name: str,
+        weights: tuple[float, ...],
+        order: int,
+        base: str | Method = "stormer_verlet",
+        error_constant: float | None = None,
+    ) -> None:
         self.base = resolve_base(base)
         super().__init__(base=self.base)
         self.name, self.order = name, order

@@ -32,14 +32,14 @@ class Trajectory:
 class IntegrationResult:
     """Result of `integrate`; per-ray arrays are (N,), or scalars for a single ray."""
 
-    q: np.ndarray                 # final positions, shape of q0
-    p: np.ndarray                 # final momenta, shape of p0
-    s: Any                        # parameter reached (failed rays: where they stopped)
-    energy_error: Any             # max |H - H(q0, p0)| seen
-    failed: Any                   # NaN/Inf, implicit solve not converged, step too small
-    steps: Any                    # steps taken (accepted steps for dopri5)
+    q: np.ndarray  # final positions, shape of q0
+    p: np.ndarray  # final momenta, shape of p0
+    s: Any  # parameter reached (failed rays: where they stopped)
+    energy_error: Any  # max |H - H(q0, p0)| seen
+    failed: Any  # NaN/Inf, implicit solve not converged, step too small
+    steps: Any  # steps taken (accepted steps for dopri5)
     trajectory: Trajectory | None = None
-    captured: Any = None          # reached the model's horizon (frozen there, not failed)
+    captured: Any = None  # reached the model's horizon (frozen there, not failed)
 
 
 class _Run:
@@ -49,19 +49,39 @@ class _Run:
     or "adaptive" (s tracked per ray in live["s"]).
     """
 
-    def __init__(self, method: Method, H: Any, Henergy: Any, Q: np.ndarray, P: np.ndarray,
-                 n: int, E0: np.ndarray, mode: str, h: Any) -> None:
+    def __init__(
+        self,
+        method: Method,
+        H: Any,
+        Henergy: Any,
+        Q: np.ndarray,
+        P: np.ndarray,
+        n: int,
+        E0: np.ndarray,
+        mode: str,
+        h: Any,
+    ) -> None:
         N = Q.shape[1]
         self.method, self.H, self.Henergy, self.n, self.mode = method, H, Henergy, n, mode
         self.capture = capture_test(Henergy)
         self.state = method.init(H, Q, P)
         self.act = np.arange(N)
-        self.out = {"q": Q[:n].copy(), "p": P[:n].copy(), "s": np.zeros(N),
-                    "err": np.zeros(N), "steps": np.zeros(N, dtype=np.int64),
-                    "failed": np.zeros(N, dtype=bool), "captured": np.zeros(N, dtype=bool)}
-        self.live = {"s": np.zeros(N), "err": np.zeros(N), "E0": E0,
-                     "steps": np.zeros(N, dtype=np.int64),
-                     "h": np.broadcast_to(np.asarray(h, dtype=np.float64), (N,)).copy()}
+        self.out = {
+            "q": Q[:n].copy(),
+            "p": P[:n].copy(),
+            "s": np.zeros(N),
+            "err": np.zeros(N),
+            "steps": np.zeros(N, dtype=np.int64),
+            "failed": np.zeros(N, dtype=bool),
+            "captured": np.zeros(N, dtype=bool),
+        }
+        self.live = {
+            "s": np.zeros(N),
+            "err": np.zeros(N),
+            "E0": E0,
+            "steps": np.zeros(N, dtype=np.int64),
+            "h": np.broadcast_to(np.asarray(h, dtype=np.float64), (N,)).copy(),
+        }
         self.h = self.live["h"] if np.ndim(h) else float(h)  # the fixed step
         self.record_list: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
@@ -78,8 +98,8 @@ class _Run:
         ids = self.act[mask]
         Q, P = self.method.qp(self.state)
         out = self.out
-        out["q"][:, ids] = Q[:self.n, mask]
-        out["p"][:, ids] = P[:self.n, mask]
+        out["q"][:, ids] = Q[: self.n, mask]
+        out["p"][:, ids] = P[: self.n, mask]
         out["s"][ids] = self.s_now()[mask]
         out["err"][ids] = self.live["err"][mask]
         out["steps"][ids] = self.live["steps"][mask]
@@ -100,7 +120,7 @@ class _Run:
             return
         Q, P = self.method.qp(self.state)
         with np.errstate(all="ignore"):
-            e = np.abs(self.Henergy.value_soa(Q[:self.n], P[:self.n]) - self.live["E0"])
+            e = np.abs(self.Henergy.value_soa(Q[: self.n], P[: self.n]) - self.live["E0"])
         np.fmax(self.live["err"], e, out=self.live["err"])
         bad = ~np.isfinite(e)
         if bad.any():
@@ -110,8 +130,8 @@ class _Run:
         """Append the current state of all rays to the trajectory."""
         Q, P = self.method.qp(self.state)
         q, p, s = self.out["q"].copy(), self.out["p"].copy(), self.out["s"].copy()
-        q[:, self.act] = Q[:self.n]
-        p[:, self.act] = P[:self.n]
+        q[:, self.act] = Q[: self.n]
+        p[:, self.act] = P[: self.n]
         s[self.act] = self.s_now()
         self.record_list.append((s, q, p))
 
@@ -120,10 +140,10 @@ class _Run:
         if self.capture is None or self.act.size == 0:
             return
         with np.errstate(all="ignore"):
-            inside = self.capture(self.method.qp(self.state)[0][:self.n])
+            inside = self.capture(self.method.qp(self.state)[0][: self.n])
         if inside.any():
             self.check_energy()
-            inside = self.capture(self.method.qp(self.state)[0][:self.n])
+            inside = self.capture(self.method.qp(self.state)[0][: self.n])
             self.retire(inside, failed=False, captured=True)
 
     def finish(self) -> None:
@@ -154,8 +174,9 @@ def _run_fixed(run: _Run, steps: int, energy_every: int, record_every: int) -> N
         run.check_energy()
 
 
-def _run_adaptive(run: _Run, s_end: np.ndarray, max_steps: int, energy_every: int,
-                  record_every: int) -> None:
+def _run_adaptive(
+    run: _Run, s_end: np.ndarray, max_steps: int, energy_every: int, record_every: int
+) -> None:
     """Per-ray step sizes up to s_end (either sign) with the method's attempt()/factor()."""
     method = run.method
     live = run.live
@@ -211,11 +232,21 @@ def _to_soa(q0: Any, p0: Any, dim: int | None) -> tuple[np.ndarray, np.ndarray, 
     return Q, P, single
 
 
-def integrate(H: Any, q0: Any, p0: Any, step: float | np.ndarray = 0.01, steps: int = 10_000,
-              method: str | Method = "yoshida4", *, adaptive: bool = False,
-              tol: float | None = None, record_every: int | None = None,
-              energy_every: int = 1, max_steps: int | None = None,
-              **options: Any) -> IntegrationResult:
+def integrate(
+    H: Any,
+    q0: Any,
+    p0: Any,
+    step: float | np.ndarray = 0.01,
+    steps: int = 10_000,
+    method: str | Method = "yoshida4",
+    *,
+    adaptive: bool = False,
+    tol: float | None = None,
+    record_every: int | None = None,
+    energy_every: int = 1,
+    max_steps: int | None = None,
+    **options: Any,
+) -> IntegrationResult:
     """Integrate Hamilton's equations for a batch of rays; see IntegrationResult.
 
     step: float or per-ray (N,). Fixed-step methods take `steps` steps of size `step`; with
@@ -253,8 +284,13 @@ def integrate(H: Any, q0: Any, p0: Any, step: float | np.ndarray = 0.01, steps: 
     if record_every:
         run.record()
     if mode == "adaptive":
-        _run_adaptive(run, run.live["h"] * steps, 10 * steps + 100 if max_steps is None
-                      else max_steps, energy_every, record_every or 0)
+        _run_adaptive(
+            run,
+            run.live["h"] * steps,
+            10 * steps + 100 if max_steps is None else max_steps,
+            energy_every,
+            record_every or 0,
+        )
     else:
         _run_fixed(run, steps, energy_every, record_every or 0)
     run.finish()
@@ -272,8 +308,16 @@ def _result(run: _Run, single: bool) -> IntegrationResult:
             traj = Trajectory(s=traj.s[:, 0], q=traj.q[:, 0], p=traj.p[:, 0])
     q, p = out["q"].T.copy(), out["p"].T.copy()
     if single:
-        return IntegrationResult(q[0], p[0], float(out["s"][0]), float(out["err"][0]),
-                                 bool(out["failed"][0]), int(out["steps"][0]), traj,
-                                 bool(out["captured"][0]))
-    return IntegrationResult(q, p, out["s"], out["err"], out["failed"], out["steps"], traj,
-                             out["captured"])
+        return IntegrationResult(
+            q[0],
+            p[0],
+            float(out["s"][0]),
+            float(out["err"][0]),
+            bool(out["failed"][0]),
+            int(out["steps"][0]),
+            traj,
+            bool(out["captured"][0]),
+        )
+    return IntegrationResult(
+        q, p, out["s"], out["err"], out["failed"], out["steps"], traj, out["captured"]
+    )

@@ -55,8 +55,9 @@ class _KickDrift(_Implicit):
             Q += ch * dp
 
 
-def run_splitting(method: Method, H: Any, state: State, seq: Pattern,
-                  h: Any) -> tuple[State, np.ndarray]:
+def run_splitting(
+    method: Method, H: Any, state: State, seq: Pattern, h: Any
+) -> tuple[State, np.ndarray]:
     """Apply the exact sub-flows seq = ((kind, c), ...) with steps c*h to a copy of state."""
     state = tuple(a.copy() for a in state)
     for kind, c in seq:
@@ -64,8 +65,9 @@ def run_splitting(method: Method, H: Any, state: State, seq: Pattern,
     return state, finite_rays(*state)
 
 
-def implicit_momentum(H: Any, Q: np.ndarray, P: np.ndarray, h: Any, opts: SolverOptions,
-                      frozen: Any = None) -> tuple[np.ndarray, np.ndarray]:
+def implicit_momentum(
+    H: Any, Q: np.ndarray, P: np.ndarray, h: Any, opts: SolverOptions, frozen: Any = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Solve P1 = P - h dH/dq(Q, P1) per ray; -> (P1, converged).
 
     Q is fixed during the solve: where H has a FrozenQ (``H.frozen_q(Q)``, or ``frozen``
@@ -102,8 +104,9 @@ def frozen_q(H: Any, Q: np.ndarray) -> FrozenQ | None:
     return as_system(H).frozen_q(Q)
 
 
-def implicit_position(H: Any, Q: np.ndarray, P: np.ndarray, h: Any,
-                      opts: SolverOptions) -> tuple[np.ndarray, np.ndarray]:
+def implicit_position(
+    H: Any, Q: np.ndarray, P: np.ndarray, h: Any, opts: SolverOptions
+) -> tuple[np.ndarray, np.ndarray]:
     """Solve Q1 = Q + h/2 (dH/dp(Q, P) + dH/dp(Q1, P)) per ray; -> (Q1, converged)."""
     _, a = H.gradient_soa(Q, P, wrt="p")
     per_ray = PerRay(H, Q, P, a, 0.5 * h)
@@ -272,8 +275,8 @@ class Gauss4(_Implicit):
         W1, W2 = W[:m2], W[m2:]
         Z1 = Z0 + GAUSS4_D[0] * W1 + GAUSS4_D[1] * W2  # = z0 + h sum b_i f(Z_i) at the solution
         fit = _GAUSS4_FIT
-        ah = fit[0, 0] * W1 + fit[0, 1] * W2     # a h
-        bh2 = fit[1, 0] * W1 + fit[1, 1] * W2    # b h^2
+        ah = fit[0, 0] * W1 + fit[0, 1] * W2  # a h
+        bh2 = fit[1, 0] * W1 + fit[1, 1] * W2  # b h^2
         Y1 = np.concatenate(((ah + 2.0 * bh2) / h, bh2 / (h * h)))  # u'(h), b
         ok &= finite_rays(Z1)
         Y1[:, ~ok] = np.nan

@@ -79,10 +79,17 @@ class Dopri5(_Stacked):
     error_constant = 0.1
     adaptive = True
 
-    def __init__(self, rtol: float = 1e-8, atol: float | None = None, safety: float = 0.9,
-                 min_factor: float = 0.2, max_factor: float = 5.0) -> None:
-        super().__init__(rtol=rtol, atol=atol, safety=safety, min_factor=min_factor,
-                         max_factor=max_factor)
+    def __init__(
+        self,
+        rtol: float = 1e-8,
+        atol: float | None = None,
+        safety: float = 0.9,
+        min_factor: float = 0.2,
+        max_factor: float = 5.0,
+    ) -> None:
+        super().__init__(
+            rtol=rtol, atol=atol, safety=safety, min_factor=min_factor, max_factor=max_factor
+        )
         self.rtol = float(rtol)
         self.atol = self.rtol if atol is None else float(atol)
         self.safety, self.min_factor, self.max_factor = safety, min_factor, max_factor
@@ -122,7 +129,7 @@ class Dopri5(_Stacked):
     def factor(self, err: np.ndarray) -> np.ndarray:
         """Step-size factor for the next attempt from the error norm (N,)."""
         with np.errstate(divide="ignore", invalid="ignore"):
-            f = self.safety * err ** -0.2
+            f = self.safety * err**-0.2
         f = np.clip(f, self.min_factor, self.max_factor)
         f[~np.isfinite(err)] = self.min_factor
         return f

@@ -62,10 +62,20 @@ def _bm4() -> tuple[tuple[float, ...], tuple[float, ...]]:
 
 def _bm6() -> tuple[tuple[float, ...], tuple[float, ...]]:
     """SRKN_11^b of Blanes & Moan (2002): (kicks b_0..b_11, drifts a_0..a_10)."""
-    b5 = (0.0414649985182624, 0.198128671918067, -0.0400061921041533, 0.0752539843015807,
-          -0.0115113874206879)
-    a5 = (0.123229775946271, 0.290553797799558, -0.127049212625417, -0.246331761062075,
-          0.357208872795928)
+    b5 = (
+        0.0414649985182624,
+        0.198128671918067,
+        -0.0400061921041533,
+        0.0752539843015807,
+        -0.0115113874206879,
+    )
+    a5 = (
+        0.123229775946271,
+        0.290553797799558,
+        -0.127049212625417,
+        -0.246331761062075,
+        0.357208872795928,
+    )
     b: tuple[float, ...] = b5 + (0.5 - sum(b5),)
     a: tuple[float, ...] = a5 + (1.0 - 2.0 * sum(a5),) + a5[::-1]
     return b + b[::-1], a
@@ -77,8 +87,14 @@ class Splitting(Method):
     symplectic = True
     explicit = True
 
-    def __init__(self, name: str, order: int, kicks: tuple[float, ...],
-                 drifts: tuple[float, ...], error_constant: float | None = None) -> None:
+    def __init__(
+        self,
+        name: str,
+        order: int,
+        kicks: tuple[float, ...],
+        drifts: tuple[float, ...],
+        error_constant: float | None = None,
+    ) -> None:
         super().__init__()
         if len(kicks) != len(drifts) + 1:
             raise ValueError("a BAB splitting has one kick more than drifts")
@@ -129,17 +145,19 @@ def split_flows(H: Any, method: str) -> tuple[Any, Any]:
     if H is not None and H.separable:
         return _gradient_kick(H), _gradient_drift(H)
     raise SplitRequired(
-            f"method '{method}' is an explicit splitting: it needs the model's split into "
-            "two exactly solvable parts K = T(p) + V(q), which this Hamiltonian does not offer "
-            "(media do, traced with the Poincaré time transformation: core.render, or "
-            "core.integrate(..., adaptive=True)); use an implicit symplectic method such as "
-            "gauss4 for it")
+        f"method '{method}' is an explicit splitting: it needs the model's split into "
+        "two exactly solvable parts K = T(p) + V(q), which this Hamiltonian does not offer "
+        "(media do, traced with the Poincaré time transformation: core.render, or "
+        "core.integrate(..., adaptive=True)); use an implicit symplectic method such as "
+        "gauss4 for it"
+    )
 
 
 def _gradient_kick(H: Any):
     def kick(Q: np.ndarray, P: np.ndarray, t: Any) -> None:
         dq, _ = H.gradient_soa(Q, P, wrt="q")
         P -= t * dq
+
     return kick
 
 
@@ -147,6 +165,7 @@ def _gradient_drift(H: Any):
     def drift(Q: np.ndarray, P: np.ndarray, t: Any) -> None:
         _, dp = H.gradient_soa(Q, P, wrt="p")
         Q += t * dp
+
     return drift
 
 

@@ -48,8 +48,9 @@ class FrozenQ:
     products in p. With H0 given, the gradient is that of K = g (H - H0) (Poincaré).
     """
 
-    def __init__(self, apply: Callable[..., ValueGradient], form: list[Any],
-                 H0: Any = None) -> None:
+    def __init__(
+        self, apply: Callable[..., ValueGradient], form: list[Any], H0: Any = None
+    ) -> None:
         self.apply, self.form, self.H0 = apply, form, H0
 
     def grad_q(self, P: np.ndarray) -> np.ndarray:
@@ -84,8 +85,7 @@ class System:
         """Poincaré time-transformation g(q) and dg/dq; default g = 1."""
         return np.ones(Q.shape[-1]), np.zeros_like(Q)
 
-    def poincare_soa(self, Q: np.ndarray, P: np.ndarray, H0: Any,
-                     wrt: str = "qp") -> ValueGradient:
+    def poincare_soa(self, Q: np.ndarray, P: np.ndarray, H0: Any, wrt: str = "qp") -> ValueGradient:
         """(K = g (H - H0), dK/dq, dK/dp); with wrt="p" only dK/dp (the others None).
 
         This default combines g, dg/dq and H's own gradient; a model that evaluates g
@@ -131,8 +131,10 @@ class DuckSystem(System):
         # The only capability probes of the integrators: an object that is not a System
         # (docs/architecture.md allows any object with the required members) may still
         # offer some optional members; each is looked up once, here.
-        self._optional = {name: getattr(H, name, None) for name in (
-            "time_scale_soa", "poincare_soa", "frozen_q", "subset", "captured_soa")}
+        self._optional = {
+            name: getattr(H, name, None)
+            for name in ("time_scale_soa", "poincare_soa", "frozen_q", "subset", "captured_soa")
+        }
 
     def value_soa(self, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
         return self.H.value_soa(Q, P)
@@ -147,8 +149,7 @@ class DuckSystem(System):
         own = self._optional["time_scale_soa"]
         return super().time_scale_soa(Q) if own is None else own(Q)
 
-    def poincare_soa(self, Q: np.ndarray, P: np.ndarray, H0: Any,
-                     wrt: str = "qp") -> ValueGradient:
+    def poincare_soa(self, Q: np.ndarray, P: np.ndarray, H0: Any, wrt: str = "qp") -> ValueGradient:
         own = self._optional["poincare_soa"]
         return super().poincare_soa(Q, P, H0, wrt) if own is None else own(Q, P, H0, wrt=wrt)
 

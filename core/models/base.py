@@ -38,14 +38,23 @@ def blocked(method):
         out = None
         for start in range(0, n_rays, BLOCK):
             cut = slice(start, min(start + BLOCK, n_rays))
-            part = method(self, Q[..., cut], *(
-                a[..., cut] if isinstance(a, np.ndarray) and a.ndim and a.shape[-1] == n_rays
-                else a for a in args), **kwargs)
+            part = method(
+                self,
+                Q[..., cut],
+                *(
+                    a[..., cut]
+                    if isinstance(a, np.ndarray) and a.ndim and a.shape[-1] == n_rays
+                    else a
+                    for a in args
+                ),
+                **kwargs,
+            )
             single = not isinstance(part, tuple)
             parts = (part,) if single else part
             if out is None:
-                out = tuple(None if x is None else np.empty(np.shape(x)[:-1] + (n_rays,))
-                            for x in parts)
+                out = tuple(
+                    None if x is None else np.empty(np.shape(x)[:-1] + (n_rays,)) for x in parts
+                )
             for o, x in zip(out, parts, strict=True):
                 if o is not None:
                     o[..., cut] = x
@@ -53,7 +62,6 @@ def blocked(method):
         return out[0] if single else out
 
     return wrapper
-
 
 
 class Hamiltonian(System):
@@ -80,8 +88,14 @@ class Hamiltonian(System):
     bounds: tuple[np.ndarray, np.ndarray] | None = None
     """(lo, hi) of the box outside which the model is uniform (rays straight); None."""
 
-    def __init__(self, coords: Sequence[str], momenta: Sequence[str], separable: bool = False,
-                 parameters: Mapping[str, float] | None = None, time_scale: str | None = None):
+    def __init__(
+        self,
+        coords: Sequence[str],
+        momenta: Sequence[str],
+        separable: bool = False,
+        parameters: Mapping[str, float] | None = None,
+        time_scale: str | None = None,
+    ):
         _check_names(coords, momenta)
         self.coords = tuple(coords)
         self.momenta = tuple(momenta)
@@ -142,8 +156,9 @@ class Hamiltonian(System):
         n_rays = Q.shape[-1]
         if self._time_scale is None:
             return np.ones(n_rays), np.zeros_like(Q)
-        env: dict[str, object] = {name: Dual.variable(Q[i], i)
-                                  for i, name in enumerate(self.coords)}
+        env: dict[str, object] = {
+            name: Dual.variable(Q[i], i) for i, name in enumerate(self.coords)
+        }
         (g,) = self._time_scale.evaluate(env)
         return _value_and_partials(g, self.dim, n_rays, offset=0)
 
@@ -176,8 +191,10 @@ class Hamiltonian(System):
         q = np.asarray(q, dtype=np.float64)
         p = np.asarray(p, dtype=np.float64)
         if q.shape != p.shape or q.shape[-1] != self.dim or q.ndim not in (1, 2):
-            raise ValueError(f"q and p must both have shape (N, {self.dim}) or ({self.dim},); "
-                             f"got {q.shape} and {p.shape}")
+            raise ValueError(
+                f"q and p must both have shape (N, {self.dim}) or ({self.dim},); "
+                f"got {q.shape} and {p.shape}"
+            )
         single = q.ndim == 1
         Q = np.ascontiguousarray(np.atleast_2d(q).T)
         P = np.ascontiguousarray(np.atleast_2d(p).T)

@@ -14,15 +14,24 @@ from .base import Hamiltonian, _value_and_partials, blocked
 class ExpressionHamiltonian(Hamiltonian):
     """H given as text over any coordinate and momentum names (any dimension)."""
 
-    def __init__(self, text: str, coords, momenta, parameters=None, definitions=(),
-                 time_scale=None, positive: Sequence[str] = ()):
+    def __init__(
+        self,
+        text: str,
+        coords,
+        momenta,
+        parameters=None,
+        definitions=(),
+        time_scale=None,
+        positive: Sequence[str] = (),
+    ):
         Hamiltonian.__init__(self, coords, momenta, parameters=parameters, time_scale=time_scale)
         names = self.coords + self.momenta
         self.text = text
         self.program = ex.compile_program([text], names, self.parameters, definitions)
         self.positive = tuple(positive)
-        self.separable = _is_separable(text, self.coords, self.momenta, self.parameters,
-                                       definitions)
+        self.separable = _is_separable(
+            text, self.coords, self.momenta, self.parameters, definitions
+        )
         self.depends_on = self.program.dependencies[0]
 
     def _env(self, Q, P, wrt: str):
@@ -105,9 +114,13 @@ def _additive_terms(text: str) -> list[str]:
     return [ast.unparse(t) for t in terms]
 
 
-def from_expression(text: str, q: Sequence[str], p: Sequence[str],
-                    parameters: Mapping[str, float] | None = None,
-                    definitions: Mapping[str, str] | Sequence[tuple[str, str]] = (),
-                    time_scale: str | None = None) -> ExpressionHamiltonian:
+def from_expression(
+    text: str,
+    q: Sequence[str],
+    p: Sequence[str],
+    parameters: Mapping[str, float] | None = None,
+    definitions: Mapping[str, str] | Sequence[tuple[str, str]] = (),
+    time_scale: str | None = None,
+) -> ExpressionHamiltonian:
     """H from text over coordinates ``q`` and momenta ``p`` (any names, any dimension)."""
     return ExpressionHamiltonian(text, q, p, parameters, definitions, time_scale)

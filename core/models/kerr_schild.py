@@ -27,8 +27,9 @@ class KerrSchild(Hamiltonian):
     chart = "kerr_schild"
 
     def __init__(self, rg: float, a: float, horizon: float, outgoing: bool = False):
-        super().__init__(("t", "x", "y", "z"), ("p_t", "p_x", "p_y", "p_z"),
-                         parameters={"rg": rg, "a": a})
+        super().__init__(
+            ("t", "x", "y", "z"), ("p_t", "p_x", "p_y", "p_z"), parameters={"rg": rg, "a": a}
+        )
         self.rg, self.a, self.horizon = rg, a, horizon
         self.outgoing = outgoing
         self._k_t = 1.0 if outgoing else -1.0
@@ -47,15 +48,23 @@ class KerrSchild(Hamiltonian):
         o = "+" if self.outgoing else "-"
         k = [f"(r*x {s} a*y)/ra2", f"(r*y {o} a*x)/ra2", "z/r"]
         lp = f"{'' if self.outgoing else '-'}p_t + ({k[0]})*p_x + ({k[1]})*p_y + ({k[2]})*p_z"
-        defs = [("rho2", "x**2 + y**2 + z**2 - a**2"),
-                ("r2", "0.5*(rho2 + sqrt(rho2**2 + 4*a**2*z**2))"), ("r", "sqrt(r2)"),
-                ("f", "rg*r*r2/(r2**2 + a**2*z**2)"), ("ra2", "r2 + a**2")]
+        defs = [
+            ("rho2", "x**2 + y**2 + z**2 - a**2"),
+            ("r2", "0.5*(rho2 + sqrt(rho2**2 + 4*a**2*z**2))"),
+            ("r", "sqrt(r2)"),
+            ("f", "rg*r*r2/(r2**2 + a**2*z**2)"),
+            ("ra2", "r2 + a**2"),
+        ]
         text = "0.5*(-p_t**2 + p_x**2 + p_y**2 + p_z**2 - f*lp**2)"
         return ExpressionHamiltonian(
-            text, self.coords, self.momenta, parameters=self.parameters,
+            text,
+            self.coords,
+            self.momenta,
+            parameters=self.parameters,
             definitions=defs + [("lp", lp)],
             time_scale="sqrt(0.5*(x**2 + y**2 + z**2 - a**2 + "
-                       "sqrt((x**2 + y**2 + z**2 - a**2)**2 + 4*a**2*z**2)))")
+            "sqrt((x**2 + y**2 + z**2 - a**2)**2 + 4*a**2*z**2)))",
+        )
 
     def partials_allocated(self, q, p) -> set[str]:
         """Variables whose partial derivative H's evaluation carries: x, y, z (as far as the
@@ -99,22 +108,28 @@ class KerrSchild(Hamiltonian):
         if not seed:
             return [f, kx, ky, kz, r]
         c = r / D
-        dr = (x * c, y * c, z * (ra2 / (r * D)))            # dr/dx, dr/dy, dr/dz
+        dr = (x * c, y * c, z * (ra2 / (r * D)))  # dr/dx, dr/dy, dr/dz
         # df_i = f (3 dr_i / r - dW_i / W), dW_i = 4 r^3 dr_i + 2 a^2 z [i = z]
         u = (3.0 / r - 4.0 * r * r2 / W) * f
         df = [u * dr[0], u * dr[1], u * dr[2] - (2.0 * a2 / W) * z * f]
         # dk_j/dx_i = (d numerator_j / dx_i - k_j 2 r dr_i) / ra2
         two_r = 2.0 * r
-        dkx = [(dr[0] * x + r - kx * two_r * dr[0]) * inv_ra2,
-               (dr[1] * x + sa - kx * two_r * dr[1]) * inv_ra2,
-               (dr[2] * x - kx * two_r * dr[2]) * inv_ra2]
-        dky = [(dr[0] * y - sa - ky * two_r * dr[0]) * inv_ra2,
-               (dr[1] * y + r - ky * two_r * dr[1]) * inv_ra2,
-               (dr[2] * y - ky * two_r * dr[2]) * inv_ra2]
+        dkx = [
+            (dr[0] * x + r - kx * two_r * dr[0]) * inv_ra2,
+            (dr[1] * x + sa - kx * two_r * dr[1]) * inv_ra2,
+            (dr[2] * x - kx * two_r * dr[2]) * inv_ra2,
+        ]
+        dky = [
+            (dr[0] * y - sa - ky * two_r * dr[0]) * inv_ra2,
+            (dr[1] * y + r - ky * two_r * dr[1]) * inv_ra2,
+            (dr[2] * y - ky * two_r * dr[2]) * inv_ra2,
+        ]
         kz_r = kz / r
         dkz = [-kz_r * dr[0], -kz_r * dr[1], 1.0 / r - kz_r * dr[2]]
-        return [Dual(v, {1: d[0], 2: d[1], 3: d[2]})
-                for v, d in ((f, df), (kx, dkx), (ky, dky), (kz, dkz), (r, dr))]
+        return [
+            Dual(v, {1: d[0], 2: d[1], 3: d[2]})
+            for v, d in ((f, df), (kx, dkx), (ky, dky), (kz, dkz), (r, dr))
+        ]
 
     # noqa: C901 below: one fused pass for every combination of H, dH/dq, dH/dp and K
     # (in place, the render's hot path); split up, it would evaluate the form's terms twice
@@ -123,8 +138,7 @@ class KerrSchild(Hamiltonian):
         ("v", "q", "p" in want). With H0: K = r (H - H0) and its gradient instead."""
         need_q = "q" in want
         if need_q:
-            (f, df), (kx, dkx), (ky, dky), (kz, dkz), (r, dr) = (
-                (d.v, d.d) for d in form)
+            (f, df), (kx, dkx), (ky, dky), (kz, dkz), (r, dr) = ((d.v, d.d) for d in form)
         else:
             f, kx, ky, kz, r = (dual.value_of(d) for d in form)
         kt = self._k_t
@@ -190,8 +204,7 @@ class KerrSchild(Hamiltonian):
     def poincare_soa(self, Q, P, H0, wrt: str = "qp"):
         """(K = r (H - H0), dK/dq, dK/dp) in one evaluation: the derivatives not in wrt are
         None, and so is K when only dK/dp is asked for."""
-        return self._apply(self._form_soa(Q, "q" in wrt), P, wrt if wrt == "p" else "v" + wrt,
-                           H0)
+        return self._apply(self._form_soa(Q, "q" in wrt), P, wrt if wrt == "p" else "v" + wrt, H0)
 
     def frozen_q(self, Q, H0=None) -> FrozenQ:
         """dH/dq at Q for any momenta (dK/dq of K = r (H - H0) with H0), see FrozenQ."""
@@ -204,8 +217,8 @@ class KerrSchild(Hamiltonian):
     def radius_soa(self, Q):
         """Kerr–Schild r > 0 from r^4 - (x^2+y^2+z^2-a^2) r^2 - a^2 z^2 = 0."""
         x, y, z = Q[1], Q[2], Q[3]
-        rho2 = x * x + y * y + z * z - self.a ** 2
-        return np.sqrt(0.5 * (rho2 + np.sqrt(rho2 * rho2 + 4 * self.a ** 2 * z * z)))
+        rho2 = x * x + y * y + z * z - self.a**2
+        return np.sqrt(0.5 * (rho2 + np.sqrt(rho2 * rho2 + 4 * self.a**2 * z * z)))
 
     def capture_test(self):
         """Rays inside the outer horizon (see captured_soa)."""

@@ -24,10 +24,12 @@ class Medium(ExpressionHamiltonian):
 
     def __init__(self, index: str, literal: bool, parameters=None, bounds=None):
         coords, momenta = ("x", "y", "z"), ("p_x", "p_y", "p_z")
-        text = "0.5*n*(p_x**2 + p_y**2 + p_z**2)" if literal else \
-            "0.5*(p_x**2 + p_y**2 + p_z**2)/n**2"
-        super().__init__(text, coords, momenta, parameters, definitions=[("n", index)],
-                         positive=("n",))
+        text = (
+            "0.5*n*(p_x**2 + p_y**2 + p_z**2)" if literal else "0.5*(p_x**2 + p_y**2 + p_z**2)/n**2"
+        )
+        super().__init__(
+            text, coords, momenta, parameters, definitions=[("n", index)], positive=("n",)
+        )
         self.index_text = index
         self.literal = literal
         self.bounds = checks.check_box("medium bounds", bounds)
@@ -39,8 +41,10 @@ class Medium(ExpressionHamiltonian):
         w = n^2 (physical H, Poincaré g = n^2) or 1/n (literal H, g = 1/n); NaN where n <= 0.
         """
         n_rays = Q.shape[-1]
-        env: dict[str, object] = {name: (Dual.variable(Q[i], i) if derivatives else Q[i])
-                                  for i, name in enumerate(self.coords)}
+        env: dict[str, object] = {
+            name: (Dual.variable(Q[i], i) if derivatives else Q[i])
+            for i, name in enumerate(self.coords)
+        }
         (n,) = self._index_program.evaluate(env)
         n, dn = _value_and_partials(n, 3, n_rays, offset=0)
         with np.errstate(all="ignore"):
@@ -73,13 +77,16 @@ class Medium(ExpressionHamiltonian):
         bad = ~(np.isfinite(n) & (n > 0))
         if bad.any():
             where = pts[np.argmax(bad)]
-            raise ValueError(f"refractive index '{self.index_text}' is {n[np.argmax(bad)]:g} at "
-                             f"(x, y, z) = ({where[0]:g}, {where[1]:g}, {where[2]:g}); "
-                             "it must be positive")
+            raise ValueError(
+                f"refractive index '{self.index_text}' is {n[np.argmax(bad)]:g} at "
+                f"(x, y, z) = ({where[0]:g}, {where[1]:g}, {where[2]:g}); "
+                "it must be positive"
+            )
 
 
-def medium(index: str, literal: bool = False, parameters: Mapping[str, float] | None = None,
-           bounds=None) -> Medium:
+def medium(
+    index: str, literal: bool = False, parameters: Mapping[str, float] | None = None, bounds=None
+) -> Medium:
     """Optical medium of refractive index n(x, y, z) given as text.
 
     Default: the physical optical Hamiltonian H = |p|^2 / (2 n^2), whose rays obey

@@ -23,7 +23,6 @@ from ..integrators.splitting import SplitSystem
 class OpticalSplit(SplitSystem):
     """K = |p|²/2 − H0 w(q) of a medium (see the module), with exact kick and drift flows."""
 
-
     def __init__(self, medium, H0, clocked: bool = False) -> None:
         self.medium = medium
         self.H0 = np.asarray(H0, dtype=np.float64)

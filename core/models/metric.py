@@ -18,9 +18,16 @@ class MetricHamiltonian(Hamiltonian):
 
     kind = "spacetime"
 
-    def __init__(self, inverse: Sequence[Sequence[str]], coords: Sequence[str],
-                 momenta: Sequence[str] | None = None, parameters=None, definitions=(),
-                 time_scale: str | None = None, symmetric_check: bool = True):
+    def __init__(
+        self,
+        inverse: Sequence[Sequence[str]],
+        coords: Sequence[str],
+        momenta: Sequence[str] | None = None,
+        parameters=None,
+        definitions=(),
+        time_scale: str | None = None,
+        symmetric_check: bool = True,
+    ):
         momenta = tuple(momenta) if momenta is not None else tuple(f"p_{c}" for c in coords)
         Hamiltonian.__init__(self, coords, momenta, parameters=parameters, time_scale=time_scale)
         n = self.dim
@@ -31,8 +38,10 @@ class MetricHamiltonian(Hamiltonian):
             for i in range(n):
                 for j in range(i):
                     if entries[i][j] != entries[j][i] and entries[j][i] not in ("", "0"):
-                        raise ValueError(f"inverse metric must be symmetric: g^{i}{j} "
-                                         f"'{entries[i][j]}' != g^{j}{i} '{entries[j][i]}'")
+                        raise ValueError(
+                            f"inverse metric must be symmetric: g^{i}{j} "
+                            f"'{entries[i][j]}' != g^{j}{i} '{entries[j][i]}'"
+                        )
         pairs, texts = [], []
         for i in range(n):
             for j in range(i, n):
@@ -47,8 +56,9 @@ class MetricHamiltonian(Hamiltonian):
 
     def inverse_metric_soa(self, Q, seed: bool):
         """Entries g^ij (i <= j) that are not identically zero, as values or Duals over q."""
-        env = {name: (Dual.variable(Q[i], i) if seed else Q[i])
-               for i, name in enumerate(self.coords)}
+        env = {
+            name: (Dual.variable(Q[i], i) if seed else Q[i]) for i, name in enumerate(self.coords)
+        }
         values = self.program.evaluate(env)
         return [values[k] for k in self._outputs]
 
@@ -57,8 +67,10 @@ class MetricHamiltonian(Hamiltonian):
         entries = self.inverse_metric_soa(Q, seed)
         scale = None
         if scaled and self._time_scale is not None:
-            env = {name: (Dual.variable(Q[i], i) if seed else Q[i])
-                   for i, name in enumerate(self.coords)}
+            env = {
+                name: (Dual.variable(Q[i], i) if seed else Q[i])
+                for i, name in enumerate(self.coords)
+            }
             (scale,) = self._time_scale.evaluate(env)
         return [*entries, scale]
 
@@ -102,7 +114,7 @@ class MetricHamiltonian(Hamiltonian):
             dp *= sv
         if need_q:
             dq *= sv
-            for k, dg in (scale.d.items() if isinstance(scale, Dual) else ()):
+            for k, dg in scale.d.items() if isinstance(scale, Dual) else ():
                 dq[k] += dg * dh
         return (None if dh is None else sv * dh), dq, dp
 
@@ -122,8 +134,9 @@ class MetricHamiltonian(Hamiltonian):
     def poincare_soa(self, Q, P, H0, wrt: str = "qp"):
         """(K = g (H - H0), dK/dq, dK/dp) in one evaluation: the derivatives not in wrt are
         None, and so is K when only dK/dp is asked for."""
-        return self._apply(self._form(Q, "q" in wrt, scaled=True), P,
-                           wrt if wrt == "p" else "v" + wrt, H0)
+        return self._apply(
+            self._form(Q, "q" in wrt, scaled=True), P, wrt if wrt == "p" else "v" + wrt, H0
+        )
 
     def frozen_q(self, Q, H0=None) -> FrozenQ:
         """dH/dq at Q for any momenta (dK/dq of K = g (H - H0) with H0), see FrozenQ."""
@@ -139,9 +152,13 @@ class MetricHamiltonian(Hamiltonian):
         return {self.coords[k] for k in keys}
 
 
-def metric(inverse: Sequence[Sequence[str]], coords: Sequence[str] = ("t", "x", "y", "z"),
-           momenta: Sequence[str] | None = None, parameters: Mapping[str, float] | None = None,
-           definitions: Mapping[str, str] | Sequence[tuple[str, str]] = (),
-           time_scale: str | None = None) -> MetricHamiltonian:
+def metric(
+    inverse: Sequence[Sequence[str]],
+    coords: Sequence[str] = ("t", "x", "y", "z"),
+    momenta: Sequence[str] | None = None,
+    parameters: Mapping[str, float] | None = None,
+    definitions: Mapping[str, str] | Sequence[tuple[str, str]] = (),
+    time_scale: str | None = None,
+) -> MetricHamiltonian:
     """Photon Hamiltonian H = 1/2 g^ij p_i p_j of any inverse metric (seed Eq. 10)."""
     return MetricHamiltonian(inverse, coords, momenta, parameters, definitions, time_scale)

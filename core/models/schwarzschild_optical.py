@@ -44,8 +44,9 @@ class SchwarzschildOptical(Medium):
             raise ValueError(f"rg (Schwarzschild radius) must be a positive number, got {rg}")
         m = 0.5 * rg
         rho = "sqrt(x**2 + y**2 + z**2)"
-        super().__init__(f"(1 + M/(2*{rho}))**3/(1 - M/(2*{rho}))", literal=False,
-                         parameters={"M": m})
+        super().__init__(
+            f"(1 + M/(2*{rho}))**3/(1 - M/(2*{rho}))", literal=False, parameters={"M": m}
+        )
         self.rg, self.a, self.horizon = rg, 0.0, rg
         # the capture radius 1.01 r+ in isotropic ρ
         r_c = 1.01 * rg
@@ -74,7 +75,7 @@ class SchwarzschildOptical(Medium):
 
     def captured_soa(self, Q: np.ndarray) -> np.ndarray:
         """Rays inside 1.01 r+ (isotropic ρ below its image), (N,)."""
-        return np.einsum("ij,ij->j", Q, Q) < self._rho_capture ** 2
+        return np.einsum("ij,ij->j", Q, Q) < self._rho_capture**2
 
     def capture_test(self):
         """Q -> rays inside 1.01 r+."""
@@ -121,8 +122,9 @@ class LogarithmicSplit(SplitSystem):
         """Λ(q, p), (N,)."""
         n, _ = self.model.index_gradient_soa(Q)
         with np.errstate(all="ignore"):
-            return np.log(0.5 * np.einsum("ij,ij->j", P, P) - self.H0) - \
-                np.log(self.H0 * (n * n - 1.0))
+            return np.log(0.5 * np.einsum("ij,ij->j", P, P) - self.H0) - np.log(
+                self.H0 * (n * n - 1.0)
+            )
 
     def gradient_soa(self, Q: np.ndarray, P: np.ndarray, wrt: str = "qp"):
         """(∂Λ/∂q or None, ∂Λ/∂p or None), each (3, N)."""

@@ -13,8 +13,12 @@ from .kerr_schild import KerrSchild
 from .metric import MetricHamiltonian
 from .schwarzschild_optical import SchwarzschildOptical
 
-_FLAT_CARTESIAN = [["-1", "0", "0", "0"], ["0", "1", "0", "0"],
-                   ["0", "0", "1", "0"], ["0", "0", "0", "1"]]
+_FLAT_CARTESIAN = [
+    ["-1", "0", "0", "0"],
+    ["0", "1", "0", "0"],
+    ["0", "0", "1", "0"],
+    ["0", "0", "0", "1"],
+]
 
 
 def _check_rg(rg: float) -> float:
@@ -24,8 +28,10 @@ def _check_rg(rg: float) -> float:
 def _check_spin(rg: float, a: float) -> float:
     a = checks.check_range("a (Kerr spin)", a)
     if abs(a) > rg / 2:
-        raise ValueError(f"Kerr spin a = {a} is beyond extremal: need |a| <= rg/2 = M = {rg / 2}"
-                         f" (a/M = {2 * a / rg:.4g})")
+        raise ValueError(
+            f"Kerr spin a = {a} is beyond extremal: need |a| <= rg/2 = M = {rg / 2}"
+            f" (a/M = {2 * a / rg:.4g})"
+        )
     return a
 
 
@@ -52,9 +58,14 @@ class SphericalSpacetime(MetricHamiltonian):
 
     def __init__(self, inverse, rg, a, time_scale, definitions=(), horizon=0.0):
         coords = ("t", "r", "theta", "phi")
-        super().__init__(inverse, coords, ("p_t", "p_r", "p_theta", "p_phi"),
-                         parameters={"rg": rg, "a": a}, definitions=definitions,
-                         time_scale=time_scale)
+        super().__init__(
+            inverse,
+            coords,
+            ("p_t", "p_r", "p_theta", "p_phi"),
+            parameters={"rg": rg, "a": a},
+            definitions=definitions,
+            time_scale=time_scale,
+        )
         self.rg, self.a = rg, a
         self.horizon = horizon
 
@@ -88,7 +99,7 @@ class SphericalSpacetime(MetricHamiltonian):
             return {"p_t": P[0].copy(), "p_phi": P[3].copy()}
         cos2 = np.cos(Q[2]) ** 2
         sin2 = 1.0 - cos2
-        carter = P[2] ** 2 + cos2 * (-(self.a ** 2) * P[0] ** 2 + P[3] ** 2 / sin2)
+        carter = P[2] ** 2 + cos2 * (-(self.a**2) * P[0] ** 2 + P[3] ** 2 / sin2)
         return {"p_t": P[0].copy(), "p_phi": P[3].copy(), "carter": carter}
 
 
@@ -97,8 +108,12 @@ def minkowski(chart: str = "cartesian") -> MetricHamiltonian:
     if chart == "cartesian":
         return Minkowski()
     if chart == "spherical":
-        inv = [["-1", "0", "0", "0"], ["0", "1", "0", "0"],
-               ["0", "0", "1/r**2", "0"], ["0", "0", "0", "1/(r**2*sin(theta)**2)"]]
+        inv = [
+            ["-1", "0", "0", "0"],
+            ["0", "1", "0", "0"],
+            ["0", "0", "1/r**2", "0"],
+            ["0", "0", "0", "1/(r**2*sin(theta)**2)"],
+        ]
         return SphericalSpacetime(inv, 0.0, 0.0, time_scale=None)
     raise ValueError(f"unknown chart '{chart}' for minkowski (use 'cartesian' or 'spherical')")
 
@@ -106,13 +121,18 @@ def minkowski(chart: str = "cartesian") -> MetricHamiltonian:
 def schwarzschild(rg: float = 1.0) -> SphericalSpacetime:
     """Schwarzschild black hole in (t, r, theta, phi) (seed Eq. 9/15, with the p_phi term)."""
     rg = _check_rg(rg)
-    inv = [["-1/(1 - rg/r)", "0", "0", "0"], ["0", "1 - rg/r", "0", "0"],
-           ["0", "0", "1/r**2", "0"], ["0", "0", "0", "1/(r**2*sin(theta)**2)"]]
+    inv = [
+        ["-1/(1 - rg/r)", "0", "0", "0"],
+        ["0", "1 - rg/r", "0", "0"],
+        ["0", "0", "1/r**2", "0"],
+        ["0", "0", "0", "1/(r**2*sin(theta)**2)"],
+    ]
     return SphericalSpacetime(inv, rg, 0.0, time_scale="r - rg", horizon=rg)
 
 
-def kerr(rg: float = 1.0, a: float = 0.0, chart: str = "boyer_lindquist",
-         outgoing: bool = False) -> Hamiltonian:
+def kerr(
+    rg: float = 1.0, a: float = 0.0, chart: str = "boyer_lindquist", outgoing: bool = False
+) -> Hamiltonian:
     """Kerr black hole, spin length a = J/M with |a| <= M = rg/2 (seed Eq. 12).
 
     ``chart="boyer_lindquist"``: (t, r, theta, phi). ``chart="kerr_schild"``: Cartesian
@@ -123,14 +143,21 @@ def kerr(rg: float = 1.0, a: float = 0.0, chart: str = "boyer_lindquist",
     a = _check_spin(rg, a)
     horizon = kerr_horizon(rg, a)
     if chart == "boyer_lindquist":
-        defs = [("s2", "sin(theta)**2"), ("sigma", "r**2 + a**2*(1 - s2)"),
-                ("delta", "r**2 - rg*r + a**2"), ("sd", "sigma*delta")]
-        inv = [["-((r**2 + a**2)**2 - a**2*delta*s2)/sd", "0", "0", "-rg*a*r/sd"],
-               ["0", "delta/sigma", "0", "0"],
-               ["0", "0", "1/sigma", "0"],
-               ["-rg*a*r/sd", "0", "0", "(delta - a**2*s2)/(sd*s2)"]]
-        return SphericalSpacetime(inv, rg, a, time_scale="(r**2 - rg*r + a**2)/r",
-                                  definitions=defs, horizon=horizon)
+        defs = [
+            ("s2", "sin(theta)**2"),
+            ("sigma", "r**2 + a**2*(1 - s2)"),
+            ("delta", "r**2 - rg*r + a**2"),
+            ("sd", "sigma*delta"),
+        ]
+        inv = [
+            ["-((r**2 + a**2)**2 - a**2*delta*s2)/sd", "0", "0", "-rg*a*r/sd"],
+            ["0", "delta/sigma", "0", "0"],
+            ["0", "0", "1/sigma", "0"],
+            ["-rg*a*r/sd", "0", "0", "(delta - a**2*s2)/(sd*s2)"],
+        ]
+        return SphericalSpacetime(
+            inv, rg, a, time_scale="(r**2 - rg*r + a**2)/r", definitions=defs, horizon=horizon
+        )
     if chart == "kerr_schild":
         return KerrSchild(rg, a, horizon, outgoing)
     raise ValueError(f"unknown chart '{chart}' for kerr (use 'boyer_lindquist' or 'kerr_schild')")

@@ -19,12 +19,17 @@ MAX_PIECES = 16
 """At most this many chords per step (the deviation then shrinks 256-fold)."""
 
 
-def hermite(X0: np.ndarray, V0: np.ndarray, X1: np.ndarray, V1: np.ndarray, h,
-            t: float) -> np.ndarray:
+def hermite(
+    X0: np.ndarray, V0: np.ndarray, X1: np.ndarray, V1: np.ndarray, h, t: float
+) -> np.ndarray:
     """The cubic Hermite interpolant at t in [0, 1] (each array (3, M); h float or (M,))."""
     t2, t3 = t * t, t * t * t
-    return ((2 * t3 - 3 * t2 + 1) * X0 + (t3 - 2 * t2 + t) * h * V0
-            + (3 * t2 - 2 * t3) * X1 + (t3 - t2) * h * V1)
+    return (
+        (2 * t3 - 3 * t2 + 1) * X0
+        + (t3 - 2 * t2 + t) * h * V0
+        + (3 * t2 - 2 * t3) * X1
+        + (t3 - t2) * h * V1
+    )
 
 
 def chord_deviation(V0: np.ndarray, V1: np.ndarray, h) -> np.ndarray:

@@ -60,9 +60,9 @@ class SphereRegion(Region):
 
     def entry(self, X: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         r2 = np.einsum("ij,ij->i", X, X)
-        inside = r2 < self.radius ** 2
+        inside = r2 < self.radius**2
         along = np.einsum("ij,ij->i", X, D)
-        disc = along ** 2 - (r2 - self.radius ** 2)
+        disc = along**2 - (r2 - self.radius**2)
         t = -along - np.sqrt(np.maximum(disc, 0.0))
         enters = ~inside & (disc > 0) & (t > 0)
         return _start_points(X, D, inside, enters, t), inside
@@ -70,9 +70,8 @@ class SphereRegion(Region):
     def left_soa(self, X: np.ndarray, X_prev: np.ndarray) -> np.ndarray:
         """Outside the sphere and moving away from the centre."""
         r2 = X[0] * X[0] + X[1] * X[1] + X[2] * X[2]
-        away = X[0] * (X[0] - X_prev[0]) + X[1] * (X[1] - X_prev[1]) + \
-            X[2] * (X[2] - X_prev[2])
-        return (r2 > self.radius ** 2) & (away > 0)
+        away = X[0] * (X[0] - X_prev[0]) + X[1] * (X[1] - X_prev[1]) + X[2] * (X[2] - X_prev[2])
+        return (r2 > self.radius**2) & (away > 0)
 
 
 class BoxRegion(Region):
@@ -98,16 +97,16 @@ class BoxRegion(Region):
         return ~np.all((X >= self.lo[:, None]) & (X <= self.hi[:, None]), axis=0)
 
 
-def _start_points(X: np.ndarray, D: np.ndarray, inside: np.ndarray, enters: np.ndarray,
-                  t: np.ndarray) -> np.ndarray:
+def _start_points(
+    X: np.ndarray, D: np.ndarray, inside: np.ndarray, enters: np.ndarray, t: np.ndarray
+) -> np.ndarray:
     """X where inside, the entry point X + t D (nudged in) where the ray enters, else NaN."""
     start = np.where(inside[:, None], X, np.nan)
     start[enters] = X[enters] + (t[enters, None] * (1 + 1e-12)) * D[enters]
     return start
 
 
-def region_for(model: Any, tolerance: float, extent: float,
-               radius: float | None = None) -> Region:
+def region_for(model: Any, tolerance: float, extent: float, radius: float | None = None) -> Region:
     """The region of a model: its box if it has bounds (and no radius is asked for), else a
     sphere; around a mass of radius sqrt(2 C / tol) M (first-order far field).
 

@@ -19,26 +19,32 @@ from .scene import ENDING
 class RayResults:
     """Per-ray outcome of a batch (rays on the first axis, world space)."""
 
-    ending: np.ndarray          # (N,) int8
-    direction: np.ndarray       # (N, 3) final direction (escape direction for escaped rays)
-    position: np.ndarray        # (N, 3) final position (hit point for hit rays)
-    surface: np.ndarray         # (N, 4) surface colour where hit
-    radiance: np.ndarray        # (N, 3) volume emission collected in front of the ending
-    transmittance: np.ndarray   # (N,) volume transmittance
-    steps: np.ndarray           # (N,) int32 integration steps
-    energy_error: np.ndarray    # (N,) |H - H0| at the end
+    ending: np.ndarray  # (N,) int8
+    direction: np.ndarray  # (N, 3) final direction (escape direction for escaped rays)
+    position: np.ndarray  # (N, 3) final position (hit point for hit rays)
+    surface: np.ndarray  # (N, 4) surface colour where hit
+    radiance: np.ndarray  # (N, 3) volume emission collected in front of the ending
+    transmittance: np.ndarray  # (N,) volume transmittance
+    steps: np.ndarray  # (N,) int32 integration steps
+    energy_error: np.ndarray  # (N,) |H - H0| at the end
 
     @classmethod
     def empty(cls, n: int, origins: np.ndarray, directions: np.ndarray) -> RayResults:
         """N rays not ended yet (ending -1) at their origins, with nothing collected."""
         return cls(
-            ending=np.full(n, -1, dtype=np.int8), direction=directions.copy(),
-            position=origins.copy(), surface=np.zeros((n, 4)), radiance=np.zeros((n, 3)),
-            transmittance=np.ones(n), steps=np.zeros(n, dtype=np.int32),
-            energy_error=np.zeros(n))
+            ending=np.full(n, -1, dtype=np.int8),
+            direction=directions.copy(),
+            position=origins.copy(),
+            surface=np.zeros((n, 4)),
+            radiance=np.zeros((n, 3)),
+            transmittance=np.ones(n),
+            steps=np.zeros(n, dtype=np.int32),
+            energy_error=np.zeros(n),
+        )
 
-    def accumulate(self, rows: np.ndarray, radiance: np.ndarray | None,
-                   trans: np.ndarray | None) -> None:
+    def accumulate(
+        self, rows: np.ndarray, radiance: np.ndarray | None, trans: np.ndarray | None
+    ) -> None:
         """Composite a segment's volume emission behind what the rays have collected."""
         if radiance is None:  # no volumes in the scene
             return
@@ -53,8 +59,7 @@ class SceneGeometry:
         self.objects = objects
         self.volumes = volumes
 
-    def record(self, rows: np.ndarray, a: np.ndarray, b: np.ndarray,
-               out: RayResults) -> np.ndarray:
+    def record(self, rows: np.ndarray, a: np.ndarray, b: np.ndarray, out: RayResults) -> np.ndarray:
         """Cast world segments a -> b of rays ``rows``: composite the volumes crossed and
         record surface hits in ``out``. Returns which segments hit a surface (M,)."""
         hits = self.cast(a, b)
@@ -84,8 +89,9 @@ class SceneGeometry:
             hits.merge(rows, self.objects.intersect(a[rows], b[rows]))
         return hits
 
-    def volume_light(self, a: np.ndarray, b: np.ndarray,
-                     hits: Hits) -> tuple[np.ndarray | None, np.ndarray | None]:
+    def volume_light(
+        self, a: np.ndarray, b: np.ndarray, hits: Hits
+    ) -> tuple[np.ndarray | None, np.ndarray | None]:
         """Emission and transmittance of every volume along a -> (b or the hit point)."""
         if not self.volumes:
             return None, None

@@ -35,8 +35,9 @@ class Stepper:
     def __init__(self, method: Method, model: Any, captured: CaptureTest | None) -> None:
         self.method, self.model, self.captured = method, model, captured
 
-    def step(self, K: PoincareTransformed, state: State, h: Any,
-             splits: int = SPLITS) -> tuple[State, np.ndarray, np.ndarray]:
+    def step(
+        self, K: PoincareTransformed, state: State, h: Any, splits: int = SPLITS
+    ) -> tuple[State, np.ndarray, np.ndarray]:
         """One step of every ray -> (state, ok, |H - H0| of the state) per ray."""
         method = self.method
         new, ok = method.step(K, state, h)
@@ -48,8 +49,9 @@ class Stepper:
             return new, ok, drift
         bad = np.flatnonzero(~ok)
         K_bad = K.subset(bad)
-        mid, ok_mid, drift_mid = self.step(K_bad, tuple(a[..., bad] for a in state), 0.5 * h,
-                                           splits - 1)
+        mid, ok_mid, drift_mid = self.step(
+            K_bad, tuple(a[..., bad] for a in state), 0.5 * h, splits - 1
+        )
         go = ok_mid.copy()
         if self.captured is not None:
             with np.errstate(all="ignore"):
@@ -57,8 +59,9 @@ class Stepper:
         end, ok_end, drift_end = mid, ok_mid, drift_mid
         if go.any():
             g = np.flatnonzero(go)
-            e2, o2, d2 = self.step(K_bad.subset(g), tuple(a[..., g] for a in mid), 0.5 * h,
-                                   splits - 1)
+            e2, o2, d2 = self.step(
+                K_bad.subset(g), tuple(a[..., g] for a in mid), 0.5 * h, splits - 1
+            )
             for a, b in zip(end, e2, strict=True):
                 a[..., g] = b
             ok_end[g], drift_end[g] = o2, d2

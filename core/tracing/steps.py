@@ -26,9 +26,13 @@ the solve then moves escape directions by at most 0.06 % of the tolerance (count
 the tolerance, as the equivalent error of the initial direction; 100x looser moves them
 by 6-24 %), while solving to 1e-14 regardless took 1.2-2.3x as long."""
 
-ERROR_CONSTANTS = MappingProxyType({
-    name: method.error_constant for name, method in METHODS.items()
-    if method.error_constant is not None})
+ERROR_CONSTANTS = MappingProxyType(
+    {
+        name: method.error_constant
+        for name, method in METHODS.items()
+        if method.error_constant is not None
+    }
+)
 """Read-only view of ``METHODS[name].error_constant``: C in err = C h^order, each method's
 escape-direction error around a mass, per step h of the Poincaré time (g = r). err is the
 *equivalent* error of the ray's initial direction (radians): the escape error over the

@@ -88,9 +88,16 @@ class Tracer:
         self.captured = model.capture_test()
         self.stepper = Stepper(self.method, model, self.captured)
         self._near = self.geometry.local_box(self._to_local)
-        self.step = options.step if options.step else default_step(
-            self.method, options.tolerance, self.region.length_scale(model),
-            scaled=self.region.scaled(model))
+        self.step = (
+            options.step
+            if options.step
+            else default_step(
+                self.method,
+                options.tolerance,
+                self.region.length_scale(model),
+                scaled=self.region.scaled(model),
+            )
+        )
 
     @property
     def objects(self) -> Any:
@@ -98,8 +105,13 @@ class Tracer:
         return self.geometry.objects
 
     # --- public ----------------------------------------------------------------------
-    def trace(self, origins: np.ndarray, directions: np.ndarray, step: float | None = None,
-              cancel: Callable[[], bool] | None = None) -> RayResults:
+    def trace(
+        self,
+        origins: np.ndarray,
+        directions: np.ndarray,
+        step: float | None = None,
+        cancel: Callable[[], bool] | None = None,
+    ) -> RayResults:
         """Trace rays (N, 3) from world origins along unit world directions."""
         n = origins.shape[0]
         out = RayResults.empty(n, origins, directions)
@@ -118,8 +130,7 @@ class Tracer:
         assert h is not None  # a curved scene's tracer has a step
         if todo.size:
             camera = self._to_local(origins[todo]).T  # (3, M): where each ray is seen from
-            self._integrate(todo, start[todo].T.copy(), D[todo].T.copy(), out, h, cancel,
-                            camera)
+            self._integrate(todo, start[todo].T.copy(), D[todo].T.copy(), out, h, cancel, camera)
         return out
 
     # --- straight parts --------------------------------------------------------------
@@ -196,8 +207,15 @@ class Tracer:
             leaving = ~ended & self.region.left_soa(X, X_prev)
             if leaving.any():
                 local = X[:, leaving].T
-                self._escape(idx[leaving], S[:, leaving], Q[:, leaving], P[:, leaving],
-                             local, self._to_world(local), out)
+                self._escape(
+                    idx[leaving],
+                    S[:, leaving],
+                    Q[:, leaving],
+                    P[:, leaving],
+                    local,
+                    self._to_world(local),
+                    out,
+                )
                 ended |= leaving
             if ended.any():
                 out.steps[idx[ended]] = step
@@ -216,8 +234,9 @@ class Tracer:
         out.position[idx] = self._to_world(X_prev.T)
         self._finish_energy(out, idx, Q, P, H0)
 
-    def _segments(self, idx, X_prev, X, ok, out: RayResults, step_ends: _StepEnds,
-                  camera) -> np.ndarray:
+    def _segments(
+        self, idx, X_prev, X, ok, out: RayResults, step_ends: _StepEnds, camera
+    ) -> np.ndarray:
         """Surface hits and volume emission along this step's path near geometry.
 
         The path between X_prev and X is followed on chords through its cubic Hermite
@@ -236,19 +255,25 @@ class Tracer:
             return hit_rows
         X0, X1 = X_prev[:, c], X[:, c]
         V0, V1, h = step_ends.velocities(c)
-        allowed = CHORD_SHARE * self.options.tolerance * \
-            np.linalg.norm(X0 - camera[:, c], axis=0)
+        allowed = CHORD_SHARE * self.options.tolerance * np.linalg.norm(X0 - camera[:, c], axis=0)
         k = dense.pieces(dense.chord_deviation(V0, V1, h), allowed)
         for n in np.unique(k):
             g = np.flatnonzero(k == n)
             hn = h if np.ndim(h) == 0 else h[g]
-            points = [X0[:, g]] + [dense.hermite(X0[:, g], V0[:, g], X1[:, g], V1[:, g], hn,
-                                                 j / n) for j in range(1, n)] + [X1[:, g]]
+            points = (
+                [X0[:, g]]
+                + [
+                    dense.hermite(X0[:, g], V0[:, g], X1[:, g], V1[:, g], hn, j / n)
+                    for j in range(1, n)
+                ]
+                + [X1[:, g]]
+            )
             alive = np.ones(g.size, dtype=bool)
             for a, b in zip(points[:-1], points[1:], strict=True):
                 live = np.flatnonzero(alive)
-                hit = self.geometry.record(idx[c[g[live]]], self._to_world(a[:, live].T),
-                                           self._to_world(b[:, live].T), out)
+                hit = self.geometry.record(
+                    idx[c[g[live]]], self._to_world(a[:, live].T), self._to_world(b[:, live].T), out
+                )
                 hit_rows[c[g[live[hit]]]] = True
                 alive[live[hit]] = False
                 if not alive.any():
@@ -262,7 +287,7 @@ class Tracer:
     def _escape(self, rows, S, Q, P, local, world, out: RayResults):
         """Rays leaving the region: direction from dq/ds, far-field correction, straight on."""
         _, dHdp = self.model.gradient_soa(Q, P, wrt="p")
-        V = self.chart.cartesian_velocity(S, dHdp[self.chart.offset:])
+        V = self.chart.cartesian_velocity(S, dHdp[self.chart.offset :])
         D = (V / np.linalg.norm(V, axis=0)).T
         D = self._far_field(local, D)
         d_world = D @ self.rotation.T
@@ -280,7 +305,7 @@ class Tracer:
             return D
         r = np.linalg.norm(X, axis=1)
         along = np.einsum("ij,ij->i", X, D)
-        perp = X - along[:, None] * D              # from the ray's line to X, ⟂ D
+        perp = X - along[:, None] * D  # from the ray's line to X, ⟂ D
         b = np.linalg.norm(perp, axis=1)
         with np.errstate(all="ignore"):
             angle = np.where(b > 0, 2 * self.mass / b * (1 - along / r), 0.0)
@@ -313,4 +338,4 @@ class _StepEnds:
         chart = self.tracer.chart
         _, dp = K.gradient_soa(Q, P, wrt="p")
         with np.errstate(all="ignore"):
-            return chart.cartesian_velocity(Q[chart.offset:], dp[chart.offset:])
+            return chart.cartesian_velocity(Q[chart.offset :], dp[chart.offset :])

@@ -60,8 +60,11 @@ def extension_zip(tmp_path_factory: pytest.TempPathFactory) -> Path:
     if dist.is_file() and dist.stat().st_mtime >= _newest_source():
         return dist
     out = tmp_path_factory.mktemp("dist")
-    subprocess.run([sys.executable, str(REPO / "tools" / "build_extension.py"),
-                    "--output-dir", str(out)], check=True, stdout=subprocess.DEVNULL)
+    subprocess.run(
+        [sys.executable, str(REPO / "tools" / "build_extension.py"), "--output-dir", str(out)],
+        check=True,
+        stdout=subprocess.DEVNULL,
+    )
     return out / _zip_name()
 
 
@@ -88,13 +91,13 @@ def addon(extension_zip: Path) -> Iterator[Addon]:
     addon_utils = importlib.import_module("addon_utils")  # importable once bpy is
 
     result = bpy.ops.extensions.package_install_files(
-        filepath=str(extension_zip), repo="user_default", enable_on_install=True)
+        filepath=str(extension_zip), repo="user_default", enable_on_install=True
+    )
     assert result == {"FINISHED"}
     if not addon_utils.check(MODULE)[1]:
         bpy.ops.preferences.addon_enable(module=MODULE)
     assert addon_utils.check(MODULE) == (True, True)
-    installed = Path(os.environ["BLENDER_USER_RESOURCES"], "extensions", "user_default",
-                     "symray")
+    installed = Path(os.environ["BLENDER_USER_RESOURCES"], "extensions", "user_default", "symray")
     assert installed.is_dir(), installed
     yield Addon()
     shutil.rmtree(os.environ["BLENDER_USER_RESOURCES"], ignore_errors=True)
@@ -145,8 +148,17 @@ def solid_material(name: str, color) -> object:
     return mat
 
 
-def add_mesh(scene, name: str, verts, faces, material=None, uvs=None, location=(0, 0, 0),
-             rotation=(0, 0, 0), scale=(1, 1, 1)):
+def add_mesh(
+    scene,
+    name: str,
+    verts,
+    faces,
+    material=None,
+    uvs=None,
+    location=(0, 0, 0),
+    rotation=(0, 0, 0),
+    scale=(1, 1, 1),
+):
     """A mesh object from vertices/faces (optional per-loop UVs, material, transform)."""
     import bpy
 
@@ -247,8 +259,14 @@ def helpers():
     from types import SimpleNamespace
 
     return SimpleNamespace(
-        add_camera=add_camera, solid_material=solid_material, add_mesh=add_mesh,
-        add_cube=add_cube, add_quad=add_quad, set_world_color=set_world_color,
-        add_empty=add_empty, image_array=image_array, frame_directions=frame_directions,
+        add_camera=add_camera,
+        solid_material=solid_material,
+        add_mesh=add_mesh,
+        add_cube=add_cube,
+        add_quad=add_quad,
+        set_world_color=set_world_color,
+        add_empty=add_empty,
+        image_array=image_array,
+        frame_directions=frame_directions,
         operator_error=operator_error,
     )

@@ -14,8 +14,12 @@ import pytest
 def rendered(scene, helpers):
     """A flat scene rendered once by the operator (the 'previous image')."""
     helpers.add_camera(scene)
-    helpers.add_cube(scene, "Cube", location=(0, 0, 0),
-                     material=helpers.solid_material("Red", (0.8, 0.1, 0.1, 1)))
+    helpers.add_cube(
+        scene,
+        "Cube",
+        location=(0, 0, 0),
+        material=helpers.solid_material("Red", (0.8, 0.1, 0.1, 1)),
+    )
     scene.symray.model = "FLAT"
     assert bpy.ops.symray.render() == {"FINISHED"}
     before = helpers.image_array(scene.symray.image_name).copy()
@@ -84,8 +88,9 @@ def test_exr_path_is_a_folder(scene, helpers, rendered, tmp_path):
     _fails(helpers, scene, rendered, "is a folder")
 
 
-@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() == 0,
-                    reason="root may write anywhere")
+@pytest.mark.skipif(
+    not hasattr(os, "geteuid") or os.geteuid() == 0, reason="root may write anywhere"
+)
 def test_exr_folder_read_only(scene, helpers, rendered, tmp_path):
     folder = tmp_path / "ro"
     folder.mkdir()
@@ -117,12 +122,20 @@ SIGNATURE_MINUS = "1, 0, 0, 0; 0, -1, 0, 0; 0, 0, -1, 0; 0, 0, 0, -1"
 ALL_ZERO = "0, 0, 0, 0; 0, 0, 0, 0; 0, 0, 0, 0; 0, 0, 0, 0"
 
 
-@pytest.mark.parametrize("prop, value, model, match", [
-    ("tolerance", math.nan, "KERR", "Tolerance must be a finite number in [1e-14, 0.1], got nan"),
-    ("rg", math.nan, "SCHWARZSCHILD", "Schwarzschild Radius must be a finite number > 0"),
-    ("spin", math.nan, "KERR", "Spin a/M must be a finite number, got nan"),
-    ("medium_min", (math.nan, 0.0, 0.0), "MEDIUM", "Box Min must be finite numbers"),
-])
+@pytest.mark.parametrize(
+    "prop, value, model, match",
+    [
+        (
+            "tolerance",
+            math.nan,
+            "KERR",
+            "Tolerance must be a finite number in [1e-14, 0.1], got nan",
+        ),
+        ("rg", math.nan, "SCHWARZSCHILD", "Schwarzschild Radius must be a finite number > 0"),
+        ("spin", math.nan, "KERR", "Spin a/M must be a finite number, got nan"),
+        ("medium_min", (math.nan, 0.0, 0.0), "MEDIUM", "Box Min must be finite numbers"),
+    ],
+)
 def test_non_finite_settings_are_refused(scene, helpers, rendered, prop, value, model, match):
     """Blender's properties let NaN through (af19e2b: tolerance NaN rendered unbent)."""
     scene.symray.model = model
@@ -130,14 +143,16 @@ def test_non_finite_settings_are_refused(scene, helpers, rendered, prop, value, 
     _fails(helpers, scene, rendered, match)
 
 
-@pytest.mark.parametrize("prop, value, match", [
-    ("max_steps", 0, "Max Steps must be an integer >= 1, got 0"),
-    ("tolerance", 5.0, "Tolerance must be a finite number in [1e-14, 0.1], got 5"),
-    ("tolerance", 0.0, "Tolerance must be a finite number in [1e-14, 0.1], got 0"),
-    ("workers", -3, "Workers must be an integer >= 0, got -3"),
-])
-def test_values_beyond_the_property_range_are_refused(scene, helpers, rendered, prop, value,
-                                                      match):
+@pytest.mark.parametrize(
+    "prop, value, match",
+    [
+        ("max_steps", 0, "Max Steps must be an integer >= 1, got 0"),
+        ("tolerance", 5.0, "Tolerance must be a finite number in [1e-14, 0.1], got 5"),
+        ("tolerance", 0.0, "Tolerance must be a finite number in [1e-14, 0.1], got 0"),
+        ("workers", -3, "Workers must be an integer >= 0, got -3"),
+    ],
+)
+def test_values_beyond_the_property_range_are_refused(scene, helpers, rendered, prop, value, match):
     """A .blend (or a script writing the ID property) bypasses the properties' min/max."""
     scene.symray.model = "KERR"
     scene.symray[prop] = value
@@ -181,10 +196,13 @@ def test_tao_is_accepted_for_a_medium(addon, scene):
     assert validation.settings_problems(scene.symray) == []
 
 
-@pytest.mark.parametrize("metric, match", [
-    (SIGNATURE_MINUS, r"signature (-, -, -, +) at the camera"),
-    (ALL_ZERO, "g^ij is singular at the camera"),
-])
+@pytest.mark.parametrize(
+    "metric, match",
+    [
+        (SIGNATURE_MINUS, r"signature (-, -, -, +) at the camera"),
+        (ALL_ZERO, "g^ij is singular at the camera"),
+    ],
+)
 def test_metric_problems_at_the_camera(scene, helpers, rendered, metric, match):
     """af19e2b: 'inside the black hole's horizon' and numpy's bare 'Singular matrix'."""
     scene.symray.model = "METRIC"

@@ -17,10 +17,25 @@ def test_render_scene_example(addon, tmp_path):
     png, blend = tmp_path / "x.png", tmp_path / "scene.blend"
     env = dict(os.environ)  # BLENDER_USER_RESOURCES: this session's folder, extension installed
     run = subprocess.run(
-        [sys.executable, str(REPO / "examples" / "render_scene.py"), "--out", str(png),
-         "--width", "20", "--height", "15", "--tolerance", "1e-4",
-         "--save-blend", str(blend)],
-        env=env, capture_output=True, text=True, timeout=300)
+        [
+            sys.executable,
+            str(REPO / "examples" / "render_scene.py"),
+            "--out",
+            str(png),
+            "--width",
+            "20",
+            "--height",
+            "15",
+            "--tolerance",
+            "1e-4",
+            "--save-blend",
+            str(blend),
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert run.returncode == 0, run.stdout + run.stderr
     assert "render_scene:" in run.stdout and "rays" in run.stdout
     assert png.stat().st_size > 0 and blend.stat().st_size > 0
@@ -29,8 +44,18 @@ def test_render_scene_example(addon, tmp_path):
     assert any(n.endswith("SymRay Error.X") for n in names), names
     assert any(n.endswith("Combined.R") for n in names), names
     again = subprocess.run(
-        [sys.executable, str(REPO / "examples" / "render_scene.py"), "--blend", str(blend),
-         "--out", str(tmp_path / "y.png")], env=env, capture_output=True, text=True,
-        timeout=300)
+        [
+            sys.executable,
+            str(REPO / "examples" / "render_scene.py"),
+            "--blend",
+            str(blend),
+            "--out",
+            str(tmp_path / "y.png"),
+        ],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert again.returncode == 0, again.stdout + again.stderr
     assert (tmp_path / "y.png").stat().st_size > 0

@@ -24,8 +24,12 @@ def test_rays_match_view_frame(addon, scene, helpers, case):
     render.resolution_x, render.resolution_y = case["res"]
     render.resolution_percentage = case.get("percentage", 100)
     render.pixel_aspect_x, render.pixel_aspect_y = case.get("aspect", (1.0, 1.0))
-    cam = helpers.add_camera(scene, location=(1.0, -9.0, 2.5),
-                             rotation=(math.radians(75), 0.2, math.radians(10)), **case["data"])
+    cam = helpers.add_camera(
+        scene,
+        location=(1.0, -9.0, 2.5),
+        rotation=(math.radians(75), 0.2, math.radians(10)),
+        **case["data"],
+    )
     export = addon.module("symray_addon.export_camera")
     kwargs = export.camera_kwargs(scene, cam)
     camera = addon.core.Camera.blender(**kwargs)
@@ -39,21 +43,32 @@ def test_rays_match_view_frame(addon, scene, helpers, case):
     if cam.data.type == "ORTHO":
         np.testing.assert_allclose(origins[flat], np.array(cam.location) + expected, atol=1e-6)
         forward = -np.array(cam.matrix_world)[:3, 2]
-        np.testing.assert_allclose(directions[flat], np.tile(forward, (len(flat), 1)),
-                                   atol=1e-9)
+        np.testing.assert_allclose(directions[flat], np.tile(forward, (len(flat), 1)), atol=1e-9)
     else:
         np.testing.assert_allclose(directions[flat], expected, atol=1e-6)
-        np.testing.assert_allclose(origins[flat], np.tile(cam.location, (len(flat), 1)),
-                                   atol=1e-6)
+        np.testing.assert_allclose(origins[flat], np.tile(cam.location, (len(flat), 1)), atol=1e-6)
 
 
 def test_kwargs_contract(addon, scene, helpers):
     cam = helpers.add_camera(scene, lens=42.0)
     kwargs = addon.module("symray_addon.export_camera").camera_kwargs(scene, cam)
     assert set(kwargs) == {
-        "type", "lens", "sensor_width", "sensor_height", "sensor_fit", "shift_x", "shift_y",
-        "ortho_scale", "resolution_x", "resolution_y", "resolution_percentage",
-        "pixel_aspect_x", "pixel_aspect_y", "matrix_world", "border"}
+        "type",
+        "lens",
+        "sensor_width",
+        "sensor_height",
+        "sensor_fit",
+        "shift_x",
+        "shift_y",
+        "ortho_scale",
+        "resolution_x",
+        "resolution_y",
+        "resolution_percentage",
+        "pixel_aspect_x",
+        "pixel_aspect_y",
+        "matrix_world",
+        "border",
+    }
     assert kwargs["lens"] == pytest.approx(42.0)
     assert kwargs["matrix_world"].shape == (4, 4)
     assert kwargs["border"] is None

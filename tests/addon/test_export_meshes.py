@@ -21,8 +21,15 @@ def objects(scene, helpers):
     twin = bpy.data.objects.new("Twin", cube.data)
     twin.location, twin.rotation_euler, twin.scale = (-3.0, 2.0, 1.0), (0.3, 0.2, 0.1), (0.5,) * 3
     scene.collection.objects.link(twin)
-    quad = helpers.add_quad(scene, "Quad", half=2.0, y=0.0, location=(0.0, 6.0, 0.0),
-                            rotation=(0.2, 0.0, 0.4), scale=(1.5, 1.5, 1.5))
+    quad = helpers.add_quad(
+        scene,
+        "Quad",
+        half=2.0,
+        y=0.0,
+        location=(0.0, 6.0, 0.0),
+        rotation=(0.2, 0.0, 0.4),
+        scale=(1.5, 1.5, 1.5),
+    )
     hidden = helpers.add_cube(scene, "Hidden", location=(0.0, -4.0, 0.0))
     hidden.hide_render = True
     bpy.context.view_layer.update()
@@ -57,8 +64,11 @@ def test_hits_agree_with_direct_ray_cast(addon, scene, objects):
     depsgraph = bpy.context.evaluated_depsgraph_get()
     meshes = addon.module("symray_addon.export_meshes")
     intersector = meshes.build_intersector(depsgraph)
-    assert intersector.names == ["Cube", "Twin", "Quad"] or \
-        sorted(intersector.names) == ["Cube", "Quad", "Twin"]
+    assert intersector.names == ["Cube", "Twin", "Quad"] or sorted(intersector.names) == [
+        "Cube",
+        "Quad",
+        "Twin",
+    ]
     rng = np.random.default_rng(7)
     a = rng.uniform(-8, 8, (400, 3))
     targets = np.array([o.matrix_world.translation[:] for o in objects])
@@ -115,14 +125,22 @@ def test_material_colors_and_texture_uv(addon, scene, helpers):
     bsdf = next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED")
     tree.links.new(tex.outputs["Color"], bsdf.inputs["Base Color"])
     helpers.add_quad(scene, "Board", half=1.0, y=5.0, material=textured)
-    helpers.add_cube(scene, "Green", size=1.0, location=(0, 0, 5),
-                     material=helpers.solid_material("G", (0.1, 0.6, 0.2, 1.0)))
+    helpers.add_cube(
+        scene,
+        "Green",
+        size=1.0,
+        location=(0, 0, 5),
+        material=helpers.solid_material("G", (0.1, 0.6, 0.2, 1.0)),
+    )
     helpers.add_cube(scene, "Plain", size=1.0, location=(0, 0, -5))
     intersector = addon.module("symray_addon.export_meshes").build_intersector(
-        bpy.context.evaluated_depsgraph_get())
+        bpy.context.evaluated_depsgraph_get()
+    )
     # quad corners: (-1,5,-1) uv (0,0); (1,5,-1) uv (1,0) ... u along +x, v along +z
-    a = np.array([[-0.5, 0, -0.5], [0.5, 0, -0.5], [-0.5, 0, 0.5], [0.5, 0, 0.5],
-                  [0, 0, 5], [0, 0, -5]], float)
+    a = np.array(
+        [[-0.5, 0, -0.5], [0.5, 0, -0.5], [-0.5, 0, 0.5], [0.5, 0, 0.5], [0, 0, 5], [0, 0, -5]],
+        float,
+    )
     a[4], a[5] = (0, -3, 5), (0, -3, -5)
     b = a + np.array([0.0, 10.0, 0.0])
     hits = intersector.intersect(a, b)

@@ -39,6 +39,7 @@ def _break_the_next_render(addon, scene, monkeypatch, failure: str) -> str:
     def raising(error):
         def trace(*_args, **_kwargs):
             raise error
+
         return trace
 
     if failure == "killed worker":
@@ -51,8 +52,11 @@ def _break_the_next_render(addon, scene, monkeypatch, failure: str) -> str:
         monkeypatch.setattr(render_module, "_trace_chunk", raising(MemoryError()))
         return "ran out of memory"
     if failure == "RecursionError":
-        monkeypatch.setattr(render_module, "_trace_chunk",
-                            raising(RecursionError("maximum recursion depth exceeded")))
+        monkeypatch.setattr(
+            render_module,
+            "_trace_chunk",
+            raising(RecursionError("maximum recursion depth exceeded")),
+        )
         return "recursion limit"
     scene.symray.model = "CUSTOM"
     scene.symray.hamiltonian = "+".join(["p_x"] * 500)  # RecursionError before
@@ -60,8 +64,9 @@ def _break_the_next_render(addon, scene, monkeypatch, failure: str) -> str:
 
 
 @pytest.mark.parametrize("failure", FAILURES)
-def test_a_failed_f12_keeps_the_previous_file(addon, scene, helpers, tmp_path, monkeypatch,
-                                              failure):
+def test_a_failed_f12_keeps_the_previous_file(
+    addon, scene, helpers, tmp_path, monkeypatch, failure
+):
     _flat_scene(scene, helpers)
     scene.render.engine = "SYMRAY"
     addon.module("symray_addon.output").set_png_format(scene.render.image_settings)
@@ -83,8 +88,9 @@ def test_a_failed_f12_keeps_the_previous_file(addon, scene, helpers, tmp_path, m
         assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
 
 
-def test_an_animation_stops_at_a_failed_frame_and_writes_no_blank_one(addon, scene, helpers,
-                                                                     tmp_path, monkeypatch):
+def test_an_animation_stops_at_a_failed_frame_and_writes_no_blank_one(
+    addon, scene, helpers, tmp_path, monkeypatch
+):
     """What `blender -b file.blend -E SYMRAY -a` does when frame 2 fails."""
     _flat_scene(scene, helpers)
     scene.render.engine = "SYMRAY"
@@ -106,8 +112,9 @@ def test_an_animation_stops_at_a_failed_frame_and_writes_no_blank_one(addon, sce
 
 
 @pytest.mark.parametrize("failure", FAILURES)
-def test_a_failed_operator_render_is_a_report_and_keeps_the_image(addon, scene, helpers,
-                                                                  monkeypatch, failure):
+def test_a_failed_operator_render_is_a_report_and_keeps_the_image(
+    addon, scene, helpers, monkeypatch, failure
+):
     _flat_scene(scene, helpers)
     assert bpy.ops.symray.render() == {"FINISHED"}
     before = helpers.image_array(scene.symray.image_name).copy()
@@ -158,8 +165,7 @@ def test_the_operators_image_survives_saving_the_blend(addon, scene, helpers, tm
         np.testing.assert_array_equal(_image_pixels(name), rendered)
 
 
-def test_a_blend_relative_exr_path_needs_a_saved_file(addon, scene, helpers, tmp_path,
-                                                      monkeypatch):
+def test_a_blend_relative_exr_path_needs_a_saved_file(addon, scene, helpers, tmp_path, monkeypatch):
     """Issue 11 item 10: '//x.exr' in an unsaved file landed in the working directory."""
     monkeypatch.chdir(tmp_path)
     _flat_scene(scene, helpers)

@@ -55,14 +55,18 @@ def _draw(panel_name: str, scene) -> list:
     return log
 
 
-@pytest.mark.parametrize("model", ["FLAT", "SCHWARZSCHILD", "KERR", "MEDIUM", "METRIC",
-                                   "CUSTOM"])
+@pytest.mark.parametrize("model", ["FLAT", "SCHWARZSCHILD", "KERR", "MEDIUM", "METRIC", "CUSTOM"])
 def test_main_panel_draws(scene, model):
     scene.symray.model = model
     log = _draw("RENDER_PT_symray", scene)
     assert ("prop", "model") in log and ("operator", "symray.render") in log
-    expected = {"KERR": "spin", "MEDIUM": "refractive_index", "METRIC": "metric",
-                "CUSTOM": "hamiltonian", "SCHWARZSCHILD": "rg"}.get(model)
+    expected = {
+        "KERR": "spin",
+        "MEDIUM": "refractive_index",
+        "METRIC": "metric",
+        "CUSTOM": "hamiltonian",
+        "SCHWARZSCHILD": "rg",
+    }.get(model)
     if expected:
         assert ("prop", expected) in log
 
@@ -97,16 +101,23 @@ def _camera(scene, location):
     bpy.context.view_layer.update()
 
 
-@pytest.mark.parametrize("setup, words", [
-    (dict(model="KERR", tolerance=float("nan")), "Tolerance must be a finite number"),
-    (dict(model="KERR", method="tao4"), "method 'tao4' cannot render a black hole"),
-    (dict(model="KERR", spin=float("nan")), "Spin a/M must be a finite number"),
-    (dict(model="METRIC", metric="1, 0, 0, 0; 0, -1, 0, 0; 0, 0, -1, 0; 0, 0, 0, -1"),
-     "signature (-, -, -, +)"),
-    (dict(model="METRIC", metric="0, 0, 0, 0; 0, 0, 0, 0; 0, 0, 0, 0; 0, 0, 0, 0"),
-     "singular at the camera"),
-    (dict(model="SCHWARZSCHILD", rg=40.0), "inside the black hole's horizon"),
-])
+@pytest.mark.parametrize(
+    "setup, words",
+    [
+        (dict(model="KERR", tolerance=float("nan")), "Tolerance must be a finite number"),
+        (dict(model="KERR", method="tao4"), "method 'tao4' cannot render a black hole"),
+        (dict(model="KERR", spin=float("nan")), "Spin a/M must be a finite number"),
+        (
+            dict(model="METRIC", metric="1, 0, 0, 0; 0, -1, 0, 0; 0, 0, -1, 0; 0, 0, 0, -1"),
+            "signature (-, -, -, +)",
+        ),
+        (
+            dict(model="METRIC", metric="0, 0, 0, 0; 0, 0, 0, 0; 0, 0, 0, 0; 0, 0, 0, 0"),
+            "singular at the camera",
+        ),
+        (dict(model="SCHWARZSCHILD", rg=40.0), "inside the black hole's horizon"),
+    ],
+)
 def test_panel_shows_render_problems_before_a_render(scene, setup, words):
     """Issue #11: what a render would refuse is shown in the panel before it starts."""
     _camera(scene, (0.0, -30.0, 0.0))

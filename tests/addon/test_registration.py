@@ -6,14 +6,33 @@ import bpy
 import pytest
 
 MODELS = {"FLAT", "SCHWARZSCHILD", "KERR", "MEDIUM", "METRIC", "CUSTOM"}
-METHODS = {"symplectic_euler", "stormer_verlet", "implicit_midpoint", "gauss4", "yoshida4",
-           "yoshida6", "yoshida8", "suzuki4", "suzuki6", "tao2", "tao4", "rk4", "dopri5",
-           "leapfrog", "blanes_moan4", "blanes_moan6", "AUTO"}
+METHODS = {
+    "symplectic_euler",
+    "stormer_verlet",
+    "implicit_midpoint",
+    "gauss4",
+    "yoshida4",
+    "yoshida6",
+    "yoshida8",
+    "suzuki4",
+    "suzuki6",
+    "tao2",
+    "tao4",
+    "rk4",
+    "dopri5",
+    "leapfrog",
+    "blanes_moan4",
+    "blanes_moan6",
+    "AUTO",
+}
 
 
 def _registered() -> bool:
-    return (hasattr(bpy.types.Scene, "symray") and hasattr(bpy.types, "RENDER_PT_symray")
-            and "SYMRAY" in _engines())
+    return (
+        hasattr(bpy.types.Scene, "symray")
+        and hasattr(bpy.types, "RENDER_PT_symray")
+        and "SYMRAY" in _engines()
+    )
 
 
 def _engines() -> set[str]:
@@ -61,16 +80,36 @@ def test_contract_properties(scene):
     assert {item.identifier for item in rna["method"].enum_items} == METHODS
     # Blender stores an enum by position: the original items keep theirs (old .blend files)
     assert [item.identifier for item in rna["method"].enum_items][:13] == [
-        "symplectic_euler", "stormer_verlet", "implicit_midpoint", "gauss4", "yoshida4",
-        "yoshida6", "yoshida8", "suzuki4", "suzuki6", "tao2", "tao4", "rk4", "dopri5"]
+        "symplectic_euler",
+        "stormer_verlet",
+        "implicit_midpoint",
+        "gauss4",
+        "yoshida4",
+        "yoshida6",
+        "yoshida8",
+        "suzuki4",
+        "suzuki6",
+        "tao2",
+        "tao4",
+        "rk4",
+        "dopri5",
+    ]
     assert rna["center"].fixed_type.identifier == "Object"
     assert settings.center is None
     assert settings.image_name == "SymRay Result"
     assert settings.exr_path == ""
     assert settings.rg > 0 and rna["rg"].hard_min > 0
     assert rna["spin"].soft_min == -1.0 and rna["spin"].soft_max == 1.0
-    for name in ("refractive_index", "metric", "hamiltonian", "tolerance", "max_steps",
-                 "pass_error", "pass_steps", "pass_ending"):
+    for name in (
+        "refractive_index",
+        "metric",
+        "hamiltonian",
+        "tolerance",
+        "max_steps",
+        "pass_error",
+        "pass_steps",
+        "pass_ending",
+    ):
         assert name in rna, name
     assert settings.tolerance > 0 and settings.max_steps > 0
     assert settings.passes() == ("steps",)  # the fixture switched the error pass off
@@ -92,23 +131,38 @@ def test_panels_and_compat_engines(addon):
         panel = getattr(bpy.types, name)
         assert panel.bl_context == "render"
         assert not hasattr(panel, "COMPAT_ENGINES")  # shown for every engine
-    for name in ("RENDER_PT_format", "RENDER_PT_output", "DATA_PT_lens", "DATA_PT_context_mesh",
-                 "EEVEE_MATERIAL_PT_surface", "EEVEE_WORLD_PT_surface"):
+    for name in (
+        "RENDER_PT_format",
+        "RENDER_PT_output",
+        "DATA_PT_lens",
+        "DATA_PT_context_mesh",
+        "EEVEE_MATERIAL_PT_surface",
+        "EEVEE_WORLD_PT_surface",
+    ):
         assert "SYMRAY" in getattr(bpy.types, name).COMPAT_ENGINES, name
 
 
 def test_engine_passes_declared(scene):
     scene.render.engine = "SYMRAY"
     scene.symray.pass_error = scene.symray.pass_steps = True
-    engine = next(c for c in bpy.types.RenderEngine.__subclasses__()
-                  if getattr(c, "bl_idname", "") == "SYMRAY")
+    engine = next(
+        c
+        for c in bpy.types.RenderEngine.__subclasses__()
+        if getattr(c, "bl_idname", "") == "SYMRAY"
+    )
     assert engine.bl_use_postprocess is True
     assert engine.bl_label == "SymRay"
 
 
-@pytest.mark.parametrize("preset, model", [("SCHWARZSCHILD_LENS", "SCHWARZSCHILD"),
-                                           ("KERR", "KERR"), ("MIRAGE_EQ17", "MEDIUM"),
-                                           ("MIRAGE_EQ18", "MEDIUM")])
+@pytest.mark.parametrize(
+    "preset, model",
+    [
+        ("SCHWARZSCHILD_LENS", "SCHWARZSCHILD"),
+        ("KERR", "KERR"),
+        ("MIRAGE_EQ17", "MEDIUM"),
+        ("MIRAGE_EQ18", "MEDIUM"),
+    ],
+)
 def test_presets(scene, preset, model):
     assert bpy.ops.symray.apply_preset(preset=preset) == {"FINISHED"}
     settings = scene.symray

@@ -24,8 +24,7 @@ def read_exr(path) -> dict[str, np.ndarray]:
     """Channels of an EXR (all parts: Blender 5 writes one per pass) by full name, (h, w)
     arrays with row 0 at the top."""
     with OpenEXR.File(str(path), separate_channels=True) as f:
-        return {name: np.array(ch.pixels) for part in f.parts
-                for name, ch in part.channels.items()}
+        return {name: np.array(ch.pixels) for part in f.parts for name, ch in part.channels.items()}
 
 
 def look_at(obj, target=(0.0, 0.0, 0.0)) -> None:
@@ -38,13 +37,20 @@ def look_at(obj, target=(0.0, 0.0, 0.0)) -> None:
 def flat_scene(scene, helpers):
     """Three coloured objects in front of a plain world colour."""
     helpers.set_world_color(scene, WORLD)
-    helpers.add_cube(scene, "Red", size=4.0,
-                     material=helpers.solid_material("R", (0.8, 0.1, 0.1, 1.0)))
-    helpers.add_quad(scene, "Green", half=6.0, y=8.0,
-                     material=helpers.solid_material("G", (0.1, 0.7, 0.2, 1.0)))
-    helpers.add_cube(scene, "Blue", size=2.0, location=(5.0, 2.0, 3.0),
-                     rotation=(0.4, 0.3, 0.2),
-                     material=helpers.solid_material("B", (0.1, 0.2, 0.9, 1.0)))
+    helpers.add_cube(
+        scene, "Red", size=4.0, material=helpers.solid_material("R", (0.8, 0.1, 0.1, 1.0))
+    )
+    helpers.add_quad(
+        scene, "Green", half=6.0, y=8.0, material=helpers.solid_material("G", (0.1, 0.7, 0.2, 1.0))
+    )
+    helpers.add_cube(
+        scene,
+        "Blue",
+        size=2.0,
+        location=(5.0, 2.0, 3.0),
+        rotation=(0.4, 0.3, 0.2),
+        material=helpers.solid_material("B", (0.1, 0.2, 0.9, 1.0)),
+    )
     cam = helpers.add_camera(scene, location=(7.0, -22.0, 5.0))
     look_at(cam)
     scene.symray.model = "FLAT"
@@ -58,8 +64,11 @@ def reference_image(scene, cam, helpers) -> np.ndarray:
     rows, cols = np.divmod(np.arange(w * h), w)
     dirs = helpers.frame_directions(scene, cam, rows, cols)
     origin = Vector(cam.matrix_world.translation)
-    colors = {"Red": (0.8, 0.1, 0.1, 1.0), "Green": (0.1, 0.7, 0.2, 1.0),
-              "Blue": (0.1, 0.2, 0.9, 1.0)}
+    colors = {
+        "Red": (0.8, 0.1, 0.1, 1.0),
+        "Green": (0.1, 0.7, 0.2, 1.0),
+        "Blue": (0.1, 0.2, 0.9, 1.0),
+    }
     trees = []
     for name in colors:
         obj = bpy.data.objects[name].evaluated_get(depsgraph)
@@ -167,7 +176,7 @@ def test_schwarzschild_shadow_and_einstein_ring(addon, scene, helpers):
     alpha = math.asin(1.5 * math.sqrt(3.0) * math.sqrt(1.0 - 1.0 / d) / d)
     r_shadow = math.tan(alpha) * px
     captured = ending == codes["captured"]
-    assert captured.sum() == pytest.approx(math.pi * r_shadow ** 2, rel=0.12)
+    assert captured.sum() == pytest.approx(math.pi * r_shadow**2, rel=0.12)
     assert captured[radius < 0.8 * r_shadow].all()
     assert not captured[radius > 1.2 * r_shadow].any()
     # Einstein ring of the source behind the hole, from the exact photon orbit
@@ -201,7 +210,7 @@ def test_schwarzschild_lenses_the_board(addon, scene, helpers):
     assert flat_half == pytest.approx(8.0 / 42.0 * px, abs=1.0)
     # lens equation: the board's edge (beta = 8/42) appears at theta = (b + sqrt(b^2 + 4 tE^2))/2
     beta, theta_e2 = math.atan(8.0 / 42.0), 2.0 * 12.0 / (30.0 * 42.0)
-    theta = 0.5 * (beta + math.sqrt(beta ** 2 + 4 * theta_e2))
+    theta = 0.5 * (beta + math.sqrt(beta**2 + 4 * theta_e2))
     assert half_width(curved) == pytest.approx(math.tan(theta) * px, rel=0.1)
     assert flat[mid, w // 2] == hit
     assert curved[mid, w // 2] == addon.core.ENDING["captured"]
@@ -327,8 +336,9 @@ def test_engine_border_percentage_and_crop(addon, scene, helpers, tmp_path):
     flat_scene(scene, helpers)
     full_path = _engine_exr(scene, tmp_path, "full")
     bpy.ops.render.render(write_still=True)
-    full = np.stack([v for k, v in sorted(read_exr(full_path).items())
-                     if ".Combined." in k], axis=-1)  # A, B, G, R
+    full = np.stack(
+        [v for k, v in sorted(read_exr(full_path).items()) if ".Combined." in k], axis=-1
+    )  # A, B, G, R
     assert full.shape == (48, 64, 4)
     render = scene.render
     render.use_border = True
@@ -337,8 +347,9 @@ def test_engine_border_percentage_and_crop(addon, scene, helpers, tmp_path):
     render.use_crop_to_border = True
     crop_path = _engine_exr(scene, tmp_path, "crop")
     bpy.ops.render.render(write_still=True)
-    crop = np.stack([v for k, v in sorted(read_exr(crop_path).items())
-                     if ".Combined." in k], axis=-1)
+    crop = np.stack(
+        [v for k, v in sorted(read_exr(crop_path).items()) if ".Combined." in k], axis=-1
+    )
     assert crop.shape == (24, 32, 4)
     np.testing.assert_allclose(crop, full[0:24, 16:48], atol=1e-6)
     render.use_border = False
@@ -396,7 +407,8 @@ def test_render_task_cancel_keeps_previous_image(addon, scene, helpers):
     before = helpers.image_array(scene.symray.image_name).copy()
     operator = addon.module("symray_addon.operator")
     job = addon.module("symray_addon.render_job").prepare(
-        scene, bpy.context.evaluated_depsgraph_get())
+        scene, bpy.context.evaluated_depsgraph_get()
+    )
     task = operator.RenderTask(job)
     task.cancel()
     task.start()
@@ -480,16 +492,22 @@ def _drive_modal(addon, scene, cancel: bool):
 
     operator = addon.module("symray_addon.operator")
     job = addon.module("symray_addon.render_job").prepare(
-        scene, bpy.context.evaluated_depsgraph_get())
+        scene, bpy.context.evaluated_depsgraph_get()
+    )
     reports: list = []
     status: list = []
     wm = _FakeWM()
-    context = SimpleNamespace(window_manager=wm, scene=scene,
-                              workspace=SimpleNamespace(status_text_set=status.append))
+    context = SimpleNamespace(
+        window_manager=wm, scene=scene, workspace=SimpleNamespace(status_text_set=status.append)
+    )
     cls = operator.SYMRAY_OT_render
-    fake = SimpleNamespace(_task=operator.RenderTask(job), _timer=object(),
-                           _image_name=scene.symray.image_name, _exr_path="",
-                           report=lambda kind, text: reports.append((kind, text)))
+    fake = SimpleNamespace(
+        _task=operator.RenderTask(job),
+        _timer=object(),
+        _image_name=scene.symray.image_name,
+        _exr_path="",
+        report=lambda kind, text: reports.append((kind, text)),
+    )
     fake._status = lambda ctx, text: cls._status(ctx, text)
     fake._cleanup = lambda ctx: cls._cleanup(fake, ctx)
     if cancel:

@@ -15,13 +15,16 @@ def test_index_error_appears_and_clears(scene):
     assert s.refractive_index_error == ""
 
 
-@pytest.mark.parametrize("text, problem", [
-    ("__import__('os').system('true')", "not allowed"),
-    ("x.real", "attribute access"),
-    ("1 +* 2", "syntax error"),
-    ("open('f')", "unknown function"),
-    ("", "empty"),
-])
+@pytest.mark.parametrize(
+    "text, problem",
+    [
+        ("__import__('os').system('true')", "not allowed"),
+        ("x.real", "attribute access"),
+        ("1 +* 2", "syntax error"),
+        ("open('f')", "unknown function"),
+        ("", "empty"),
+    ],
+)
 def test_index_refuses_unsafe_or_broken_text(scene, text, problem):
     scene.symray.refractive_index = text
     assert problem in scene.symray.refractive_index_error
@@ -38,17 +41,22 @@ def test_hamiltonian_names(scene):
 def test_metric_valid_forms(scene):
     s = scene.symray
     assert s.metric_error == ""  # default: Minkowski
-    s.metric = ("r = sqrt(x**2 + y**2 + z**2); f = 1 - 1/r; "
-                "-1/f, 0, 0, 0; 0, f, 0, 0; 0, 0, 1, 0; 0, 0, 0, atan2(y, x)**0")
+    s.metric = (
+        "r = sqrt(x**2 + y**2 + z**2); f = 1 - 1/r; "
+        "-1/f, 0, 0, 0; 0, f, 0, 0; 0, 0, 1, 0; 0, 0, 0, atan2(y, x)**0"
+    )
     assert s.metric_error == ""
 
 
-@pytest.mark.parametrize("text, problem", [
-    ("-1, 0, 0, 0; 0, 1, 0, 0; 0, 0, 1, 0", "has 3 rows, needs 4"),
-    ("-1, 0, 0; 0, 1, 0, 0; 0, 0, 1, 0; 0, 0, 0, 1", "row 1 has 3 entries"),
-    ("-1, x, 0, 0; 0, 1, 0, 0; 0, 0, 1, 0; 0, 0, 0, 1", "symmetric"),
-    ("-1, 0, 0, 0; 0, 1, 0, 0; 0, 0, 1, 0; 0, 0, 0, q", "g^33: unknown name 'q'"),
-])
+@pytest.mark.parametrize(
+    "text, problem",
+    [
+        ("-1, 0, 0, 0; 0, 1, 0, 0; 0, 0, 1, 0", "has 3 rows, needs 4"),
+        ("-1, 0, 0; 0, 1, 0, 0; 0, 0, 1, 0; 0, 0, 0, 1", "row 1 has 3 entries"),
+        ("-1, x, 0, 0; 0, 1, 0, 0; 0, 0, 1, 0; 0, 0, 0, 1", "symmetric"),
+        ("-1, 0, 0, 0; 0, 1, 0, 0; 0, 0, 1, 0; 0, 0, 0, q", "g^33: unknown name 'q'"),
+    ],
+)
 def test_metric_errors(scene, text, problem):
     scene.symray.metric = text
     assert problem in scene.symray.metric_error
@@ -65,8 +73,9 @@ def test_metric_error_column_points_at_the_entry(addon):
 def test_metric_text_block(scene, helpers):
     s = scene.symray
     text = bpy.data.texts.new("metric")
-    text.write("# Minkowski with a helper\nc = 1\n-c, 0, 0, 0\n0, 1, 0, 0\n0, 0, 1, 0\n"
-               "0, 0, 0, oops\n")
+    text.write(
+        "# Minkowski with a helper\nc = 1\n-c, 0, 0, 0\n0, 1, 0, 0\n0, 0, 1, 0\n0, 0, 0, oops\n"
+    )
     s.metric_text = text
     assert "line 6" in s.metric_error and "oops" in s.metric_error
     props = addon_props()

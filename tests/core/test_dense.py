@@ -19,10 +19,14 @@ def test_hermite_follows_a_circle_to_fourth_order():
     hs = np.array([0.4, 0.2, 0.1, 0.05])
     for h in hs:
         s0, s1 = 0.3, 0.3 + h
-        X0, X1 = np.array([[math.cos(s0)], [math.sin(s0)], [0.0]]), \
-            np.array([[math.cos(s1)], [math.sin(s1)], [0.0]])
-        V0, V1 = np.array([[-math.sin(s0)], [math.cos(s0)], [0.0]]), \
-            np.array([[-math.sin(s1)], [math.cos(s1)], [0.0]])
+        X0, X1 = (
+            np.array([[math.cos(s0)], [math.sin(s0)], [0.0]]),
+            np.array([[math.cos(s1)], [math.sin(s1)], [0.0]]),
+        )
+        V0, V1 = (
+            np.array([[-math.sin(s0)], [math.cos(s0)], [0.0]]),
+            np.array([[-math.sin(s1)], [math.cos(s1)], [0.0]]),
+        )
         mid = np.array([math.cos(s0 + h / 2), math.sin(s0 + h / 2), 0.0])
         errs.append(np.linalg.norm(dense.hermite(X0, V0, X1, V1, h, 0.5)[:, 0] - mid))
         chord_errs.append(np.linalg.norm(0.5 * (X0 + X1)[:, 0] - mid))

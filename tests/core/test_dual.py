@@ -17,8 +17,9 @@ def numeric_derivative(f, x, h=1e-6):
     return (4 * d1 - d2) / 3
 
 
-@pytest.mark.parametrize("name", ["sqrt", "exp", "log", "sin", "cos", "tan", "arctan",
-                                  "sinh", "cosh", "tanh", "abs"])
+@pytest.mark.parametrize(
+    "name", ["sqrt", "exp", "log", "sin", "cos", "tan", "arctan", "sinh", "cosh", "tanh", "abs"]
+)
 def test_unary_derivatives_match_finite_differences(name):
     f = dual.FUNCTIONS[name]
     x = X if name != "abs" else UNIT
@@ -36,8 +37,9 @@ def test_inverse_trig_derivatives(name):
 
 def test_arithmetic_and_powers():
     """+ - * / and ** with integer, real and dual exponents, on two variables."""
+
     def f(x, y):
-        return (x * y - y / x + 3.0) ** 3 / (2.0 - y) + x ** 0.5 * y ** -2 + x ** y - 2.0 ** y
+        return (x * y - y / x + 3.0) ** 3 / (2.0 - y) + x**0.5 * y**-2 + x**y - 2.0**y
 
     x0, y0 = np.array([0.5, 1.3]), np.array([0.2, 0.9])
     got = f(Dual.variable(x0, 0), Dual.variable(y0, 1))

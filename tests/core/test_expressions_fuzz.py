@@ -22,15 +22,33 @@ from hypothesis import strategies as st
 
 from core import expressions as ex
 
-SETTINGS = settings(max_examples=400, derandomize=True, deadline=None, database=None,
-                    suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = settings(
+    max_examples=400,
+    derandomize=True,
+    deadline=None,
+    database=None,
+    suppress_health_check=[HealthCheck.too_slow],
+)
 NAMES = ("x", "y")
 ENV = {"x": np.array([-2.5, 0.3, 1.7, 0.0]), "y": np.array([0.5, -1.2, 3.0, 1e-3])}
-UNARY_FUNCTIONS = {"sqrt": np.sqrt, "exp": np.exp, "log": np.log, "sin": np.sin,
-                   "cos": np.cos, "tan": np.tan, "arcsin": np.arcsin, "asin": np.arcsin,
-                   "arccos": np.arccos, "acos": np.arccos, "arctan": np.arctan,
-                   "atan": np.arctan, "sinh": np.sinh, "cosh": np.cosh, "tanh": np.tanh,
-                   "abs": np.abs}
+UNARY_FUNCTIONS = {
+    "sqrt": np.sqrt,
+    "exp": np.exp,
+    "log": np.log,
+    "sin": np.sin,
+    "cos": np.cos,
+    "tan": np.tan,
+    "arcsin": np.arcsin,
+    "asin": np.arcsin,
+    "arccos": np.arccos,
+    "acos": np.arccos,
+    "arctan": np.arctan,
+    "atan": np.arctan,
+    "sinh": np.sinh,
+    "cosh": np.cosh,
+    "tanh": np.tanh,
+    "abs": np.abs,
+}
 BINARY_FUNCTIONS = {"arctan2": np.arctan2, "atan2": np.arctan2}
 OPERATORS = {"+": ast.Add, "-": ast.Sub, "*": ast.Mult, "/": ast.Div, "**": ast.Pow}
 
@@ -49,8 +67,7 @@ def _extend(children):
         st.tuples(st.sampled_from(["neg", "pos"]), children),
         st.tuples(st.sampled_from(list(OPERATORS)), children, children),
         st.tuples(st.just("call"), st.sampled_from(list(UNARY_FUNCTIONS)), children),
-        st.tuples(st.just("call"), st.sampled_from(list(BINARY_FUNCTIONS)), children,
-                  children),
+        st.tuples(st.just("call"), st.sampled_from(list(BINARY_FUNCTIONS)), children, children),
     )
 
 
@@ -63,8 +80,11 @@ def to_ast(tree) -> ast.expr:
     if kind == "name":
         return ast.Name(tree[1], ast.Load())
     if kind == "num":
-        return ast.UnaryOp(ast.USub(), ast.Constant(-tree[1])) if tree[1] < 0 else \
-            ast.Constant(tree[1])
+        return (
+            ast.UnaryOp(ast.USub(), ast.Constant(-tree[1]))
+            if tree[1] < 0
+            else ast.Constant(tree[1])
+        )
     if kind in ("neg", "pos"):
         return ast.UnaryOp(ast.USub() if kind == "neg" else ast.UAdd(), to_ast(tree[1]))
     if kind == "call":
@@ -94,8 +114,13 @@ def _power(base, exponent, constant_exponent: bool):
     """The language's **: a constant exponent 2, 3, 1, -1, 0.5 means products, 1/x, sqrt."""
     if not constant_exponent:
         return np.power(base, exponent)
-    special = {2.0: lambda b: b * b, 3.0: lambda b: b * b * b, 1.0: lambda b: b,
-               -1.0: lambda b: 1.0 / b, 0.5: np.sqrt}
+    special = {
+        2.0: lambda b: b * b,
+        3.0: lambda b: b * b * b,
+        1.0: lambda b: b,
+        -1.0: lambda b: 1.0 / b,
+        0.5: np.sqrt,
+    }
     rule = special.get(float(exponent))
     return rule(base) if rule is not None else np.power(base, exponent)
 
@@ -116,8 +141,10 @@ def reference(tree, env) -> tuple[object, bool]:
     if kind in ("neg", "pos"):
         value, constant = reference(tree[1], env)
         return (-value if kind == "neg" else value), constant
-    args = [reference(a, env) for a in tree[2:] if kind == "call"] or \
-        [reference(tree[1], env), reference(tree[2], env)]
+    args = [reference(a, env) for a in tree[2:] if kind == "call"] or [
+        reference(tree[1], env),
+        reference(tree[2], env),
+    ]
     constant = all(c for _, c in args)
     values = [v for v, _ in args]
     if kind == "call":
@@ -147,9 +174,11 @@ def nothing_executes():
     def refuse(*_args, **_kwargs):
         raise AssertionError("eval/exec called")
 
-    with mock.patch.object(builtins, "eval", refuse), \
-            mock.patch.object(builtins, "exec", refuse), \
-            mock.patch.object(builtins, "compile", only_ast):
+    with (
+        mock.patch.object(builtins, "eval", refuse),
+        mock.patch.object(builtins, "exec", refuse),
+        mock.patch.object(builtins, "compile", only_ast),
+    ):
         yield
 
 
@@ -167,13 +196,27 @@ def _compile_or_refuse(text: str):
 
 EXPRESSION_ALPHABET = st.sampled_from(
     list("xy0123456789.+-*/() ,e_ijpsqrtnaolcb'\"[]:=<>!&|^%@~#\\\n\t;{}`$?")
-    + ["**", "sin(", "sqrt(", "__import__", "lambda", "pi", "1e308", "ｘ", "−", "\u00a0",
-       "\u0301", "ﬁ", "\U0001d465", "\x00"])
+    + [
+        "**",
+        "sin(",
+        "sqrt(",
+        "__import__",
+        "lambda",
+        "pi",
+        "1e308",
+        "ｘ",
+        "−",
+        "\u00a0",
+        "\u0301",
+        "ﬁ",
+        "\U0001d465",
+        "\x00",
+    ]
+)
 
 
 @SETTINGS
-@given(st.one_of(st.lists(EXPRESSION_ALPHABET, max_size=30).map("".join),
-                 st.text(max_size=30)))
+@given(st.one_of(st.lists(EXPRESSION_ALPHABET, max_size=30).map("".join), st.text(max_size=30)))
 def test_random_text_is_compiled_or_refused_with_an_expression_error(text):
     compiled = _compile_or_refuse(text)
     if compiled is not None:
@@ -198,5 +241,6 @@ def test_random_trees_evaluate_as_the_reference_says(tree, minimal_brackets):
     if compiled is not None:
         with np.errstate(all="ignore"):
             got = compiled(ENV)
-        np.testing.assert_array_equal(np.broadcast_to(got, (4,)),
-                                      np.broadcast_to(expected, (4,)), err_msg=text)
+        np.testing.assert_array_equal(
+            np.broadcast_to(got, (4,)), np.broadcast_to(expected, (4,)), err_msg=text
+        )

@@ -43,14 +43,14 @@ def test_volterra_symplectic_orbits_close_and_h_stays_bounded():
     |H - H0| does not grow; rk4 at the same step drifts (its orbits spiral)."""
     s, q, p, dH, _ = figures.volterra_run("gauss4", 0.5, 600, record_every=1)
     spread, count = section_spread(s, q, p)
-    assert (count >= 20).all()                 # ~26 periods of ~11.4
-    assert spread.max() < 1e-5, spread     # measured ~1e-6 (spline interpolation)
+    assert (count >= 20).all()  # ~26 periods of ~11.4
+    assert spread.max() < 1e-5, spread  # measured ~1e-6 (spline interpolation)
     third = len(s) // 3
     first, last = np.abs(dH[:third]).max(0), np.abs(dH[-third:]).max(0)
     assert (last < 1.5 * first).all() and first.max() < 1e-5
     s, q, p, dH, _ = figures.volterra_run("rk4", 0.5, 4500, record_every=1)
     grow = np.abs(dH[-1]) / np.abs(dH[len(s) // 10]).clip(1e-300)
-    assert (grow > 5).all(), grow              # linear drift: ~10x over the run
+    assert (grow > 5).all(), grow  # linear drift: ~10x over the run
     rk_spread, _ = section_spread(s, q, p)
     assert (rk_spread > 100 * spread).all()  # measured ~1.5e-3
 
@@ -69,11 +69,16 @@ def test_flat_space_in_spherical_coordinates_equals_straight_rays():
     """Fig. 6: Eq. 14 (spherical coordinates, integrated) gives the straight-ray image."""
     cam = figures.camera((0, -20, 2), (0, 0, 0), 45, 20, 15)
     objs = [figures.checker_board(10.0, 16.0), *figures.textured_spheres()]
-    straight = core.render(figures.lens_scene(core.hamiltonians.minkowski("cartesian"), objs),
-                           cam, passes=("ending",))
-    curved = core.render(figures.lens_scene(core.hamiltonians.minkowski("spherical"), objs,
-                                            region_radius=8.0), cam, method="gauss4",
-                         tolerance=1e-4, passes=("ending",))
+    straight = core.render(
+        figures.lens_scene(core.hamiltonians.minkowski("cartesian"), objs), cam, passes=("ending",)
+    )
+    curved = core.render(
+        figures.lens_scene(core.hamiltonians.minkowski("spherical"), objs, region_radius=8.0),
+        cam,
+        method="gauss4",
+        tolerance=1e-4,
+        passes=("ending",),
+    )
     assert curved.summary["steps"] > 0
     np.testing.assert_array_equal(curved.passes["ending"], straight.passes["ending"])
     assert np.abs(curved.rgba - straight.rgba).max() < 1e-3
@@ -99,7 +104,7 @@ def test_fig11_vince_ghost_above_the_board():
     seen = column("fig11")
     assert seen.endswith("RGW_"), seen
     ghost = seen.rfind("WGR")
-    assert 0 <= ghost < len(seen) - 4, seen   # the ghost is above the upright board
+    assert 0 <= ghost < len(seen) - 4, seen  # the ghost is above the upright board
 
 
 @pytest.mark.parametrize("a", [0.0, 0.499])
@@ -108,8 +113,9 @@ def test_kerr_shadow_edges_match_bardeen(a):
     a/M = 0 symmetric about the centre, a/M = 0.998 flattened on the left (prograde side,
     x = -1.0 rg) and reaching x = +3.5 rg on the right: its centre shifts by +1.2 rg."""
     w, h = 48, 24
-    out, pix = figures.kerr_shadow(a, w, h, distance=1000.0, fov_deg=0.6, method="gauss4",
-                                   tolerance=1e-5)
+    out, pix = figures.kerr_shadow(
+        a, w, h, distance=1000.0, fov_deg=0.6, method="gauss4", tolerance=1e-5
+    )
     left, right = figures.shadow_edges(out.passes["ending"], pix, 1000.0)
     x, _ = figures.bardeen_shadow(a)
     px = pix * 1000.0

@@ -25,13 +25,22 @@ def schwarzschild_rays():
 
 CASES = {
     "medium_gauss4": (MEDIUM, medium_rays(3), dict(step=0.05, steps=20, method="gauss4")),
-    "medium_yoshida4_adaptive": (MEDIUM, medium_rays(3),
-                                 dict(step=0.05, steps=20, method="yoshida4", adaptive=True)),
+    "medium_yoshida4_adaptive": (
+        MEDIUM,
+        medium_rays(3),
+        dict(step=0.05, steps=20, method="yoshida4", adaptive=True),
+    ),
     "medium_dopri5": (MEDIUM, medium_rays(3), dict(step=0.05, steps=20, method="dopri5")),
-    "schwarzschild_adaptive": (hm.schwarzschild(), schwarzschild_rays(),
-                               dict(step=0.02, steps=30, method="gauss4", adaptive=True)),
-    "schwarzschild_rk4": (hm.schwarzschild(), schwarzschild_rays(),
-                          dict(step=0.1, steps=30, method="rk4")),
+    "schwarzschild_adaptive": (
+        hm.schwarzschild(),
+        schwarzschild_rays(),
+        dict(step=0.02, steps=30, method="gauss4", adaptive=True),
+    ),
+    "schwarzschild_rk4": (
+        hm.schwarzschild(),
+        schwarzschild_rays(),
+        dict(step=0.1, steps=30, method="rk4"),
+    ),
 }
 
 
@@ -47,7 +56,7 @@ def test_batch_shapes(case):
     assert res.failed.dtype == bool and not res.failed.any()
     assert np.all(np.isfinite(res.energy_error)) and np.all(res.energy_error >= 0)
     assert np.all(res.s > 0)
-    np.testing.assert_array_equal(q0, q_in)        # inputs are not modified
+    np.testing.assert_array_equal(q0, q_in)  # inputs are not modified
     np.testing.assert_array_equal(p0, p_in)
     captured = getattr(res, "captured", None)
     if captured is not None:
@@ -77,15 +86,16 @@ def test_batch_of_one_keeps_its_batch_shape():
 
 
 def test_array_likes_and_integers_accepted():
-    res = core.integrate(hm.minkowski(), [[0, 0, 0, 0]], [[-1, 1, 0, 0]], step=0.5, steps=4,
-                         method="stormer_verlet")
+    res = core.integrate(
+        hm.minkowski(), [[0, 0, 0, 0]], [[-1, 1, 0, 0]], step=0.5, steps=4, method="stormer_verlet"
+    )
     assert res.q.dtype == np.float64
-    np.testing.assert_allclose(res.q, [[2.0, 2.0, 0.0, 0.0]], atol=1e-14)   # straight line
+    np.testing.assert_allclose(res.q, [[2.0, 2.0, 0.0, 0.0]], atol=1e-14)  # straight line
 
 
 def test_failed_rays_are_flagged_and_do_not_disturb_the_others():
     """A ray walking into n <= 0 (H becomes NaN) is failed; its neighbours are unchanged."""
-    H = hm.medium("z")                                 # n = z: n <= 0 below z = 0
+    H = hm.medium("z")  # n = z: n <= 0 below z = 0
     q0 = np.array([[0.0, 0.0, 1.0], [0.0, 0.0, 0.3], [0.0, 0.0, 2.0]])
     p0 = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -0.3], [0.0, 2.0, 0.0]]) * q0[:, 2:3]
     kw = dict(step=0.1, steps=200, method="gauss4")
@@ -97,12 +107,15 @@ def test_failed_rays_are_flagged_and_do_not_disturb_the_others():
         np.testing.assert_allclose(res.q[i], one.q, rtol=1e-12, atol=1e-14)
 
 
-@pytest.mark.parametrize("q0, p0", [
-    (np.zeros((2, 3)), np.zeros((3, 3))),               # batch sizes differ
-    (np.zeros((2, 4)), np.zeros((2, 4))),               # wrong dimension for the medium
-    (np.zeros(3), np.zeros((1, 3))),                    # (n,) with (1, n)
-    (np.zeros((2, 2, 3)), np.zeros((2, 2, 3))),         # too many axes
-])
+@pytest.mark.parametrize(
+    "q0, p0",
+    [
+        (np.zeros((2, 3)), np.zeros((3, 3))),  # batch sizes differ
+        (np.zeros((2, 4)), np.zeros((2, 4))),  # wrong dimension for the medium
+        (np.zeros(3), np.zeros((1, 3))),  # (n,) with (1, n)
+        (np.zeros((2, 2, 3)), np.zeros((2, 2, 3))),  # too many axes
+    ],
+)
 def test_bad_shapes_rejected(q0, p0):
     with pytest.raises(ValueError):
         core.integrate(MEDIUM, q0, p0, step=0.1, steps=1)

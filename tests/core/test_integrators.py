@@ -125,8 +125,9 @@ class Poisoned(Harmonic):
 
     def gradient_soa(self, Q, P, wrt="qp"):
         bad = Q[0] > 0.5
-        return tuple(None if g is None else np.where(bad, np.nan, g)
-                     for g in super().gradient_soa(Q, P, wrt))
+        return tuple(
+            None if g is None else np.where(bad, np.nan, g) for g in super().gradient_soa(Q, P, wrt)
+        )
 
 
 class Coupled(_Ham):
@@ -159,9 +160,14 @@ def reference(H, q0, p0, s, rtol=1e-13):
         return np.concatenate((dp[:, 0], -dq[:, 0]))
 
     s = np.broadcast_to(s, (q0.shape[0],))
-    return np.array([solve_ivp(f, (0.0, si), np.concatenate((q, p)), method="DOP853",
-                               rtol=rtol, atol=1e-15).y[:, -1]
-                     for q, p, si in zip(q0, p0, s, strict=True)])
+    return np.array(
+        [
+            solve_ivp(
+                f, (0.0, si), np.concatenate((q, p)), method="DOP853", rtol=rtol, atol=1e-15
+            ).y[:, -1]
+            for q, p, si in zip(q0, p0, s, strict=True)
+        ]
+    )
 
 
 def slope(hs, errs):
@@ -179,21 +185,38 @@ def test_coefficients_match_design():
     assert yoshida_weights(YOSHIDA8_W)[7] == pytest.approx(1.7084530707869978, abs=1e-13)
     assert suzuki_weights(4)[0] == pytest.approx(0.41449077179437573714, abs=1e-15)
     # each level uses its own p_k: p_3 = 1/(4 - 4^(1/5)) scales p_2 in suzuki6
-    p3 = 1.0 / (4.0 - 4.0 ** 0.2)
+    p3 = 1.0 / (4.0 - 4.0**0.2)
     assert suzuki_weights(6)[0] == pytest.approx(p3 * 0.41449077179437573714, rel=1e-14)
     for name in ("yoshida4", "yoshida6", "yoshida8", "suzuki4", "suzuki6", "tao4"):
         w = np.array(METHODS[name].weights)
         assert w.sum() == pytest.approx(1.0, abs=1e-13), name
         assert np.array_equal(w, w[::-1]), name
-    sizes = {name: len(METHODS[name].weights) for name in ("yoshida4", "yoshida6", "yoshida8",
-                                                           "suzuki4", "suzuki6")}
+    sizes = {
+        name: len(METHODS[name].weights)
+        for name in ("yoshida4", "yoshida6", "yoshida8", "suzuki4", "suzuki6")
+    }
     assert sizes == {"yoshida4": 3, "yoshida6": 7, "yoshida8": 15, "suzuki4": 5, "suzuki6": 25}
 
 
 def test_registry_and_options():
-    assert set(METHODS) == {"symplectic_euler", "stormer_verlet", "implicit_midpoint", "gauss4",
-                            "yoshida4", "yoshida6", "yoshida8", "suzuki4", "suzuki6", "tao2",
-                            "tao4", "rk4", "dopri5", "leapfrog", "blanes_moan4", "blanes_moan6"}
+    assert set(METHODS) == {
+        "symplectic_euler",
+        "stormer_verlet",
+        "implicit_midpoint",
+        "gauss4",
+        "yoshida4",
+        "yoshida6",
+        "yoshida8",
+        "suzuki4",
+        "suzuki6",
+        "tao2",
+        "tao4",
+        "rk4",
+        "dopri5",
+        "leapfrog",
+        "blanes_moan4",
+        "blanes_moan6",
+    }
     for name, m in METHODS.items():
         assert m.name == name
         assert m.symplectic == (name not in ("rk4", "dopri5"))
@@ -258,32 +281,40 @@ def test_observed_order_non_separable(name, pq_reference):
     order, steps = ORDER_CASES[name]
     method = METHODS[name]
     assert method.order == order
-    errs = [np.abs(fixed_steps(method, PQ(), PQ_Q0, PQ_P0, 4.0, n) - pq_reference).max()
-            for n in steps]
+    errs = [
+        np.abs(fixed_steps(method, PQ(), PQ_Q0, PQ_P0, 4.0, n) - pq_reference).max() for n in steps
+    ]
     assert slope(4.0 / np.array(steps), errs) == pytest.approx(order, abs=0.3), errs
 
 
-@pytest.mark.parametrize("name, base, steps", [
-    ("yoshida4", "implicit_midpoint", [8, 16, 32, 64]),
-    ("yoshida6", "implicit_midpoint", [8, 12, 16, 24]),
-    ("suzuki4", "tao2", [20, 40, 80, 160]),
-])
+@pytest.mark.parametrize(
+    "name, base, steps",
+    [
+        ("yoshida4", "implicit_midpoint", [8, 16, 32, 64]),
+        ("yoshida6", "implicit_midpoint", [8, 12, 16, 24]),
+        ("suzuki4", "tao2", [20, 40, 80, 160]),
+    ],
+)
 def test_observed_order_other_bases(name, base, steps, pq_reference):
     method = get_method(name, base=base)
-    errs = [np.abs(fixed_steps(method, PQ(), PQ_Q0, PQ_P0, 4.0, n) - pq_reference).max()
-            for n in steps]
+    errs = [
+        np.abs(fixed_steps(method, PQ(), PQ_Q0, PQ_P0, 4.0, n) - pq_reference).max() for n in steps
+    ]
     assert slope(4.0 / np.array(steps), errs) == pytest.approx(method.order, abs=0.3), errs
 
 
-@pytest.mark.parametrize("name, steps", [
-    ("symplectic_euler", [40, 80, 160, 320]),
-    ("stormer_verlet", [20, 40, 80, 160]),
-    ("yoshida4", [8, 16, 32, 64]),
-    ("yoshida6", [6, 8, 12, 16]),
-    ("yoshida8", [12, 16, 24, 32]),
-    ("suzuki4", [4, 8, 16, 32]),
-    ("suzuki6", [4, 6, 8, 12]),
-])
+@pytest.mark.parametrize(
+    "name, steps",
+    [
+        ("symplectic_euler", [40, 80, 160, 320]),
+        ("stormer_verlet", [20, 40, 80, 160]),
+        ("yoshida4", [8, 16, 32, 64]),
+        ("yoshida6", [6, 8, 12, 16]),
+        ("yoshida8", [12, 16, 24, 32]),
+        ("suzuki4", [4, 8, 16, 32]),
+        ("suzuki6", [4, 6, 8, 12]),
+    ],
+)
 def test_observed_order_separable_explicit(name, steps):
     """The merged kick/drift path for separable H (nonlinear pendulum) keeps every order."""
     H = Pendulum()
@@ -302,8 +333,9 @@ def test_verlet_separable_is_explicit_and_exact_to_second_order():
     errs = []
     for steps in (100, 200, 400):
         H.calls.clear()
-        res = integrate(H, q0, p0, step=3.0 / steps, steps=steps, method="stormer_verlet",
-                        energy_every=0)
+        res = integrate(
+            H, q0, p0, step=3.0 / steps, steps=steps, method="stormer_verlet", energy_every=0
+        )
         # kick, drift, kick per step: only the half of the gradient needed, never both
         assert H.calls.count("q") == 2 * steps and H.calls.count("p") == steps
         assert "qp" not in H.calls
@@ -342,15 +374,16 @@ def test_fig45_rk4_drifts_symplectic_bounded(name, options):
     q0, p0 = np.array([0.2]), np.array([0.3])
     E0 = H.value_soa(q0[:, None], p0[:, None])[0]
     n = 100_000
-    res = integrate(H, q0, p0, step=0.2, steps=n, method=name, energy_every=0,
-                    record_every=1, **options)
+    res = integrate(
+        H, q0, p0, step=0.2, steps=n, method=name, energy_every=0, record_every=1, **options
+    )
     assert not res.failed
     e = energy_along(res, H, E0)
     if name == "rk4":
-        assert e.max() > 8 * e[:n // 10].max()                     # 10x from 1e4 to 1e5
-        assert np.all(np.diff(np.maximum.accumulate(e)[::n // 10]) > 0)  # grows every 1e4
+        assert e.max() > 8 * e[: n // 10].max()  # 10x from 1e4 to 1e5
+        assert np.all(np.diff(np.maximum.accumulate(e)[:: n // 10]) > 0)  # grows every 1e4
     else:
-        assert e.max() < 1.05 * e[:n // 100].max()                  # no growth after 1e3
+        assert e.max() < 1.05 * e[: n // 100].max()  # no growth after 1e3
 
 
 def test_default_yoshida4_energy_bounded():
@@ -360,12 +393,12 @@ def test_default_yoshida4_energy_bounded():
     H = PQ()
     q0, p0 = np.array([0.2]), np.array([0.3])
     E0 = H.value_soa(q0[:, None], p0[:, None])[0]
-    res = integrate(H, q0, p0, step=0.2, steps=5000, method="yoshida4", energy_every=0,
-                    record_every=1)
+    res = integrate(
+        H, q0, p0, step=0.2, steps=5000, method="yoshida4", energy_every=0, record_every=1
+    )
     e = energy_along(res, H, E0)
     assert e.max() < 1.1 * e[:1000].max() and e.max() < 1e-5
-    rk = integrate(H, q0, p0, step=0.2, steps=5000, method="rk4", energy_every=0,
-                   record_every=1)
+    rk = integrate(H, q0, p0, step=0.2, steps=5000, method="rk4", energy_every=0, record_every=1)
     erk = energy_along(rk, H, E0)
     assert erk.max() > 4 * erk[:1000].max()
 
@@ -388,7 +421,7 @@ def test_implicit_non_convergence_is_flagged(name):
     res = integrate(H, Q.T, P.T, step=np.array([0.2, 10.0, 0.2]), steps=2, method=name)
     assert res.failed.tolist() == [False, True, False]
     assert np.isfinite(res.q).all() and np.isfinite(res.p).all()
-    assert res.q[1, 0] == 1.0 and res.p[1, 0] == -1.0          # frozen at its last good state
+    assert res.q[1, 0] == 1.0 and res.p[1, 0] == -1.0  # frozen at its last good state
     assert res.steps.tolist() == [2, 0, 2] and res.s[1] == 0.0
 
 
@@ -495,8 +528,7 @@ def test_dopri5_adaptive_per_ray():
     back = integrate(H, res.q, res.p, step=-0.1, steps=40, method="dopri5", tol=1e-10)
     assert np.array_equal(back.s, [-4.0, -4.0])
     assert np.abs(np.hstack((back.q - PQ_Q0, back.p - PQ_P0))).max() < 1e-8
-    few = integrate(H, PQ_Q0, PQ_P0, step=0.1, steps=40, method="dopri5", tol=1e-12,
-                    max_steps=5)
+    few = integrate(H, PQ_Q0, PQ_P0, step=0.1, steps=40, method="dopri5", tol=1e-12, max_steps=5)
     assert few.failed.all() and np.all(few.s < 4.0)
 
 
@@ -510,26 +542,32 @@ def _fd_check(K, Q, P):
     for i in range(Q.shape[0]):
         E = np.zeros_like(Q)
         E[i] = eps
-        assert np.allclose((K.value_soa(Q + E, P) - K.value_soa(Q - E, P)) / (2 * eps), dq[i],
-                           rtol=1e-6, atol=1e-8)
-        assert np.allclose((K.value_soa(Q, P + E) - K.value_soa(Q, P - E)) / (2 * eps), dp[i],
-                           rtol=1e-6, atol=1e-8)
+        assert np.allclose(
+            (K.value_soa(Q + E, P) - K.value_soa(Q - E, P)) / (2 * eps), dq[i], rtol=1e-6, atol=1e-8
+        )
+        assert np.allclose(
+            (K.value_soa(Q, P + E) - K.value_soa(Q, P - E)) / (2 * eps), dp[i], rtol=1e-6, atol=1e-8
+        )
     assert np.allclose(K.gradient_soa(Q, P, wrt="p")[1], dp)
     assert np.allclose(K.gradient_soa(Q, P, wrt="q")[0], dq)
 
 
 def test_poincare_gradients():
     H = Kepler()
-    Q, P = np.array([[1.0, 0.3, -0.5], [0.2, 0.8, 0.4]]), np.array([[0.1, -0.9, 0.3],
-                                                                   [1.0, 0.2, -0.7]])
+    Q, P = (
+        np.array([[1.0, 0.3, -0.5], [0.2, 0.8, 0.4]]),
+        np.array([[0.1, -0.9, 0.3], [1.0, 0.2, -0.7]]),
+    )
     K = PoincareTransformed(H, np.array([-0.5, -0.4, -0.3]))
     _fd_check(K, Q, P)
-    _fd_check(PoincareTransformed(Clocked(H)), np.vstack((Q, [0.0, 1.0, 2.0])),
-              np.vstack((P, [0.5, 0.4, 0.3])))
+    _fd_check(
+        PoincareTransformed(Clocked(H)),
+        np.vstack((Q, [0.0, 1.0, 2.0])),
+        np.vstack((P, [0.5, 0.4, 0.3])),
+    )
     sub = K.subset(np.array([2, 0]))
     assert np.array_equal(sub.H0, [-0.3, -0.5])
-    assert np.allclose(sub.value_soa(Q[:, [2, 0]], P[:, [2, 0]]),
-                       K.value_soa(Q, P)[[2, 0]])
+    assert np.allclose(sub.value_soa(Q[:, [2, 0]], P[:, [2, 0]]), K.value_soa(Q, P)[[2, 0]])
 
 
 def kepler_orbit(e):
@@ -549,7 +587,7 @@ def test_poincare_same_rays_at_equal_s():
     q0 = np.array([s[0] for s in starts])
     p0 = np.array([s[1] for s in starts])
     res = integrate(H, q0, p0, step=0.05, steps=60, method="gauss4", adaptive=True)
-    assert not res.failed.any() and np.all(res.s > 1.0)   # past the pericentre
+    assert not res.failed.any() and np.all(res.s > 1.0)  # past the pericentre
     ref = reference(H, q0, p0, res.s, rtol=1e-12)
     err = np.abs(np.hstack((res.q, res.p)) - ref).max(axis=1)
     assert err.max() < 2e-6 and res.energy_error.max() < 1e-6
@@ -559,9 +597,9 @@ def test_poincare_same_rays_at_equal_s():
     # the tracer's way: the transformed H with per-ray H0 (no clock), driven in tau
     K = PoincareTransformed(H, H.value_soa(q0.T, p0.T))
     Kres = integrate(K, q0, p0, step=0.05, steps=60, method="gauss4")
-    assert Kres.energy_error.max() < 1e-6                  # K = 0 is conserved
+    assert Kres.energy_error.max() < 1e-6  # K = 0 is conserved
     assert np.allclose(Kres.q, res.q, rtol=0, atol=1e-12)  # the clock changes nothing
-    assert np.allclose(Kres.s, 3.0)                        # its s is tau
+    assert np.allclose(Kres.s, 3.0)  # its s is tau
 
 
 def test_poincare_subsets_per_ray_h0():
@@ -573,7 +611,7 @@ def test_poincare_subsets_per_ray_h0():
     K = PoincareTransformed(H, H.value_soa(q0.T, p0.T))
     batch = integrate(K, q0, p0, step=0.1, steps=20, method="implicit_midpoint")
     for i in range(4):
-        Ki = PoincareTransformed(H, H.value_soa(q0[i:i + 1].T, p0[i:i + 1].T))
+        Ki = PoincareTransformed(H, H.value_soa(q0[i : i + 1].T, p0[i : i + 1].T))
         one = integrate(Ki, q0[i], p0[i], step=0.1, steps=20, method="implicit_midpoint")
         assert np.allclose(batch.q[i], one.q, rtol=1e-12, atol=1e-13)
 

@@ -24,8 +24,7 @@ def test_every_method_states_its_properties(name):
 
 def test_explicit_methods():
     explicit = {n for n, m in METHODS.items() if m.explicit}
-    assert explicit == {"rk4", "dopri5", "tao2", "tao4", "leapfrog", "blanes_moan4",
-                        "blanes_moan6"}
+    assert explicit == {"rk4", "dopri5", "tao2", "tao4", "leapfrog", "blanes_moan4", "blanes_moan6"}
     assert core.get_method("yoshida4", base="tao2").explicit
 
 
@@ -35,9 +34,15 @@ def test_error_constants_are_read_only():
 
 
 def test_models_are_systems_with_the_tracer_interface():
-    models = [hm.schwarzschild(), hm.kerr(1.0, 0.4), hm.kerr(1.0, 0.4, chart="kerr_schild"),
-              hm.minkowski(), hm.minkowski("spherical"), hm.medium("1 + 0.1*x"),
-              hm.from_expression("0.5*p**2 + q**2", q=["q"], p=["p"])]
+    models = [
+        hm.schwarzschild(),
+        hm.kerr(1.0, 0.4),
+        hm.kerr(1.0, 0.4, chart="kerr_schild"),
+        hm.minkowski(),
+        hm.minkowski("spherical"),
+        hm.medium("1 + 0.1*x"),
+        hm.from_expression("0.5*p**2 + q**2", q=["q"], p=["p"]),
+    ]
     for m in models:
         assert isinstance(m, hm.Hamiltonian) and isinstance(m, System)
         # a split where the model offers one (media), None elsewhere

@@ -21,15 +21,23 @@ def cartesian(n):
 
 
 def spherical(n):
-    q = np.vstack([RNG.uniform(-5, 5, n), RNG.uniform(2.5, 12, n),
-                   RNG.uniform(0.2, np.pi - 0.2, n), RNG.uniform(-3, 3, n)])
+    q = np.vstack(
+        [
+            RNG.uniform(-5, 5, n),
+            RNG.uniform(2.5, 12, n),
+            RNG.uniform(0.2, np.pi - 0.2, n),
+            RNG.uniform(-3, 3, n),
+        ]
+    )
     return q, RNG.normal(size=(4, n))
 
 
 MODELS = {
     "kerr_schild": (hm.kerr(1.0, 0.45, chart="kerr_schild"), cartesian),
-    "kerr_schild_outgoing": (hm.kerr(1.0, 0.45, chart="kerr_schild").for_backward_tracing(),
-                             cartesian),
+    "kerr_schild_outgoing": (
+        hm.kerr(1.0, 0.45, chart="kerr_schild").for_backward_tracing(),
+        cartesian,
+    ),
     "kerr_bl": (hm.kerr(1.0, 0.45), spherical),
     "schwarzschild": (hm.schwarzschild(1.0), spherical),
 }
@@ -84,8 +92,11 @@ def test_frozen_q_gradient_and_subset(name, scaled):
         np.testing.assert_allclose(frozen.grad_q(P_try), expected, rtol=1e-12, atol=1e-12)
     idx = np.array([3, 1, 1, 17, 29])
     sub = frozen.subset(idx)
-    expected, _ = model.gradient_soa(Q[:, idx], P[:, idx], wrt="q") if not scaled else \
-        PoincareTransformed(H, H0[idx]).gradient_soa(Q[:, idx], P[:, idx], wrt="q")
+    expected, _ = (
+        model.gradient_soa(Q[:, idx], P[:, idx], wrt="q")
+        if not scaled
+        else PoincareTransformed(H, H0[idx]).gradient_soa(Q[:, idx], P[:, idx], wrt="q")
+    )
     np.testing.assert_allclose(sub.grad_q(P[:, idx]), expected, rtol=1e-12, atol=1e-12)
 
 
@@ -96,15 +107,26 @@ def test_blocked_evaluation_equals_whole_batch(name, monkeypatch):
     H, points = MODELS[name]
     Q, P = points(23)
     H0 = RNG.normal(size=23)
-    whole = (H.value_soa(Q, P), H.value_gradient_soa(Q, P), H.gradient_soa(Q, P, wrt="p"),
-             H.poincare_soa(Q, P, H0), H.poincare_soa(Q, P, H0, wrt="p"))
+    whole = (
+        H.value_soa(Q, P),
+        H.value_gradient_soa(Q, P),
+        H.gradient_soa(Q, P, wrt="p"),
+        H.poincare_soa(Q, P, H0),
+        H.poincare_soa(Q, P, H0, wrt="p"),
+    )
     monkeypatch.setattr(models_base, "BLOCK", 4)
-    parts = (H.value_soa(Q, P), H.value_gradient_soa(Q, P), H.gradient_soa(Q, P, wrt="p"),
-             H.poincare_soa(Q, P, H0), H.poincare_soa(Q, P, H0, wrt="p"))
+    parts = (
+        H.value_soa(Q, P),
+        H.value_gradient_soa(Q, P),
+        H.gradient_soa(Q, P, wrt="p"),
+        H.poincare_soa(Q, P, H0),
+        H.poincare_soa(Q, P, H0, wrt="p"),
+    )
     assert parts[2][0] is None and parts[4][1] is None
     for a, b in zip(whole, parts, strict=True):
-        for x, y in zip(a if isinstance(a, tuple) else (a,), b if isinstance(b, tuple) else (b,),
-                        strict=True):
+        for x, y in zip(
+            a if isinstance(a, tuple) else (a,), b if isinstance(b, tuple) else (b,), strict=True
+        ):
             if x is None:
                 assert y is None
             else:
@@ -119,8 +141,9 @@ def test_long_steps_into_the_horizon_are_split_not_failed():
     from core.trace import MAX_STEP, TraceOptions, Tracer
 
     n = 30
-    cam = core.Camera.perspective(position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1),
-                                  fov_deg=12, width=n, height=n)
+    cam = core.Camera.perspective(
+        position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=12, width=n, height=n
+    )
     scene = core.Scene(model=hm.kerr(1.0, 0.45, chart="kerr_schild"))
     origins, directions = cam.rays()
     ref = Tracer(scene, TraceOptions(method="rk4", step=0.03)).trace(origins, directions)
@@ -130,10 +153,9 @@ def test_long_steps_into_the_horizon_are_split_not_failed():
     edge = np.zeros_like(captured)
     for dy in (-1, 0, 1):
         for dx in (-1, 0, 1):
-            edge |= padded[1 + dy:n + 1 + dy, 1 + dx:n + 1 + dx] != captured
+            edge |= padded[1 + dy : n + 1 + dy, 1 + dx : n + 1 + dx] != captured
     for method in ("gauss4", "yoshida4"):
-        rays = Tracer(scene, TraceOptions(method=method, step=MAX_STEP)).trace(origins,
-                                                                               directions)
+        rays = Tracer(scene, TraceOptions(method=method, step=MAX_STEP)).trace(origins, directions)
         assert np.count_nonzero(rays.ending == core.ENDING["failed"]) == 0, method
         # at such a long step the rays grazing the photon region may end either way: any
         # disagreement must be on the shadow's edge (a neighbour pixel ends the other way)
@@ -150,15 +172,17 @@ def test_rays_drifting_off_the_light_cone_are_flagged_failed():
     import core
     from core.trace import TraceOptions, Tracer
 
-    cam = core.Camera.perspective(position=(0, -200, 0), look_at=(0, 0, 0), up=(0, 0, 1),
-                                  fov_deg=3.6, width=128, height=96)
+    cam = core.Camera.perspective(
+        position=(0, -200, 0), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=3.6, width=128, height=96
+    )
     origins, directions = cam.rays()
     rows = np.array([43 * 128 + 53, 52 * 128 + 53, 43 * 128 + 52, 52 * 128 + 54])
     scene = core.Scene(model=hm.kerr(1.0, 0.499, chart="kerr_schild"))
-    rays = Tracer(scene, TraceOptions(method="gauss4", tolerance=1e-6, max_steps=3000),
-                  200.0).trace(origins[rows], directions[rows])
+    rays = Tracer(
+        scene, TraceOptions(method="gauss4", tolerance=1e-6, max_steps=3000), 200.0
+    ).trace(origins[rows], directions[rows])
     failed, escaped, captured = (core.ENDING[k] for k in ("failed", "escaped", "captured"))
     assert rays.ending[:2].tolist() == [failed, failed], rays.ending
-    assert (rays.steps[:2] < 300).all(), rays.steps           # measured 110
+    assert (rays.steps[:2] < 300).all(), rays.steps  # measured 110
     assert set(rays.ending[2:].tolist()) <= {escaped, captured}, rays.ending
     assert (rays.energy_error[2:] < 1e-2).all(), rays.energy_error

@@ -60,8 +60,9 @@ def radial_potential(a, xi, eta):
 def carter_textbook(a, q, p):
     """Q = p_theta^2 + cos^2 theta (-a^2 p_t^2 + p_phi^2 / sin^2 theta), rows of (t,r,th,ph)."""
     th = q[..., 2]
-    return p[..., 2] ** 2 + np.cos(th) ** 2 * (-a * a * p[..., 0] ** 2
-                                               + p[..., 3] ** 2 / np.sin(th) ** 2)
+    return p[..., 2] ** 2 + np.cos(th) ** 2 * (
+        -a * a * p[..., 0] ** 2 + p[..., 3] ** 2 / np.sin(th) ** 2
+    )
 
 
 @pytest.mark.parametrize("a", [0.45, 0.499])
@@ -117,7 +118,7 @@ def test_kerr_invariants_conserved_near_photon_region(a):
     H = hm.kerr(rg=RG, a=a)
     q0, p0, xi, eta, r_min = photon_near_photon_region(a)
     pro, retro = photon_region(a)
-    assert max(pro - r_min, r_min - retro, 0.0) <= 0.5 * RG    # passes within 0.5 rg
+    assert max(pro - r_min, r_min - retro, 0.0) <= 0.5 * RG  # passes within 0.5 rg
     assert r_min > horizon(a)
     # the model's metric against the textbook potentials: H = 0 at the start
     assert abs(H.value(q0, p0)) < 1e-14
@@ -125,14 +126,15 @@ def test_kerr_invariants_conserved_near_photon_region(a):
     assert Q0 > 0 and abs(Q0 - eta) < 1e-12 * eta
     assert abs(H.invariants(q0, p0)["carter"] - Q0) < 1e-12 * Q0
 
-    res = core.integrate(H, q0, p0, step=0.015, steps=1300, method="gauss4", adaptive=True,
-                         record_every=1)
+    res = core.integrate(
+        H, q0, p0, step=0.015, steps=1300, method="gauss4", adaptive=True, record_every=1
+    )
     assert not res.failed
     assert res.p[1] > 0 and res.q[1] > 100.0, "the ray must have come back out"
     q, p = res.trajectory.q, res.trajectory.p
     assert np.all(np.isfinite(q)) and np.all(np.isfinite(p))
     th = q[:, 2]
-    assert th.min() < 0.5 and th.max() > math.pi - 0.5          # truly non-equatorial
+    assert th.min() < 0.5 and th.max() > math.pi - 0.5  # truly non-equatorial
 
     h_rel = np.max(np.abs(H.value(q, p))) / p0[0] ** 2
     assert h_rel < 1e-8, h_rel
@@ -147,7 +149,7 @@ def test_kerr_invariants_conserved_near_photon_region(a):
 
     # the turning radius is the largest root of R (parabola through the sampled minimum)
     i = int(np.argmin(q[:, 1]))
-    r_m, r_c, r_p = q[i - 1:i + 2, 1]
+    r_m, r_c, r_p = q[i - 1 : i + 2, 1]
     r_turn = r_c - (r_p - r_m) ** 2 / (8 * (r_p - 2 * r_c + r_m))
     assert abs(r_turn - r_min) < 1e-8, r_turn - r_min
 
@@ -189,20 +191,26 @@ def test_kerr_schild_rays_over_the_pole(a):
     3.4e-10, |dL_z| < 2e-14; 1.2 s CPU each.
     """
     H = hm.kerr(rg=RG, a=a, chart="kerr_schild")
-    starts = [[-30.0, 0.0, 3.0], [-30.0, 1e-12, 3.0], [0.0, -30.0, 4.0], [0.0, 0.0, 2.0],
-              [1e-12, 0.0, 2.0]]
+    starts = [
+        [-30.0, 0.0, 3.0],
+        [-30.0, 1e-12, 3.0],
+        [0.0, -30.0, 4.0],
+        [0.0, 0.0, 2.0],
+        [1e-12, 0.0, 2.0],
+    ]
     dirs = [[1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0]]
     q0, p0 = kerr_schild_photons(H, starts, dirs)
     assert np.all(np.abs(H.value(q0, p0)) < 1e-14)
-    res = core.integrate(H, q0, p0, step=0.02, steps=400, method="gauss4", adaptive=True,
-                         record_every=1)
+    res = core.integrate(
+        H, q0, p0, step=0.02, steps=400, method="gauss4", adaptive=True, record_every=1
+    )
     traj = res.trajectory
     assert np.all(np.isfinite(traj.q)) and np.all(np.isfinite(traj.p))
     assert not res.failed.any()
     # the crossing rays really went over the pole: x (or y) changed sign near the axis
     rho = np.hypot(traj.q[:, :3, 1], traj.q[:, :3, 2])
     assert np.all(rho.min(axis=0) < 0.05)
-    assert np.all(ks_radius(a, res.q) > 50.0)                       # all escaped
+    assert np.all(ks_radius(a, res.q) > 50.0)  # all escaped
     assert np.all(res.energy_error < 1e-8)
     assert np.max(np.abs(H.value(traj.q.reshape(-1, 4), traj.p.reshape(-1, 4)))) < 1e-8
     inv0 = H.invariants(q0, p0)
@@ -222,10 +230,14 @@ def test_kerr_schild_rays_into_the_horizon_are_captured(a):
     0.02, 500 steps.
     """
     H = hm.kerr(rg=RG, a=a, chart="kerr_schild")
-    starts = [[0.0, 0.0, 30.0], [1e-9, -1e-9, 30.0], [-30.0, 0.0, 0.5], [-30.0, 0.0, -1.0],
-              [-30.0, 0.0, 6.0]]
-    dirs = [[0.0, 0.0, -1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0]]
+    starts = [
+        [0.0, 0.0, 30.0],
+        [1e-9, -1e-9, 30.0],
+        [-30.0, 0.0, 0.5],
+        [-30.0, 0.0, -1.0],
+        [-30.0, 0.0, 6.0],
+    ]
+    dirs = [[0.0, 0.0, -1.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0]]
     q0, p0 = kerr_schild_photons(H, starts, dirs)
     assert np.all(np.abs(H.value(q0, p0)) < 1e-14)
     res = core.integrate(H, q0, p0, step=0.02, steps=500, method="gauss4", adaptive=True)
@@ -247,7 +259,7 @@ def test_boyer_lindquist_ray_into_the_horizon_is_captured():
     a = 0.45
     H = hm.kerr(rg=RG, a=a)
     r0 = 30.0
-    xi, eta = 0.5, 2.0                                         # b ~ 1.5 < critical: falls in
+    xi, eta = 0.5, 2.0  # b ~ 1.5 < critical: falls in
     delta = r0 * r0 - 2 * M * r0 + a * a
     R = np.polyval(radial_potential(a, xi, eta), r0)
     q0 = np.array([0.0, r0, math.pi / 2, 0.0])

@@ -21,22 +21,29 @@ import core
 from core import hamiltonians as hm
 
 Z0 = 1.0
-ALPHA0 = 0.25          # initial angle below the horizontal
-AZIMUTH = 0.5          # horizontal direction of travel, from the x axis
+ALPHA0 = 0.25  # initial angle below the horizontal
+AZIMUTH = 0.5  # horizontal direction of travel, from the x axis
 
 MEDIA = {
     # name: (index text, n(z) in numpy, exact turning height z*)
-    "linear": ("1 + 0.1*z", lambda z: 1 + 0.1 * z,
-               (1.1 * math.cos(ALPHA0) - 1) / 0.1),
-    "sqrt": ("sqrt(1 + 0.2*z)", lambda z: np.sqrt(1 + 0.2 * z),
-             ((1 + 0.2 * Z0) * math.cos(ALPHA0) ** 2 - 1) / 0.2),
+    "linear": ("1 + 0.1*z", lambda z: 1 + 0.1 * z, (1.1 * math.cos(ALPHA0) - 1) / 0.1),
+    "sqrt": (
+        "sqrt(1 + 0.2*z)",
+        lambda z: np.sqrt(1 + 0.2 * z),
+        ((1 + 0.2 * Z0) * math.cos(ALPHA0) ** 2 - 1) / 0.2,
+    ),
 }
 
 
 def launch(n0):
     """q0, p0 with |p| = n0 (H = 1/2), going down at ALPHA0 towards AZIMUTH."""
-    t = np.array([math.cos(ALPHA0) * math.cos(AZIMUTH), math.cos(ALPHA0) * math.sin(AZIMUTH),
-                  -math.sin(ALPHA0)])
+    t = np.array(
+        [
+            math.cos(ALPHA0) * math.cos(AZIMUTH),
+            math.cos(ALPHA0) * math.sin(AZIMUTH),
+            -math.sin(ALPHA0),
+        ]
+    )
     return np.array([0.0, 0.0, Z0]), n0 * t
 
 
@@ -83,7 +90,7 @@ def test_snell_invariant_and_turning_height(name):
     res = core.integrate(H, q0, p0, step=0.02, steps=300, method="gauss4", record_every=1)
     assert not res.failed
     q, p = res.trajectory.q, res.trajectory.p
-    assert p[-1, 2] > 0 and q[:, 2].min() < Z0 - 0.2        # turned and going back up
+    assert p[-1, 2] > 0 and q[:, 2].min() < Z0 - 0.2  # turned and going back up
     C = n_of_z(Z0) * math.cos(ALPHA0)
     s_err = np.max(np.abs(snell(n_of_z, q, p) - C))
     assert s_err < 1e-10, s_err
@@ -110,7 +117,7 @@ def test_ray_is_the_analytic_parabola():
     xi = np.hypot(q[:, 0], q[:, 1])
     C = n0 * math.cos(ALPHA0)
     z_exact = Z0 - math.tan(ALPHA0) * xi + k * xi**2 / (4 * C**2)
-    assert xi[-1] > 1.5 * 2 * C**2 * math.tan(ALPHA0) / k          # well past the turn
+    assert xi[-1] > 1.5 * 2 * C**2 * math.tan(ALPHA0) / k  # well past the turn
     assert np.max(np.abs(q[:, 2] - z_exact)) < 1e-11
     assert np.max(np.abs(np.arctan2(q[1:, 1], q[1:, 0]) - AZIMUTH)) < 1e-12
 

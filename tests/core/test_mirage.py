@@ -24,23 +24,38 @@ def banded_board(distance, z0, z1):
         c[f <= 1 / 3, :3] = 1.0
         return c
 
-    v = np.array([[distance, -0.5, z0], [distance, 0.5, z0], [distance, 0.5, z1],
-                  [distance, -0.5, z1]])
+    v = np.array(
+        [[distance, -0.5, z0], [distance, 0.5, z0], [distance, 0.5, z1], [distance, -0.5, z1]]
+    )
     return core.TriangleMesh(vertices=v, faces=np.array([[0, 1, 2], [0, 2, 3]]), color=paint)
 
 
 def column(model, camera_z, tilt, board, fov_deg):
     """Letters seen top to bottom: R G W (board bands), '.' sky, '_' ground; runs merged."""
     ground = core.Plane(point=(0, 0, 0), normal=(0, 0, 1), color=(0.3, 0.3, 0.3, 1))
-    scene = core.Scene(model=model, objects=[banded_board(20.0, *board), ground],
-                       background=(0, 0, 1))
-    cam = core.Camera.perspective(position=(0, 0, camera_z), look_at=(1, 0, camera_z + tilt),
-                                  up=(0, 0, 1), fov_deg=fov_deg, width=1, height=300)
+    scene = core.Scene(
+        model=model, objects=[banded_board(20.0, *board), ground], background=(0, 0, 1)
+    )
+    cam = core.Camera.perspective(
+        position=(0, 0, camera_z),
+        look_at=(1, 0, camera_z + tilt),
+        up=(0, 0, 1),
+        fov_deg=fov_deg,
+        width=1,
+        height=300,
+    )
     out = core.render(scene, cam, method="yoshida4", step=0.05, passes=("ending",))
     assert out.summary["failed"] == 0
     rgb = out.rgba[:, 0, :3]
-    letters = np.where(rgb.sum(1) > 2.5, "W", np.where(rgb[:, 0] > 0.5, "R", np.where(
-        rgb[:, 1] > 0.5, "G", np.where(rgb[:, 2] > 0.5, ".", "_"))))
+    letters = np.where(
+        rgb.sum(1) > 2.5,
+        "W",
+        np.where(
+            rgb[:, 0] > 0.5,
+            "R",
+            np.where(rgb[:, 1] > 0.5, "G", np.where(rgb[:, 2] > 0.5, ".", "_")),
+        ),
+    )
     return "".join(k for k, _ in itertools.groupby("".join(letters)))
 
 

@@ -10,11 +10,13 @@ RNG = np.random.default_rng(20261122)
 
 def finite_difference_gradient(H, q, p, h=1e-5):
     """Richardson-extrapolated central differences of H.value, independent of the AD."""
+
     def partial(x, i, f):
         def shifted(s):
             y = x.copy()
             y[:, i] += s * h * np.maximum(1.0, np.abs(x[:, i]))
             return f(y)
+
         step = h * np.maximum(1.0, np.abs(x[:, i]))
         d1 = (shifted(1) - shifted(-1)) / (2 * step)
         d2 = (shifted(2) - shifted(-2)) / (4 * step)
@@ -26,8 +28,14 @@ def finite_difference_gradient(H, q, p, h=1e-5):
 
 
 def spherical_points(n):
-    q = np.column_stack([RNG.uniform(-5, 5, n), RNG.uniform(2.5, 12, n),
-                         RNG.uniform(0.2, np.pi - 0.2, n), RNG.uniform(-3, 3, n)])
+    q = np.column_stack(
+        [
+            RNG.uniform(-5, 5, n),
+            RNG.uniform(2.5, 12, n),
+            RNG.uniform(0.2, np.pi - 0.2, n),
+            RNG.uniform(-3, 3, n),
+        ]
+    )
     return q, RNG.normal(size=(n, 4))
 
 
@@ -36,11 +44,15 @@ def cartesian_points(n, scale=6.0):
 
 
 USER_METRIC = hm.metric(
-    inverse=[["-1/(1 - 2*m/sqrt(x**2+y**2+z**2))", "0", "0", "0"],
-             ["0", "1 + 0.1*sin(y)", "0.05*x*z", "0"],
-             ["0", "0.05*x*z", "1", "0"],
-             ["0", "0", "0", "1 + 0.2*exp(-x**2)"]],
-    coords=["t", "x", "y", "z"], parameters={"m": 0.5})
+    inverse=[
+        ["-1/(1 - 2*m/sqrt(x**2+y**2+z**2))", "0", "0", "0"],
+        ["0", "1 + 0.1*sin(y)", "0.05*x*z", "0"],
+        ["0", "0.05*x*z", "1", "0"],
+        ["0", "0", "0", "1 + 0.2*exp(-x**2)"],
+    ],
+    coords=["t", "x", "y", "z"],
+    parameters={"m": 0.5},
+)
 
 MODELS = {
     "minkowski_cartesian": (hm.minkowski("cartesian"), cartesian_points),
@@ -50,16 +62,27 @@ MODELS = {
     "kerr_bl_0.998": (hm.kerr(rg=2.0, a=0.998), spherical_points),
     "kerr_schild_0.9": (hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"), cartesian_points),
     "user_metric": (USER_METRIC, lambda n: cartesian_points(n, 3.0)),
-    "medium_physical": (hm.medium("0.85 - 0.3*z**3 + 0.03*cos(3*pi*x)"),
-                        lambda n: (RNG.uniform(-0.6, 0.6, (n, 3)), RNG.normal(size=(n, 3)))),
-    "medium_literal": (hm.medium("1 + 0.2*tanh(4*z) + 0.01*x*y", literal=True),
-                       lambda n: (RNG.uniform(-1, 1, (n, 3)), RNG.normal(size=(n, 3)))),
-    "volterra_fig4": (hm.from_expression("p*q*(p+q-1)", q=["q"], p=["p"]),
-                      lambda n: (RNG.uniform(0.1, 0.9, (n, 1)), RNG.uniform(0.1, 0.9, (n, 1)))),
-    "custom_5d": (hm.from_expression("0.5*(a1**2 + b2**2*u**2) + k*sin(u)*cos(v)*w + s*e5**3",
-                                     q=["u", "v", "w", "s", "z5"], p=["a1", "b2", "c3", "d4", "e5"],
-                                     parameters={"k": 0.7}),
-                  lambda n: (RNG.normal(size=(n, 5)), RNG.normal(size=(n, 5)))),
+    "medium_physical": (
+        hm.medium("0.85 - 0.3*z**3 + 0.03*cos(3*pi*x)"),
+        lambda n: (RNG.uniform(-0.6, 0.6, (n, 3)), RNG.normal(size=(n, 3))),
+    ),
+    "medium_literal": (
+        hm.medium("1 + 0.2*tanh(4*z) + 0.01*x*y", literal=True),
+        lambda n: (RNG.uniform(-1, 1, (n, 3)), RNG.normal(size=(n, 3))),
+    ),
+    "volterra_fig4": (
+        hm.from_expression("p*q*(p+q-1)", q=["q"], p=["p"]),
+        lambda n: (RNG.uniform(0.1, 0.9, (n, 1)), RNG.uniform(0.1, 0.9, (n, 1))),
+    ),
+    "custom_5d": (
+        hm.from_expression(
+            "0.5*(a1**2 + b2**2*u**2) + k*sin(u)*cos(v)*w + s*e5**3",
+            q=["u", "v", "w", "s", "z5"],
+            p=["a1", "b2", "c3", "d4", "e5"],
+            parameters={"k": 0.7},
+        ),
+        lambda n: (RNG.normal(size=(n, 5)), RNG.normal(size=(n, 5))),
+    ),
 }
 
 
@@ -93,7 +116,12 @@ def test_cyclic_coordinates_get_no_partials():
     assert "t" not in ks.partials_allocated(*cartesian_points(4))
     med = hm.medium("1 + 0.1*z + 0.01*x")
     assert med.partials_allocated(RNG.uniform(size=(3, 3)), RNG.uniform(size=(3, 3))) == {
-        "x", "z", "p_x", "p_y", "p_z"}
+        "x",
+        "z",
+        "p_x",
+        "p_y",
+        "p_z",
+    }
     # and the metric's dH/dt is exactly zero without ever being computed
     dq, _ = hm.kerr(1.0, 0.45).gradient(q, p)
     assert np.all(dq[:, [0, 3]] == 0.0)
@@ -101,8 +129,9 @@ def test_cyclic_coordinates_get_no_partials():
 
 def test_kerr_reduces_to_schwarzschild():
     q, p = spherical_points(20)
-    np.testing.assert_allclose(hm.kerr(1.0, 0.0).value(q, p), hm.schwarzschild(1.0).value(q, p),
-                               rtol=1e-13)
+    np.testing.assert_allclose(
+        hm.kerr(1.0, 0.0).value(q, p), hm.schwarzschild(1.0).value(q, p), rtol=1e-13
+    )
 
 
 def test_kerr_schild_principal_null_direction_is_null():
@@ -114,8 +143,9 @@ def test_kerr_schild_principal_null_direction_is_null():
     rho2 = x**2 + y**2 + z**2 - a**2
     r = np.sqrt(0.5 * (rho2 + np.sqrt(rho2**2 + 4 * a**2 * z**2)))
     assert np.allclose(r**4 - rho2 * r**2 - a**2 * z**2, 0.0, atol=1e-9)
-    l_cov = np.column_stack([np.ones_like(r), (r * x + a * y) / (r**2 + a**2),
-                             (r * y - a * x) / (r**2 + a**2), z / r])
+    l_cov = np.column_stack(
+        [np.ones_like(r), (r * x + a * y) / (r**2 + a**2), (r * y - a * x) / (r**2 + a**2), z / r]
+    )
     np.testing.assert_allclose(ks.value(q, l_cov), 0.0, atol=1e-12)
     np.testing.assert_allclose(ks.value(q, 2.5 * l_cov), 0.0, atol=1e-11)
 
@@ -127,15 +157,18 @@ def test_separability_detection():
     assert not hm.schwarzschild().separable
 
 
-@pytest.mark.parametrize("make, message", [
-    (lambda: hm.schwarzschild(rg=-1.0), "positive"),
-    (lambda: hm.kerr(rg=1.0, a=0.6), "beyond extremal"),
-    (lambda: hm.kerr(rg=1.0, a=0.1, chart="polar"), "unknown chart"),
-    (lambda: hm.metric([["1", "0"], ["0"]], coords=["a", "b"]), "2x2"),
-    (lambda: hm.metric([["1", "x"], ["y", "1"]], coords=["x", "y"]), "symmetric"),
-    (lambda: hm.from_expression("p*q", q=["q", "r"], p=["p"]), "as many momenta"),
-    (lambda: hm.from_expression("p*pi", q=["pi"], p=["p"]), "clash"),
-])
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda: hm.schwarzschild(rg=-1.0), "positive"),
+        (lambda: hm.kerr(rg=1.0, a=0.6), "beyond extremal"),
+        (lambda: hm.kerr(rg=1.0, a=0.1, chart="polar"), "unknown chart"),
+        (lambda: hm.metric([["1", "0"], ["0"]], coords=["a", "b"]), "2x2"),
+        (lambda: hm.metric([["1", "x"], ["y", "1"]], coords=["x", "y"]), "symmetric"),
+        (lambda: hm.from_expression("p*q", q=["q", "r"], p=["p"]), "as many momenta"),
+        (lambda: hm.from_expression("p*pi", q=["pi"], p=["p"]), "clash"),
+    ],
+)
 def test_parameters_validated_with_clear_errors(make, message):
     with pytest.raises(ValueError, match=message):
         make()

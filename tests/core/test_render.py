@@ -21,8 +21,9 @@ def analytic_sphere_hits(origins, directions, center, radius):
 
 
 def test_flat_scene_is_straight_casting_without_integration():
-    cam = core.Camera.perspective(position=(1, -12, 3), look_at=(0, 0, 0), up=(0, 0, 1),
-                                  fov_deg=50, width=48, height=32)
+    cam = core.Camera.perspective(
+        position=(1, -12, 3), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=50, width=48, height=32
+    )
     sphere = core.Sphere(center=(0.5, 0, 0), radius=2.0, color=(1, 0, 0, 1))
     for model in (None, hm.minkowski("cartesian")):
         scene = core.Scene(model=model, objects=[sphere], background=(0.0, 0.0, 1.0))
@@ -77,8 +78,10 @@ def exact_schwarzschild_escape(camera_pos, directions, rg=1.0):
                 return integrand(u) * 2 * u_turn * t
 
             t0 = np.sqrt(1 - u0 / u_turn)
-            phi = quad(smooth, 0, 1, epsabs=1e-14, epsrel=1e-12, limit=400)[0] + \
-                quad(smooth, 0, t0, epsabs=1e-14, epsrel=1e-12, limit=400)[0]
+            phi = (
+                quad(smooth, 0, 1, epsabs=1e-14, epsrel=1e-12, limit=400)[0]
+                + quad(smooth, 0, t0, epsabs=1e-14, epsrel=1e-12, limit=400)[0]
+            )
         else:
             phi = quad(integrand, 0, u0, epsabs=1e-14, epsrel=1e-12)[0]
         e2 = d - (d @ e1) * e1
@@ -90,8 +93,9 @@ def exact_schwarzschild_escape(camera_pos, directions, rg=1.0):
 def test_schwarzschild_escape_directions_match_exact_deflection():
     """64x64 image, camera at 20 rg: escape directions to 1e-6 rad of the exact ones."""
     pos = np.array([0.0, -20.0, 0.0])
-    cam = core.Camera.perspective(position=pos, look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=60,
-                                  width=64, height=64)
+    cam = core.Camera.perspective(
+        position=pos, look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=60, width=64, height=64
+    )
     scene = core.Scene(model=hm.schwarzschild(rg=1.0))
     origins, directions = cam.rays()
     pick = np.arange(0, cam.n_pixels, 5)  # every 5th pixel of the image: keeps the test quick
@@ -109,8 +113,9 @@ def test_implicit_solves_are_as_tight_as_the_tolerance_needs():
     """The tracer solves gauss4's stage equations to tolerance x 1e-4, not to 1e-14: the
     escape directions keep their accuracy against the exact deflection."""
     pos = np.array([0.0, -20.0, 0.0])
-    cam = core.Camera.perspective(position=pos, look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=60,
-                                  width=64, height=64)
+    cam = core.Camera.perspective(
+        position=pos, look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=60, width=64, height=64
+    )
     scene = core.Scene(model=hm.schwarzschild(rg=1.0))
     origins, directions = cam.rays()
     pick = np.arange(0, cam.n_pixels, 5)
@@ -133,7 +138,7 @@ def test_implicit_solves_are_as_tight_as_the_tolerance_needs():
     # weakly lensed rays (impact parameter > 8 rg: magnification ~1) move by < 0.5 % of the
     # tolerance (measured 0.09 %); near the photon sphere the lens magnifies any change
     cos_psi = -directions[esc] @ (pos / np.linalg.norm(pos))
-    impact = 20.0 * np.sqrt(1.0 - cos_psi ** 2) / np.sqrt(1.0 - 1.0 / 20.0)
+    impact = 20.0 * np.sqrt(1.0 - cos_psi**2) / np.sqrt(1.0 - 1.0 / 20.0)
     weak = impact > 8.0
     assert weak.sum() > 400
     assert _angles(a.direction[esc][weak], b.direction[esc][weak]).max() <= 5e-3 * tol
@@ -146,8 +151,9 @@ def _angles(u, v):
 
 def test_failed_rays_are_counted_and_drawn_in_debug_colour():
     """An index that is NaN above z = 3 (sqrt of a negative) poisons rays reaching it."""
-    cam = core.Camera.perspective(position=(0, -5, 0), look_at=(0, 0, 0), up=(0, 0, 1),
-                                  fov_deg=60, width=16, height=16)
+    cam = core.Camera.perspective(
+        position=(0, -5, 0), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=60, width=16, height=16
+    )
     scene = core.Scene(model=hm.medium("1 + 0*sqrt(3 - z)"), background=(0.2, 0.3, 0.4))
     out = core.render(scene, cam, method="rk4", tolerance=1e-6)
     failed = out.passes["ending"] == core.ENDING["failed"]
@@ -159,11 +165,17 @@ def test_failed_rays_are_counted_and_drawn_in_debug_colour():
 
 def test_volume_along_straight_path_matches_quadrature():
     """Flat scene: emission-absorption along a pixel's ray equals scipy's integral."""
+
     def density(p):
         return np.exp(-np.sum(p**2, axis=1))
 
-    vol = core.Volume((-2, -2, -2), (2, 2, 2), density,
-                      emission=lambda p: np.outer(density(p), [1.0, 0.5, 0.25]), absorption=0.7)
+    vol = core.Volume(
+        (-2, -2, -2),
+        (2, 2, 2),
+        density,
+        emission=lambda p: np.outer(density(p), [1.0, 0.5, 0.25]),
+        absorption=0.7,
+    )
     scene = core.Scene(model=None, volumes=[vol], background=(0, 0, 0))
     origin, direction = np.array([[0.3, -6.0, 0.2]]), np.array([[0.0, 1.0, 0.0]])
     rays = Tracer(scene, TraceOptions()).trace(origin, direction)
@@ -184,8 +196,9 @@ def test_volume_along_straight_path_matches_quadrature():
 @pytest.mark.parametrize("method", ["yoshida4"])
 def test_error_pass_is_honest_against_a_reference_render(method):
     """Kerr a/M = 0.9: estimated vs true escape-direction error within 3x on >= 90 % rays."""
-    cam = core.Camera.perspective(position=(0, -25, 4), look_at=(0, 0, 0), up=(0, 0, 1),
-                                  fov_deg=30, width=16, height=16)
+    cam = core.Camera.perspective(
+        position=(0, -25, 4), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=30, width=16, height=16
+    )
     scene = core.Scene(model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"))
     origins, directions = cam.rays()
     tracer = Tracer(scene, TraceOptions(method=method, step=0.08))

@@ -28,7 +28,7 @@ import core
 from core import hamiltonians as hm
 
 RG = 1.0
-B_CRIT = 1.5 * math.sqrt(3.0) * RG            # critical impact parameter 3 sqrt(3) / 2 rg
+B_CRIT = 1.5 * math.sqrt(3.0) * RG  # critical impact parameter 3 sqrt(3) / 2 rg
 
 
 # ----------------------------------------------------------------------------------
@@ -38,8 +38,7 @@ B_CRIT = 1.5 * math.sqrt(3.0) * RG            # critical impact parameter 3 sqrt
 def _roots(b):
     """The three real roots u1 < u2 < u3 of rg u^3 - u^2 + 1/b^2 (b > b_crit), mpmath."""
     with mp.workdps(40):
-        rs = mp.polyroots([1 / mp.mpf(b) ** 2, 0, -1, RG], maxsteps=200, extraprec=200,
-                          asc=True)
+        rs = mp.polyroots([1 / mp.mpf(b) ** 2, 0, -1, RG], maxsteps=200, extraprec=200, asc=True)
         rs = sorted(mp.re(r) for r in rs)
     return rs
 
@@ -83,8 +82,10 @@ def deflection(b):
 # the reference checked on its own
 
 
-@pytest.mark.parametrize("b, r_a", [(b, r) for b in (50.0, 10.0, 6.0, 2.6)
-                                     for r in (math.inf, 1000.0, 60.0, 7.0, 1.6) if r > b])
+@pytest.mark.parametrize(
+    "b, r_a",
+    [(b, r) for b in (50.0, 10.0, 6.0, 2.6) for r in (math.inf, 1000.0, 60.0, 7.0, 1.6) if r > b],
+)
 def test_reference_quadrature_equals_elliptic_form(b, r_a):
     """Both forms of I agree at 40 digits; r_a = inf, far, near and just outside r_min."""
     u_a = 0.0 if math.isinf(r_a) else 1.0 / r_a
@@ -96,9 +97,9 @@ def test_reference_quadrature_equals_elliptic_form(b, r_a):
 def test_reference_weak_field_series():
     """alpha = 4 M/b + 15 pi/4 (M/b)^2 + 128/3 (M/b)^3 + 3465 pi/64 (M/b)^4 + O(b^-5)."""
     for b in (50.0, 200.0, 1000.0):
-        x = RG / 2 / b                                 # M / b
+        x = RG / 2 / b  # M / b
         series = 4 * x + 15 * math.pi / 4 * x**2 + 128 / 3 * x**3 + 3465 * math.pi / 64 * x**4
-        assert abs(float(deflection(b)) - series) < 2e3 * x**5   # next coefficient 3584/5
+        assert abs(float(deflection(b)) - series) < 2e3 * x**5  # next coefficient 3584/5
     assert abs(float(deflection(1e6)) - 2 * RG / 1e6) < 1e-11
 
 
@@ -144,7 +145,7 @@ def test_deflection_matches_elliptic_integral():
     assert not res.failed.any()
     assert np.all(res.p[:, 1] > 0), "rays must be past their turning point, going out"
     assert np.all(res.q[:, 1] > 300.0)
-    assert np.all(np.abs(res.q[:, 2] - np.pi / 2) < 1e-14)      # stays equatorial
+    assert np.all(np.abs(res.q[:, 2] - np.pi / 2) < 1e-14)  # stays equatorial
     np.testing.assert_array_equal(res.p[:, [0, 3]], p0[:, [0, 3]])  # cyclic: exact
     assert np.all(res.energy_error < 1e-9)
     for i, b in enumerate(bs):
@@ -179,7 +180,7 @@ def test_photon_sphere_orbit_stays_circular(inclination):
     p0 = np.array([-1.0, 0.0, -B_CRIT * math.sin(inclination), B_CRIT * math.cos(inclination)])
     assert abs(H.value(q0, p0)) < 1e-15
     step = 0.02
-    steps = int(math.ceil(2 * math.pi * r_c**2 / B_CRIT / step)) + 1   # dpsi/ds = b / r^2
+    steps = int(math.ceil(2 * math.pi * r_c**2 / B_CRIT / step)) + 1  # dpsi/ds = b / r^2
     res = core.integrate(H, q0, p0, step=step, steps=steps, method="yoshida8", record_every=1)
     assert not res.failed
     traj = res.trajectory
@@ -190,6 +191,6 @@ def test_photon_sphere_orbit_stays_circular(inclination):
     e2 = np.array([0.0, math.cos(inclination), math.sin(inclination)])
     psi = np.unwrap(np.arctan2(n @ e2, n[:, 0]))
     assert psi[-1] >= 2 * math.pi
-    assert np.max(np.abs(n @ np.cross([1.0, 0.0, 0.0], e2))) < 1e-9   # stays in its plane
+    assert np.max(np.abs(n @ np.cross([1.0, 0.0, 0.0], e2))) < 1e-9  # stays in its plane
     dev = np.max(np.abs(traj.q[:, 1] - r_c))
     assert dev < 1e-6, dev

@@ -28,13 +28,19 @@ def test_coefficients_are_consistent_and_symmetric(name):
     assert m.stages == {"leapfrog": 1, "blanes_moan4": 6, "blanes_moan6": 11}[name]
 
 
-KEPLER = hm.from_expression("0.5*(px**2 + py**2) - 1/sqrt(x**2 + y**2)", q=["x", "y"],
-                            p=["px", "py"])
+KEPLER = hm.from_expression(
+    "0.5*(px**2 + py**2) - 1/sqrt(x**2 + y**2)", q=["x", "y"], p=["px", "py"]
+)
 
 
-@pytest.mark.parametrize("name, steps", [("leapfrog", [80, 160, 320, 640]),
-                                         ("blanes_moan4", [40, 80, 160, 320]),
-                                         ("blanes_moan6", [40, 60, 80, 120])])
+@pytest.mark.parametrize(
+    "name, steps",
+    [
+        ("leapfrog", [80, 160, 320, 640]),
+        ("blanes_moan4", [40, 80, 160, 320]),
+        ("blanes_moan6", [40, 60, 80, 120]),
+    ],
+)
 def test_observed_order_on_a_kepler_ellipse(name, steps):
     """Separable Kepler (its own split), eccentricity 0.44, one period T = 2 pi a^(3/2):
     the exact orbit is back at its start; the error falls at the nominal order (fitted
@@ -55,10 +61,10 @@ def test_blanes_moan4_error_constant_is_far_below_the_triple_jump():
     """At equal force evaluations (BM4: 6 per step, Yoshida's triple jump of leapfrog: 3),
     BM4 is over 50x more accurate on Kepler (measured: ~500x)."""
     T = 2 * math.pi  # the circular orbit
-    bm = core.integrate(KEPLER, [1.0, 0.0], [0.0, 1.0], step=T / 40, steps=40,
-                        method="blanes_moan4")
-    yo = core.integrate(KEPLER, [1.0, 0.0], [0.0, 1.0], step=T / 80, steps=80,
-                        method="yoshida4")
+    bm = core.integrate(
+        KEPLER, [1.0, 0.0], [0.0, 1.0], step=T / 40, steps=40, method="blanes_moan4"
+    )
+    yo = core.integrate(KEPLER, [1.0, 0.0], [0.0, 1.0], step=T / 80, steps=80, method="yoshida4")
     err = [np.hypot(r.q[0] - 1.0, r.q[1]) for r in (bm, yo)]
     assert err[0] * 50 < err[1], err
 
@@ -66,11 +72,18 @@ def test_blanes_moan4_error_constant_is_far_below_the_triple_jump():
 def test_refused_without_a_split():
     """Non-separable H without a split (a metric) is refused with a message naming why."""
     with pytest.raises(SplitRequired, match="explicit splitting.*gauss4"):
-        core.integrate(hm.schwarzschild(1.0), [0, 10, 1.5, 0], [-1, -1, 0, 4], step=0.1,
-                       steps=3, method="blanes_moan4")
+        core.integrate(
+            hm.schwarzschild(1.0),
+            [0, 10, 1.5, 0],
+            [-1, -1, 0, 4],
+            step=0.1,
+            steps=3,
+            method="blanes_moan4",
+        )
     scene = core.Scene(model=hm.kerr(1.0, 0.45, chart="kerr_schild"))
-    cam = core.Camera.perspective(position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1),
-                                  fov_deg=40, width=4, height=4)
+    cam = core.Camera.perspective(
+        position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=40, width=4, height=4
+    )
     with pytest.raises(SplitRequired, match="leapfrog"):
         core.render(scene, cam, method="leapfrog")
     assert issubclass(SplitRequired, ValueError)
@@ -90,8 +103,9 @@ def test_split_is_the_poincare_transformed_hamiltonian(model):
     H0 = rng.uniform(0.3, 0.7, 50)
     split = model.split_parts(H0)
     general = PoincareTransformed(model, H0)
-    np.testing.assert_allclose(split.value_soa(Q, P), general.value_soa(Q, P), rtol=1e-13,
-                               atol=1e-13)
+    np.testing.assert_allclose(
+        split.value_soa(Q, P), general.value_soa(Q, P), rtol=1e-13, atol=1e-13
+    )
     dq, dp = split.gradient_soa(Q, P)
     gq, gp = general.gradient_soa(Q, P)
     np.testing.assert_allclose(dq, gq, rtol=1e-12, atol=1e-12)
@@ -133,13 +147,14 @@ def test_clocked_split_follows_the_analytic_parabola_and_its_parameter(name):
     n0 = math.sqrt(1 + k * z0)
     t = np.array([math.cos(a0) * math.cos(az), math.cos(a0) * math.sin(az), -math.sin(a0)])
     q0, p0 = np.array([0.0, 0.0, z0]), n0 * t
-    res = core.integrate(H, q0, p0, step=0.05, steps=120, method=name, adaptive=True,
-                         record_every=1)
+    res = core.integrate(
+        H, q0, p0, step=0.05, steps=120, method=name, adaptive=True, record_every=1
+    )
     assert not res.failed
     q = res.trajectory.q
     xi = np.hypot(q[:, 0], q[:, 1])
     C = n0 * math.cos(a0)
-    assert xi[-1] > 2 * C**2 * math.tan(a0) / k                      # past the turn
+    assert xi[-1] > 2 * C**2 * math.tan(a0) / k  # past the turn
     z_exact = z0 - math.tan(a0) * xi + k * xi**2 / (4 * C**2)
     assert np.max(np.abs(q[:, 2] - z_exact)) < 1e-9
     assert res.energy_error < 1e-10
@@ -158,8 +173,12 @@ def test_energy_stays_bounded_over_long_runs(name):
     p0 *= math.sqrt(2 - 0.09) / np.linalg.norm(p0)
     growth = {}
     for method in (name, "rk4"):
-        short, long = (core.integrate(H, q0, p0, step=0.25, steps=n, method=method,
-                                      adaptive=True, energy_every=10) for n in (160, 16_000))
+        short, long = (
+            core.integrate(
+                H, q0, p0, step=0.25, steps=n, method=method, adaptive=True, energy_every=10
+            )
+            for n in (160, 16_000)
+        )
         assert not long.failed
         growth[method] = long.energy_error / short.energy_error
     assert growth[name] < 2.0 and growth["rk4"] > 30.0, growth
@@ -179,8 +198,7 @@ def test_mirage_image_agrees_with_dopri5(name):
 
     scene, cam, pixel = _mirage(40, 30)
     origins, directions = cam.rays()
-    ref = Tracer(scene, TraceOptions(method="dopri5", tolerance=1e-11)).trace(origins,
-                                                                             directions)
+    ref = Tracer(scene, TraceOptions(method="dopri5", tolerance=1e-11)).trace(origins, directions)
     out = Tracer(scene, TraceOptions(method=name, step=0.1)).trace(origins, directions)
     np.testing.assert_array_equal(out.ending, ref.ending)
     hit = ref.ending == core.ENDING["hit"]
@@ -225,7 +243,7 @@ def test_logarithmic_split_is_tangent_to_the_optical_rays():
     rng = np.random.default_rng(4)
     Q = rng.normal(size=(3, 40)) * 6
     D = rng.normal(size=(3, 40))
-    _, P = core.observer.medium_momenta(model, Q, D)     # H = 1/2: on the rays
+    _, P = core.observer.medium_momenta(model, Q, D)  # H = 1/2: on the rays
     split = model.split_parts(0.5)
     K = PoincareTransformed(model, 0.5)
     A = 0.5 * np.einsum("ij,ij->j", P, P) - 0.5
@@ -234,10 +252,16 @@ def test_logarithmic_split_is_tangent_to_the_optical_rays():
 
 
 def _schwarzschild_rays(width):
-    cam = core.Camera.perspective(position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1),
-                                  fov_deg=40, width=width, height=width)
-    board = core.Plane(point=(0, 12, 0), normal=(0, -1, 0), u_axis=(1, 0, 0),
-                       extent=(16, 16), color=(0.9, 0.7, 0.2, 1))
+    cam = core.Camera.perspective(
+        position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=40, width=width, height=width
+    )
+    board = core.Plane(
+        point=(0, 12, 0),
+        normal=(0, -1, 0),
+        u_axis=(1, 0, 0),
+        extent=(16, 16),
+        color=(0.9, 0.7, 0.2, 1),
+    )
     scene = core.Scene(model=hm.schwarzschild(1.0), objects=[board])
     origins, directions = cam.rays()
     return scene, origins, directions, math.radians(40) / width
@@ -252,19 +276,24 @@ def test_schwarzschild_image_agrees_with_dopri5(name):
     from core.trace import TraceOptions, Tracer
 
     scene, origins, directions, pixel = _schwarzschild_rays(24)
-    ref = Tracer(scene, TraceOptions(method="dopri5", tolerance=1e-11),
-                 extent=30).trace(origins, directions)
+    ref = Tracer(scene, TraceOptions(method="dopri5", tolerance=1e-11), extent=30).trace(
+        origins, directions
+    )
     tracer = Tracer(scene, TraceOptions(method=name, tolerance=1e-8), extent=30)
     assert tracer.model.chart == "isotropic"
     out = tracer.trace(origins, directions)
     np.testing.assert_array_equal(out.ending, ref.ending)
     counts = np.bincount(ref.ending, minlength=3)
-    assert counts[0] > 50 and counts[1] > 20 and counts[2] > 50    # escaped, captured, hit
+    assert counts[0] > 50 and counts[1] > 20 and counts[2] > 50  # escaped, captured, hit
     esc, hit = ref.ending == 0, ref.ending == 2
     cos = np.clip(np.einsum("ij,ij->i", out.direction[esc], ref.direction[esc]), -1, 1)
     dist = np.linalg.norm(ref.position[hit] - origins[hit], axis=1)
-    err = np.concatenate([np.arccos(cos) / pixel, np.linalg.norm(
-        out.position[hit] - ref.position[hit], axis=1) / (dist * pixel)])
+    err = np.concatenate(
+        [
+            np.arccos(cos) / pixel,
+            np.linalg.norm(out.position[hit] - ref.position[hit], axis=1) / (dist * pixel),
+        ]
+    )
     assert np.percentile(err, 99) < 0.1, np.percentile(err, 99)
 
 
@@ -291,5 +320,5 @@ def test_default_method_per_model():
     assert default_method(hm.schwarzschild(1.0)) == "blanes_moan6"
     assert default_method(hm.medium("1 + 0.1*z")) == "blanes_moan4"
     assert default_method(hm.kerr(1.0, 0.45, chart="kerr_schild")) == "gauss4"
-    assert default_method(hm.kerr(1.0, 0.3)) == "gauss4"   # Boyer–Lindquist chart
-    assert default_method(hm.kerr(1.0, 0.0)) == "blanes_moan6"   # that is Schwarzschild
+    assert default_method(hm.kerr(1.0, 0.3)) == "gauss4"  # Boyer–Lindquist chart
+    assert default_method(hm.kerr(1.0, 0.0)) == "blanes_moan6"  # that is Schwarzschild

@@ -39,8 +39,7 @@ def test_steps_past_the_stability_limit_are_flagged_not_drawn():
     ok = stress.core.integrate(H, [1.0], [0.0], step=1.98, steps=2000, method="stormer_verlet")
     assert not ok.failed and ok.energy_error < 1.0
     with np.errstate(all="ignore"):
-        bad = stress.core.integrate(H, [1.0], [0.0], step=2.02, steps=2000,
-                                    method="stormer_verlet")
+        bad = stress.core.integrate(H, [1.0], [0.0], step=2.02, steps=2000, method="stormer_verlet")
     assert bad.failed and bad.steps < 2000
 
 
@@ -66,8 +65,7 @@ def test_positions_at_1e8_rg_weak_field_deflection():
     """A ray from 1e8 rg with b = 1e4 rg: deflection 2 rg/b + 15 pi/16 (rg/b)^2 to 1e-6."""
     H = stress.hm.schwarzschild(rg=1.0)
     q0, p0 = stress.schwarzschild_ray([1e4], r0=1e8)
-    res = stress.core.integrate(H, q0, p0, step=0.01, steps=2000, method="gauss4",
-                                adaptive=True)
+    res = stress.core.integrate(H, q0, p0, step=0.01, steps=2000, method="gauss4", adaptive=True)
     r_end = res.q[0, 1]
     bend = res.q[0, 3] - (math.pi - math.asin(1e-4) - math.asin(1e4 / r_end))
     exact = 2e-4 + 15 * math.pi / 16 * 1e-8
@@ -88,8 +86,9 @@ def test_rays_over_the_kerr_pole_in_boyer_lindquist():
 def test_spin_09999_and_grazing_rays():
     """a/M = 0.9999: a small image without failures or NaN; rays grazing the horizon of
     a/M = 0.9 (Kerr–Schild) are captured inside r+ with p_t and L_z conserved."""
-    cam = stress.core.Camera.perspective(position=(0, -30, 1), look_at=(0, 0, 0),
-                                         up=(0, 0, 1), fov_deg=25, width=8, height=8)
+    cam = stress.core.Camera.perspective(
+        position=(0, -30, 1), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=25, width=8, height=8
+    )
     scene = stress.core.Scene(model=stress.hm.kerr(rg=1.0, a=0.49995, chart="kerr_schild"))
     out = stress.core.render(scene, cam, method="gauss4", tolerance=1e-6, passes=("ending",))
     assert stress.image_check(out).startswith("no NaN") and out.summary["failed"] == 0
@@ -100,8 +99,7 @@ def test_spin_09999_and_grazing_rays():
     p0 = np.stack([np.zeros(2), np.ones(2), np.zeros(2), np.zeros(2)], 1)
     p0[:, 0] = stress._null_pt(H, q0, p0)
     assert np.abs(H.value(q0, p0)).max() < 1e-12
-    res = stress.core.integrate(H, q0, p0, step=0.01, steps=2500, method="gauss4",
-                                adaptive=True)
+    res = stress.core.integrate(H, q0, p0, step=0.01, steps=2500, method="gauss4", adaptive=True)
     assert res.captured.all() and not res.failed.any()
     assert (H.radius_soa(res.q.T) < H.horizon).all()
     d = stress.drift(H, q0, p0, res)

@@ -22,14 +22,16 @@ def mirage_scene():
     """A custom medium from text (its model is a closure over parsed expressions: it
     cannot be pickled, so processes must inherit it) with a textured object."""
     model = hm.medium("1 + 0.4*exp(-(x**2 + y**2 + z**2)/4)", bounds=((-6,) * 3, (6,) * 3))
-    board = core.Plane(point=(0, 6, 0), normal=(0, -1, 0), u_axis=(1, 0, 0),
-                       color=core.checker(8, 8))
+    board = core.Plane(
+        point=(0, 6, 0), normal=(0, -1, 0), u_axis=(1, 0, 0), color=core.checker(8, 8)
+    )
     return core.Scene(model=model, objects=[board], background="procedural")
 
 
 def camera(size=64):
-    return core.Camera.perspective(position=(0, -12, 1), look_at=(0, 0, 0), up=(0, 0, 1),
-                                   fov_deg=50, width=size, height=size)
+    return core.Camera.perspective(
+        position=(0, -12, 1), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=50, width=size, height=size
+    )
 
 
 @needs_fork
@@ -53,9 +55,17 @@ def test_processes_threads_and_inline_give_the_same_image():
 def test_processes_report_progress_of_every_ray_and_cancel():
     scene, cam = mirage_scene(), camera(128)  # 8 chunks of 2048 rays
     seen = []
-    out = core.render(scene, cam, workers=2, parallel="processes", method="rk4", tolerance=1e-4,
-                      chunk_size=2048,
-                      passes=("steps",), progress=lambda done, total: seen.append((done, total)))
+    out = core.render(
+        scene,
+        cam,
+        workers=2,
+        parallel="processes",
+        method="rk4",
+        tolerance=1e-4,
+        chunk_size=2048,
+        passes=("steps",),
+        progress=lambda done, total: seen.append((done, total)),
+    )
     assert not out.cancelled
     assert [t for _, t in seen] == [cam.n_pixels] * 8
     assert [d for d, _ in seen] == sorted(d for d, _ in seen) and seen[-1][0] == cam.n_pixels
@@ -66,10 +76,18 @@ def test_processes_report_progress_of_every_ray_and_cancel():
         polled_from.add(threading.get_ident())
         return len(seen) > 8
 
-    out = core.render(scene, cam, workers=2, parallel="processes", method="rk4", tolerance=1e-4,
-                      chunk_size=2048,
-                      passes=("steps", "ending"), should_cancel=cancel_after_first_chunk,
-                      progress=lambda done, total: seen.append((done, total)))
+    out = core.render(
+        scene,
+        cam,
+        workers=2,
+        parallel="processes",
+        method="rk4",
+        tolerance=1e-4,
+        chunk_size=2048,
+        passes=("steps", "ending"),
+        should_cancel=cancel_after_first_chunk,
+        progress=lambda done, total: seen.append((done, total)),
+    )
     assert out.cancelled
     assert polled_from == {caller}  # never from a worker process (it may touch a UI)
     traced = out.passes["ending"] >= 0
@@ -94,6 +112,7 @@ def test_an_error_in_a_worker_process_reaches_the_caller():
 @needs_fork
 def test_without_a_process_pool_the_chunks_run_in_threads(monkeypatch):
     """No working semaphores (a container without /dev/shm): threads, same results."""
+
     def no_pool(*args):
         raise workers._PoolUnavailable("no semaphores")
 
@@ -124,8 +143,11 @@ def test_a_fork_that_fails_falls_back_to_threads(monkeypatch):
 
     monkeypatch.setattr(os, "fork", fork_once)
     spans = [(0, 3), (3, 5), (5, 9)]
-    out = dict(workers.run_chunks(lambda span, cancel: span[1] - span[0], spans, "processes",
-                                  2, workers.CancelLatch(None)))
+    out = dict(
+        workers.run_chunks(
+            lambda span, cancel: span[1] - span[0], spans, "processes", 2, workers.CancelLatch(None)
+        )
+    )
     assert out == {(0, 3): 3, (3, 5): 2, (5, 9): 4} and forks == [1]
     monkeypatch.undo()
     for child in multiprocessing.active_children():
@@ -143,8 +165,9 @@ def test_finished_chunks_are_not_kept_by_the_pool(kind):
     nothing in the pool holds it (a 1080p frame's results are 260 MB)."""
     spans = [(s, s + 1000) for s in range(0, 8000, 1000)]
     alive = []
-    for _span, result in workers.run_chunks(_chunk_of_rays, spans, kind, 2,
-                                            workers.CancelLatch(None)):
+    for _span, result in workers.run_chunks(
+        _chunk_of_rays, spans, kind, 2, workers.CancelLatch(None)
+    ):
         assert result.shape == (1000, 16)
         alive.append(weakref.ref(result))
         del result
