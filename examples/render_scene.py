@@ -44,7 +44,11 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument("--height", type=int, default=120)
     parser.add_argument("--spin", type=float, default=0.0, help="a/M; nonzero = Kerr")
     parser.add_argument("--tolerance", type=float, default=1e-5)
-    parser.add_argument("--method", default="gauss4")
+    parser.add_argument(
+        "--method",
+        default="AUTO",
+        help="integrator (AUTO: the add-on's default, the measured cheapest for the model)",
+    )
     return parser.parse_args(argv)
 
 
