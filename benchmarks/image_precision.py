@@ -291,15 +291,21 @@ def main(argv: list[str] | None = None) -> list[str]:
     parser.add_argument("--scenes", default="schwarzschild,mirage")
     parser.add_argument("--out", default=OUT)
     args = parser.parse_args(argv)
-    os.makedirs(args.out, exist_ok=True)
-    found = []
-    for name in [s for s in args.scenes.split(",") if s]:
-        rows = run_scene(name, args.quick, args.out)
-        write_csv(os.path.join(args.out, f"image_{name}.csv"), rows)
-        plot(rows, os.path.join(args.out, f"image_{name}.png"))
-        found += verdict(rows)
+    found = run_scenes([s for s in args.scenes.split(",") if s], args.quick, args.out)
     print("image verdicts:")
     print("\n".join(found))
+    return found
+
+
+def run_scenes(names: list[str], quick: bool, out: str) -> list[str]:
+    """Run, write (image_<scene>.csv and .png under ``out``) and judge the scenes."""
+    os.makedirs(out, exist_ok=True)
+    found = []
+    for name in names:
+        rows = run_scene(name, quick, out)
+        write_csv(os.path.join(out, f"image_{name}.csv"), rows)
+        plot(rows, os.path.join(out, f"image_{name}.png"))
+        found += verdict(rows)
     return found
 
 

@@ -45,6 +45,7 @@ import os
 import time
 from dataclasses import dataclass, fields
 
+import image_precision
 import numpy as np
 
 import core
@@ -901,6 +902,8 @@ def main(argv: list[str] | None = None) -> None:
         )
         rows, _ = image_level(size, args.quick, args.out)
         found += _image_verdict(rows)
+        print("image: Schwarzschild and mirage scenes (benchmarks/image_precision.py)")
+        found += image_precision.run_scenes(["schwarzschild", "mirage"], args.quick, args.out)
     print("verdict (cheapest method at each accuracy):")
     print("\n".join(found))
     print(f"done in {time.perf_counter() - start:.0f} s; results in {args.out}/")
