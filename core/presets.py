@@ -39,10 +39,9 @@ MIRAGE_VIEWS = {
 """The seed's two mirage views (Figs. 10 and 11), shared by examples, benchmarks and tests."""
 
 
-def mirage_scene(index: str | None, board_z: tuple[float, float]) -> Scene:
-    """A banded board (red top, green, white bottom) 20 m away on a checkered ground, seen
-    through the literal-form medium ``index`` within MIRAGE_BOX (None: no medium)."""
-    z0, z1 = board_z
+def band_texture(z0: float, z1: float):
+    """A texture (uv, position, normal) -> RGBA of three horizontal bands between heights z0
+    and z1: red (top third), green, white (bottom third)."""
 
     def paint(uv, p, n):
         c = np.zeros((len(p), 4))
@@ -53,6 +52,14 @@ def mirage_scene(index: str | None, board_z: tuple[float, float]) -> Scene:
         c[f <= 1 / 3, :3] = 1.0
         return c
 
+    return paint
+
+
+def mirage_scene(index: str | None, board_z: tuple[float, float]) -> Scene:
+    """A banded board (red top, green, white bottom) 20 m away on a checkered ground, seen
+    through the literal-form medium ``index`` within MIRAGE_BOX (None: no medium)."""
+    z0, z1 = board_z
+    paint = band_texture(z0, z1)
     board = Plane(
         point=(20, 0, 0.5 * (z0 + z1)),
         normal=(-1, 0, 0),

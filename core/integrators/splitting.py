@@ -50,6 +50,11 @@ class SplitSystem(System):
         """Exact flow of the momentum part T over t (p fixed)."""
         raise NotImplementedError
 
+    def value_gradient_soa(self, Q: np.ndarray, P: np.ndarray) -> tuple[Any, Any, Any]:
+        """(K, dK/dq, dK/dp) from value_soa and gradient_soa."""
+        dq, dp = self.gradient_soa(Q, P)
+        return self.value_soa(Q, P), dq, dp
+
 
 def _bm4() -> tuple[tuple[float, ...], tuple[float, ...]]:
     """SRKN_6^b of Blanes & Moan (2002): (kicks b_0..b_6, drifts a_0..a_5)."""

@@ -67,12 +67,3 @@ class OpticalSplit(SplitSystem):
             if self.clocked:
                 dp[3] = w
         return dq, dp
-
-    def value_gradient_soa(self, Q: np.ndarray, P: np.ndarray):
-        """(K, ∂K/∂q, ∂K/∂p)."""
-        dq, dp = self.gradient_soa(Q, P)
-        return self.value_soa(Q, P), dq, dp
-
-    def time_scale_soa(self, Q: np.ndarray):
-        """g = 1: K is already transformed."""
-        return np.ones(Q.shape[1]), np.zeros_like(Q)

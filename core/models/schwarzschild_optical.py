@@ -133,12 +133,3 @@ class LogarithmicSplit(SplitSystem):
         if "p" in wrt:
             dp = P / (0.5 * np.einsum("ij,ij->j", P, P) - self.H0)
         return dq, dp
-
-    def value_gradient_soa(self, Q: np.ndarray, P: np.ndarray):
-        """(Λ, ∂Λ/∂q, ∂Λ/∂p)."""
-        dq, dp = self.gradient_soa(Q, P)
-        return self.value_soa(Q, P), dq, dp
-
-    def time_scale_soa(self, Q: np.ndarray):
-        """g = 1: Λ is already transformed."""
-        return np.ones(Q.shape[1]), np.zeros_like(Q)

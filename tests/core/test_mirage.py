@@ -11,19 +11,12 @@ import numpy as np
 
 import core
 from core import hamiltonians as hm
-from core.presets import MIRAGE_EQ17_INDEX, MIRAGE_EQ18_INDEX
+from core.presets import MIRAGE_EQ17_INDEX, MIRAGE_EQ18_INDEX, band_texture
 
 
 def banded_board(distance, z0, z1):
-    def paint(uv, p, n):
-        c = np.zeros((len(p), 4))
-        c[:, 3] = 1.0
-        f = (p[:, 2] - z0) / (z1 - z0)
-        c[f > 2 / 3, 0] = 1.0
-        c[(f <= 2 / 3) & (f > 1 / 3), 1] = 1.0
-        c[f <= 1 / 3, :3] = 1.0
-        return c
-
+    """The mirage scenes' banded board (core.presets.band_texture) as a triangle mesh."""
+    paint = band_texture(z0, z1)
     v = np.array(
         [[distance, -0.5, z0], [distance, 0.5, z0], [distance, 0.5, z1], [distance, -0.5, z1]]
     )
