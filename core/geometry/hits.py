@@ -40,6 +40,11 @@ class Hits:
     def __len__(self) -> int:
         return self.hit.shape[0]
 
+    def assign(self, rows: np.ndarray, other: Hits, other_rows: np.ndarray) -> None:
+        """Replace the hits ``rows`` by ``other``'s ``other_rows``, in place (every field)."""
+        for name in ("hit", "t", "object_id", "position", "normal", "uv", "color"):
+            getattr(self, name)[rows] = getattr(other, name)[other_rows]
+
     def merge(self, rows: np.ndarray, other: Hits, object_id: int | None = None) -> None:
         """Take other's hits where nearer, in place; ``rows``: integer indices of other's rows.
 

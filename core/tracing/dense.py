@@ -16,13 +16,16 @@ from __future__ import annotations
 import numpy as np
 
 MAX_PIECES = 16
-"""At most this many chords per step (the deviation then shrinks 256-fold)."""
+"""At most this many chords per step to look for surfaces (the deviation shrinks 256-fold)."""
+REFINE_PIECES, REFINE_LEVELS = 16, 2
+"""A chord that hits a surface is cut again into REFINE_PIECES chords on the cubic, up to
+REFINE_LEVELS times while they still deviate more than allowed: the hit is then found on
+the cubic to within 1/65536 of the chord's deviation, for the rays that end there only."""
 
 
-def hermite(
-    X0: np.ndarray, V0: np.ndarray, X1: np.ndarray, V1: np.ndarray, h, t: float
-) -> np.ndarray:
-    """The cubic Hermite interpolant at t in [0, 1] (each array (3, M); h float or (M,))."""
+def hermite(X0: np.ndarray, V0: np.ndarray, X1: np.ndarray, V1: np.ndarray, h, t) -> np.ndarray:
+    """The cubic Hermite interpolant at t in [0, 1] (each array (3, M); h and t a float or
+    per ray (M,))."""
     t2, t3 = t * t, t * t * t
     return (
         (2 * t3 - 3 * t2 + 1) * X0
@@ -30,6 +33,24 @@ def hermite(
         + (3 * t2 - 2 * t3) * X1
         + (t3 - t2) * h * V1
     )
+
+
+class CubicPath:
+    """The cubic Hermite path of M rays' steps (see the module); points by (t, rays)."""
+
+    def __init__(self, X0: np.ndarray, V0: np.ndarray, X1: np.ndarray, V1: np.ndarray, h):
+        self.X0, self.V0, self.X1, self.V1 = X0, V0, X1, V1
+        self.h = np.broadcast_to(np.asarray(h, dtype=np.float64), X0.shape[1:])
+
+    @property
+    def size(self) -> int:
+        """Number of rays."""
+        return self.X0.shape[1]
+
+    def at(self, t, rays: np.ndarray) -> np.ndarray:
+        """Points (3, len(rays)) at t (a float or per ray) of the rays ``rays``."""
+        return hermite(self.X0[:, rays], self.V0[:, rays], self.X1[:, rays],
+                       self.V1[:, rays], self.h[rays], t)  # fmt: skip
 
 
 def chord_deviation(V0: np.ndarray, V1: np.ndarray, h) -> np.ndarray:

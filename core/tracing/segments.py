@@ -62,7 +62,13 @@ class SceneGeometry:
     def record(self, rows: np.ndarray, a: np.ndarray, b: np.ndarray, out: RayResults) -> np.ndarray:
         """Cast world segments a -> b of rays ``rows``: composite the volumes crossed and
         record surface hits in ``out``. Returns which segments hit a surface (M,)."""
-        hits = self.cast(a, b)
+        return self.record_hits(rows, a, b, self.cast(a, b), out)
+
+    def record_hits(
+        self, rows: np.ndarray, a: np.ndarray, b: np.ndarray, hits: Hits, out: RayResults
+    ) -> np.ndarray:
+        """Record ``hits`` (of segments a -> b, possibly refined) and the volumes' light up
+        to them in ``out``. Returns which segments hit a surface (M,)."""
         rad, trans = self.volume_light(a, b, hits)
         out.accumulate(rows, rad, trans)
         h = hits.hit

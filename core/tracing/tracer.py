@@ -19,6 +19,7 @@ import numpy as np
 
 from .. import checks, integrators
 from ..charts import chart_for
+from ..geometry import Hits
 from ..observer import medium_momenta, spacetime_momenta
 from . import dense
 from .regions import Region, region_for
@@ -256,29 +257,65 @@ class Tracer:
         X0, X1 = X_prev[:, c], X[:, c]
         V0, V1, h = step_ends.velocities(c)
         allowed = CHORD_SHARE * self.options.tolerance * np.linalg.norm(X0 - camera[:, c], axis=0)
-        k = dense.pieces(dense.chord_deviation(V0, V1, h), allowed)
+        deviation = dense.chord_deviation(V0, V1, h)
+        k = dense.pieces(deviation, allowed)
         for n in np.unique(k):
             g = np.flatnonzero(k == n)
-            hn = h if np.ndim(h) == 0 else h[g]
-            points = (
-                [X0[:, g]]
-                + [
-                    dense.hermite(X0[:, g], V0[:, g], X1[:, g], V1[:, g], hn, j / n)
-                    for j in range(1, n)
-                ]
-                + [X1[:, g]]
-            )
-            alive = np.ones(g.size, dtype=bool)
-            for a, b in zip(points[:-1], points[1:], strict=True):
-                live = np.flatnonzero(alive)
-                hit = self.geometry.record(
-                    idx[c[g[live]]], self._to_world(a[:, live].T), self._to_world(b[:, live].T), out
-                )
-                hit_rows[c[g[live[hit]]]] = True
-                alive[live[hit]] = False
-                if not alive.any():
-                    break
+            hg = h if np.ndim(h) == 0 else h[g]
+            path = dense.CubicPath(X0[:, g], V0[:, g], X1[:, g], V1[:, g], hg)
+            limits = (deviation[g] / (n * n), allowed[g])
+            hit_rows[c[g]] = self._path_hits(idx[c[g]], path, int(n), limits, out)
         return hit_rows
+
+    def _path_hits(self, rows, path: dense.CubicPath, n: int, limits, out: RayResults):
+        """Cast the n chords of each ray's cubic path in order (rays ``rows``), refine the
+        chords that hit on the cubic, record hits and volume light. -> (M,) bool: hit."""
+        hit = np.zeros(path.size, dtype=bool)
+        alive = np.ones(path.size, dtype=bool)
+        for j in range(n):
+            live = np.flatnonzero(alive)
+            a = self._to_world(path.at(j / n, live).T)
+            b = self._to_world(path.at((j + 1) / n, live).T)
+            hits = self.geometry.cast(a, b)
+            if hits.hit.any():
+                self._refine(path, live, hits, j / n, 1.0 / n, [x[live] for x in limits])
+            got = self.geometry.record_hits(rows[live], a, b, hits, out)
+            hit[live[got]] = True
+            alive[live[got]] = False
+            if not alive.any():
+                break
+        return hit
+
+    def _refine(self, path: dense.CubicPath, live, hits, t0: float, width: float, limits):
+        """Where the chord [t0, t0 + width] of the rays ``live`` hit, find the hit again on
+        REFINE_PIECES finer chords of the cubic (REFINE_LEVELS times at most, while they
+        deviate more than allowed); ``hits`` takes the refined hits, in place. A ray whose
+        finer chords all miss (a grazing edge) keeps its chord's hit."""
+        deviation, allowed = limits
+        todo = np.flatnonzero(hits.hit & (deviation > allowed))
+        lo = np.full(todo.size, t0)
+        m = dense.REFINE_PIECES
+        for _ in range(dense.REFINE_LEVELS):
+            if todo.size == 0:
+                return
+            width /= m
+            found, start = Hits.miss(todo.size), np.full(todo.size, np.nan)
+            for i in range(m):
+                open_ = np.flatnonzero(~found.hit)
+                if open_.size == 0:
+                    break
+                ta = lo[open_] + i * width
+                rays = live[todo[open_]]
+                sub = self.geometry.cast(self._to_world(path.at(ta, rays).T),
+                                         self._to_world(path.at(ta + width, rays).T))  # fmt: skip
+                got = open_[sub.hit]
+                found.assign(got, sub, np.flatnonzero(sub.hit))
+                start[got] = ta[sub.hit]
+            ok = found.hit
+            hits.assign(todo[ok], found, np.flatnonzero(ok))
+            deviation = deviation / (m * m)
+            keep = ok & (deviation[todo] > allowed[todo])
+            todo, lo = todo[keep], start[keep]
 
     def _finish_energy(self, out, rows, Q, P, H0):
         with np.errstate(all="ignore"):
