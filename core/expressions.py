@@ -11,6 +11,9 @@ Everything else (attribute access, subscripts, lambdas, comprehensions, calls of
 anything not whitelisted, unknown names, non-ASCII characters, absurd sizes or nesting)
 raises :class:`ExpressionError`, whose message names the problem and its column; no
 other exception escapes, whatever the text (tests/core/test_expressions_fuzz.py).
+
+(Over 400 lines on purpose: the whitelist, its checks and the compiler to closures are one
+subject, and reading them together is how the language is audited.)
 """
 
 from __future__ import annotations
