@@ -19,7 +19,6 @@ import numpy as np
 
 from .. import checks, integrators
 from ..charts import chart_for
-from ..geometry import Hits
 from ..observer import medium_momenta, spacetime_momenta
 from . import dense
 from .regions import Region, region_for
@@ -288,9 +287,9 @@ class Tracer:
 
     def _refine(self, path: dense.CubicPath, live, hits, t0: float, width: float, limits):
         """Where the chord [t0, t0 + width] of the rays ``live`` hit, find the hit again on
-        REFINE_PIECES finer chords of the cubic (REFINE_LEVELS times at most, while they
-        deviate more than allowed); ``hits`` takes the refined hits, in place. A ray whose
-        finer chords all miss (a grazing edge) keeps its chord's hit."""
+        REFINE_PIECES finer chords of the cubic, all cast at once (REFINE_LEVELS times at
+        most, while they deviate more than allowed); ``hits`` takes the refined hits, in
+        place. A ray whose finer chords all miss (a grazing edge) keeps its chord's hit."""
         deviation, allowed = limits
         todo = np.flatnonzero(hits.hit & (deviation > allowed))
         lo = np.full(todo.size, t0)
@@ -299,23 +298,17 @@ class Tracer:
             if todo.size == 0:
                 return
             width /= m
-            found, start = Hits.miss(todo.size), np.full(todo.size, np.nan)
-            for i in range(m):
-                open_ = np.flatnonzero(~found.hit)
-                if open_.size == 0:
-                    break
-                ta = lo[open_] + i * width
-                rays = live[todo[open_]]
-                sub = self.geometry.cast(self._to_world(path.at(ta, rays).T),
-                                         self._to_world(path.at(ta + width, rays).T))  # fmt: skip
-                got = open_[sub.hit]
-                found.assign(got, sub, np.flatnonzero(sub.hit))
-                start[got] = ta[sub.hit]
-            ok = found.hit
-            hits.assign(todo[ok], found, np.flatnonzero(ok))
+            rays = np.tile(live[todo], m)  # sub-chord i of every ray, i = 0..m-1
+            ta = np.repeat(np.arange(m) * width, todo.size) + np.tile(lo, m)
+            sub = self.geometry.cast(self._to_world(path.at(ta, rays).T),
+                                     self._to_world(path.at(ta + width, rays).T))  # fmt: skip
+            got = sub.hit.reshape(m, todo.size)
+            ok = got.any(axis=0)
+            first = got.argmax(axis=0)[ok] * todo.size + np.flatnonzero(ok)
+            hits.assign(todo[ok], sub, first)
             deviation = deviation / (m * m)
-            keep = ok & (deviation[todo] > allowed[todo])
-            todo, lo = todo[keep], start[keep]
+            keep = deviation[todo[ok]] > allowed[todo[ok]]
+            todo, lo = todo[ok][keep], ta[first][keep]
 
     def _finish_energy(self, out, rows, Q, P, H0):
         with np.errstate(all="ignore"):
