@@ -18,16 +18,18 @@ TOLERANCE_RANGE = (1e-14, 0.1)
 estimates lose their meaning, below 1e-14 float64 rays cannot be that accurate (and the
 steps take hours). The add-on's Tolerance property has the same range."""
 
-TIME_SCALE_REFUSED = {
-    name: f"method '{name}' cannot render a black hole (or any model with a Poincaré time "
-    "scale g(q)): Tao's method binds two copies of each ray with a fixed strength, and "
-    "on the time-transformed Hamiltonian K = g (H - H0) that the renderer integrates "
-    "the copies drift apart and the rays fail (on a Kerr frame, every one); choose "
-    "gauss4 (the default), a Yoshida or Suzuki composition or rk4 (media, metrics "
-    "without a time scale and core.integrate still accept it)"
-    for name in ("tao2", "tao4")
-}
-"""Methods that core.render refuses on time-scaled models, with the reason shown."""
+
+def time_scale_refusal(name: str) -> str:
+    """Why a method that does not follow time-scaled rays (``Method.follows_time_scale``
+    False: Tao's) is refused for a black hole."""
+    return (
+        f"method '{name}' cannot render a black hole (or any model with a Poincaré time "
+        "scale g(q)): Tao's method binds two copies of each ray with a fixed strength, and "
+        "on the time-transformed Hamiltonian K = g (H - H0) that the renderer integrates "
+        "the copies drift apart and the rays fail (on a Kerr frame, every one); choose "
+        "gauss4 (the default), a Yoshida or Suzuki composition or rk4 (media, metrics "
+        "without a time scale and core.integrate still accept it)"
+    )
 
 
 def _interval(lo: float, hi: float, lo_open: bool, hi_open: bool) -> str:
@@ -134,11 +136,14 @@ def check_tolerance(tolerance: Any, name: str = "tolerance") -> float:
 
 
 def check_render_method(method: Any, time_scaled: bool) -> None:
-    """ValueError if ``method`` (a name or a method object) cannot render a model with a
-    Poincaré time scale (``time_scaled``; TIME_SCALE_REFUSED)."""
-    reason = TIME_SCALE_REFUSED.get(method if isinstance(method, str) else method.name)
-    if reason is not None and time_scaled:
-        raise ValueError(reason)
+    """ValueError if ``method`` (a name, e.g. the add-on's, or a method object) cannot render
+    a model with a Poincaré time scale (``time_scaled``): its ``follows_time_scale``."""
+    from .integrators import METHODS  # (the integrators use these checks too)
+
+    if isinstance(method, str):
+        method = METHODS.get(method)  # other names (the add-on's "AUTO"): nothing to refuse
+    if time_scaled and method is not None and not method.follows_time_scale:
+        raise ValueError(time_scale_refusal(method.name))
 
 
 def check_render_options(tolerance: Any, step: Any, max_steps: Any) -> None:

@@ -114,6 +114,9 @@ class Method:
     explicit: bool = False
     error_constant: float | None = None
     adaptive: bool = False
+    follows_time_scale: bool = True
+    """Whether it follows rays of a Poincaré-transformed K = g (H - H0) (Tao's binding of
+    two copies does not: the renderer refuses it for black holes)."""
 
     def __init__(self, **options: Any) -> None:
         self.options = dict(options)

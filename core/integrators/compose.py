@@ -107,6 +107,11 @@ class Composition(Method):
         """Explicit when the base is."""
         return self.base.explicit
 
+    @property
+    def follows_time_scale(self) -> bool:  # type: ignore[override]
+        """As the base does."""
+        return self.base.follows_time_scale
+
     def init(self, H: Any, Q: np.ndarray, P: np.ndarray) -> State:
         """The base method's initial state."""
         return self.base.init(H, Q, P)

@@ -25,6 +25,7 @@ class Tao2(Method):
 
     name, order, symplectic, explicit = "tao2", 2, True, True
     error_constant = None  # with the default binding it does not follow rays around a mass
+    follows_time_scale = False
     _pattern: Pattern = (("A", 0.5), ("B", 0.5), ("C", 1.0), ("B", 0.5), ("A", 0.5))
 
     def __init__(self, omega: float = 5.0) -> None:

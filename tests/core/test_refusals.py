@@ -191,6 +191,15 @@ def test_tao_is_refused_for_time_scaled_models(method, model):
         core.render(core.Scene(model=model), small_camera(), method=core.get_method(method))
 
 
+def test_a_composition_of_tao_is_refused_like_tao():
+    """The refusal reads the method's interface (``follows_time_scale``, a composition asks
+    its base), not its name: yoshida4 with Tao's base fails on black holes like tao4."""
+    method = core.get_method("yoshida4", base="tao2")
+    assert not method.follows_time_scale and core.get_method("yoshida4").follows_time_scale
+    with pytest.raises(ValueError, match="method 'yoshida4' cannot render a black hole"):
+        core.render(core.Scene(model=hm.schwarzschild(1.0)), small_camera(), method=method)
+
+
 def test_tao_still_renders_a_medium_like_gauss4():
     """Without a time scale Tao's rays are right: the same endings and colours as gauss4."""
     scene = core.Scene(
