@@ -278,6 +278,9 @@ def plot(rows: list[dict], path: str) -> None:
 
 
 def write_csv(path: str, rows: list[dict]) -> None:
+    """Rows (dicts with the same keys) as a CSV file with a header; nothing if no rows."""
+    if not rows:
+        return
     with open(path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()

@@ -607,20 +607,11 @@ class AdaptiveDopri5(Method):
         return (Z, F, last), ok
 
 
-def kerr_scene() -> core.Scene:
-    """The README's Kerr scene: a/M = 0.9 (Kerr–Schild), a red sphere behind the hole."""
-    return core.Scene(
-        model=hm.kerr(rg=RG, a=0.45, chart="kerr_schild"),
-        objects=[core.Sphere(center=(0, 8, 0), radius=1, color=(1, 0, 0, 1))],
-        background="procedural",
-    )
-
-
 def trace_image(
     size: int, method, tolerance: float, step=None, region_radius=None, chunk: int = 8192
 ):
     """Trace every pixel of the Kerr scene; -> (ending, direction, steps, seconds)."""
-    scene = kerr_scene()
+    scene = image_precision.kerr_scene()
     cam = core.Camera.perspective(
         position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=40, width=size, height=size
     )
@@ -727,7 +718,7 @@ def image_level(size: int, quick: bool, out: str):
                 f"{row['failed']} failed",
                 flush=True,
             )
-    _write_csv(os.path.join(out, "image_error.csv"), rows)
+    image_precision.write_csv(os.path.join(out, "image_error.csv"), rows)
     _plot_image(rows, size, os.path.join(out, "image_error.png"))
     return rows, ref_seconds
 
@@ -794,15 +785,6 @@ def _kept_rows(path: str, rerun: set) -> list[dict]:
         return []
     with open(path) as f:
         return [row for row in csv.DictReader(f) if row["problem"] not in rerun]
-
-
-def _write_csv(path: str, rows: list[dict]) -> None:
-    if not rows:
-        return
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0]))
-        w.writeheader()
-        w.writerows(rows)
 
 
 def build_problems(names, quick: bool):
@@ -883,7 +865,7 @@ def main(argv: list[str] | None = None) -> None:
             tput.append(dict(problem=prob.name, method=m, ns_per_ray_step=round(ns, 1)))
     if all_runs:
         rerun = {r.problem for r in all_runs}  # other problems' rows in the CSVs are kept
-        _write_csv(
+        image_precision.write_csv(
             os.path.join(args.out, "work_precision.csv"),
             _kept_rows(os.path.join(args.out, "work_precision.csv"), rerun)
             + [
@@ -892,7 +874,7 @@ def main(argv: list[str] | None = None) -> None:
             ],
         )
         tput = _kept_rows(os.path.join(args.out, "throughput.csv"), rerun) + tput
-        _write_csv(os.path.join(args.out, "throughput.csv"), tput)
+        image_precision.write_csv(os.path.join(args.out, "throughput.csv"), tput)
         _print_throughput(tput)
     if "image" in names:
         size = args.image_size or (64 if args.quick else 256)
