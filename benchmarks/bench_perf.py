@@ -355,7 +355,9 @@ def magnification(scene, options, origins, directions, reference, pixel, axes, d
     return np.maximum(*mags)
 
 
-def bench_calibrate(n: int = 1500) -> None:
+def bench_calibrate(
+    n: int = 1500, names: tuple[str, ...] | None = None, scale: float = 1.0
+) -> None:
     """C in err = C h^order for each method, err the largest equivalent direction error.
 
     The equivalent error of an escape direction is its error divided by the lens's own
@@ -379,10 +381,10 @@ def bench_calibrate(n: int = 1500) -> None:
     axes = (cam.frame.right, cam.frame.up)
     mag = magnification(scene, ref_opts, origins, directions, ref, pixel, axes)
     line("magnification median / max", f"{np.median(mag):.2f} / {mag.max():.0f}")
-    for name in METHODS:
+    for name in names or tuple(METHODS):
         method = get_method(name)
         p = method.order
-        h_big = {1: 0.004, 2: 0.03}.get(p, 0.2)
+        h_big = scale * {1: 0.004, 2: 0.03}.get(p, 0.2)
         for h in (h_big, 0.5 * h_big):
             rays = Tracer(
                 scene, TraceOptions(method=name, step=h, region_radius=3000.0, max_steps=10**6)

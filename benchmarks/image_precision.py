@@ -14,6 +14,7 @@ The verdict is the cheapest run with 99 % of the pixels within 0.1, 0.01 and 0.0
 at most 1e-4 of them ending differently). The scenes:
 
 - ``kerr``: the README's scene, a/M = 0.9 (Kerr–Schild), a red sphere behind the hole;
+- ``kerr998``: the same at a/M = 0.998;
 - ``schwarzschild``: the same camera, a = 0, a checker board behind the hole;
 - ``mirage``: the seed's Fig. 10 view (hot ground, Eq. 17, literal form).
 
@@ -54,10 +55,11 @@ def _black_hole_camera(width: int, height: int) -> core.Camera:
     )
 
 
-def kerr_scene() -> core.Scene:
-    """The README's Kerr scene: a/M = 0.9 (Kerr–Schild), a red sphere behind the hole."""
+def kerr_scene(a: float = 0.45) -> core.Scene:
+    """The README's Kerr scene: a/M = 0.9 (Kerr–Schild, rg = 1), a red sphere behind the
+    hole; another spin ``a`` (a/M = 2 a)."""
     return core.Scene(
-        model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"),
+        model=hm.kerr(rg=1.0, a=a, chart="kerr_schild"),
         objects=[core.Sphere(center=(0, 8, 0), radius=1, color=(1, 0, 0, 1))],
         background="procedural",
     )
@@ -94,14 +96,32 @@ def scene_case(name: str, quick: bool) -> SceneCase:
         fov = MIRAGE_VIEWS["fig10"][4]
         return SceneCase(scene, cam, math.radians(fov) / w, None, _runs(quick, media=True))
     size = 48 if quick else 192
-    scene = kerr_scene() if name == "kerr" else schwarzschild_scene()
-    return SceneCase(
-        scene,
-        _black_hole_camera(size, size),
-        math.radians(40.0) / size,
-        REGION,
-        _runs(quick, media=False, splits=name == "schwarzschild"),
-    )
+    if name in KERR_SPINS:
+        scene, runs = kerr_scene(KERR_SPINS[name]), _kerr_runs(quick)
+    else:
+        scene, runs = schwarzschild_scene(), _runs(quick, media=False)
+    return SceneCase(scene, _black_hole_camera(size, size), math.radians(40.0) / size, REGION, runs)
+
+
+KERR_SPINS = {"kerr": 0.45, "kerr998": 0.499}
+"""Kerr scenes by name: spin a (rg = 1; a/M = 0.9 and 0.998)."""
+
+
+def _kerr_runs(quick: bool):
+    """Kerr's runs: the Kerr–Schild methods and the splittings of the Boyer–Lindquist
+    square-root split (core/models/kerr_split.py), on one grid of tolerances from 1e-2."""
+    if quick:
+        grid = (1e-3, 1e-5)
+        return [(m, grid) for m in ("rk4", "dopri5", "gauss4", "blanes_moan_s6", "blanes_moan_s10")]
+    grid = (1e-2, 1e-3, 1e-4, 1e-5, 1e-6, 1e-8)
+    return [
+        ("rk4", grid),
+        ("dopri5", grid),
+        ("gauss4", (1e-2, 1e-3, 1e-4, 1e-6, 1e-8)),
+        ("blanes_moan_s6", grid),
+        ("blanes_moan_s10", grid),
+        ("blanes_moan6", (1e-4, 1e-6)),
+    ]
 
 
 def _runs(quick: bool, media: bool, splits: bool = True):

@@ -41,6 +41,10 @@ class CartesianChart:
         """Cartesian velocity (3, N) from coordinate velocity dq/ds at S."""
         return dS
 
+    def coord_time(self, S: np.ndarray, D: np.ndarray) -> np.ndarray:
+        """Coordinate-time component of Cartesian vectors D (the same time slices): 0."""
+        return np.zeros(S.shape[1])
+
     def axial_killing(self, S: np.ndarray) -> np.ndarray:
         """Spatial components of the rotation generator about z: (-y, x, 0)."""
         return np.stack([-S[1], S[0], np.zeros_like(S[0])])
@@ -104,7 +108,97 @@ class SpheroidalChart:
         J = self.jacobian(S)
         return np.einsum("nij,jn->in", J, dS)
 
+    def coord_time(self, S: np.ndarray, D: np.ndarray) -> np.ndarray:
+        """Coordinate-time component of Cartesian vectors D (the same time slices): 0."""
+        return np.zeros(S.shape[1])
+
     def axial_killing(self, S):
+        """Components of d/dphi: (0, 0, 1)."""
+        z = np.zeros_like(S[0])
+        return np.stack([z, z, np.ones_like(z)])
+
+
+class KerrBLChart:
+    """The tracer's Kerr–Schild Cartesian frame <-> Boyer–Lindquist (s, theta, phi) of Kerr.
+
+    s is the BL radius r in the tortoise-like form r = M + b cosh s, b = sqrt(M^2 - a^2)
+    (ds = dr / sqrt(Delta): Delta = b^2 sinh^2 s; the horizon r+ is s = 0). The outgoing
+    Kerr–Schild frame the renderer traces Kerr in (core.models.kerr_schild, outgoing) is
+    x + i y = (r - i a) sin(theta) e^(i phî), z = r cos(theta), with phî = phi - Phi(r) and
+    t̂ = t - T(r), where Phi = int a/Delta dr = (a/b) ln tanh(s/2) (0 at infinity) and
+    T' = 2 M r / Delta (checked against the metrics in tests/core/test_kerr_split.py).
+    q = (t, s, theta, phi); a = 0 gives Schwarzschild (b = M).
+    """
+
+    name = "kerr_bl"
+    offset = 1
+    time_index = 0
+
+    def __init__(self, mass: float, a: float):
+        self.mass, self.a = float(mass), float(a)
+        self.b = float(np.sqrt(self.mass**2 - self.a**2))
+
+    def radius(self, s: np.ndarray) -> np.ndarray:
+        """BL (= Kerr–Schild) r of s."""
+        return self.mass + self.b * np.cosh(s)
+
+    def phi_shift(self, s: np.ndarray) -> np.ndarray:
+        """Phi(s) = phi - phî, (a / b) ln tanh(s / 2); mirrored (|s|) for s < 0, the same r,
+        where a step past the horizon lands (the capture test ends those rays)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return (self.a / self.b) * np.log(np.tanh(0.5 * np.abs(s)))
+
+    def to_coords(self, X: np.ndarray) -> np.ndarray:
+        """(s, theta, phi) of local Cartesian positions (3, N) (NaN inside the horizon)."""
+        r, theta, psi = SpheroidalChart(self.a).to_coords(X)
+        with np.errstate(invalid="ignore"):
+            s = np.arccosh((r - self.mass) / self.b)
+        # x = sqrt(r^2 + a^2) sin(theta) cos(psi) with psi = phî - atan(a / r)
+        phi = psi + np.arctan2(self.a, r) + self.phi_shift(s)
+        return np.stack([s, theta, phi])
+
+    def _parts(self, S: np.ndarray):
+        s, theta, phi = S
+        r = self.radius(s)
+        ph = phi - self.phi_shift(s)
+        st, ct, sp, cp = np.sin(theta), np.cos(theta), np.sin(ph), np.cos(ph)
+        return s, r, st, ct, sp, cp
+
+    def to_cartesian(self, S: np.ndarray) -> np.ndarray:
+        """Local Cartesian positions of (s, theta, phi) (3, N)."""
+        _, r, st, ct, sp, cp = self._parts(S)
+        a = self.a
+        return np.stack([st * (r * cp + a * sp), st * (r * sp - a * cp), r * ct])
+
+    def jacobian(self, S: np.ndarray) -> np.ndarray:
+        """d(x, y, z)/d(s, theta, phi) as (N, 3, 3)."""
+        s, r, st, ct, sp, cp = self._parts(S)
+        a, b = self.a, self.b
+        sh = np.sinh(s)
+        J = np.empty((s.shape[0], 3, 3))
+        d_phi = np.stack([-st * (r * sp - a * cp), st * (r * cp + a * sp), np.zeros_like(s)])
+        d_r = np.stack([st * cp, st * sp, ct])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            J[:, :, 0] = (d_r * (b * sh) - d_phi * (a / (b * sh))).T
+        J[:, :, 1] = np.stack([ct * (r * cp + a * sp), ct * (r * sp - a * cp), -r * st]).T
+        J[:, :, 2] = d_phi.T
+        return J
+
+    def coord_directions(self, S: np.ndarray, D: np.ndarray) -> np.ndarray:
+        """(ds, dtheta, dphi) of Cartesian vectors D (3, N) at S."""
+        return np.linalg.solve(self.jacobian(S), D.T[..., None])[..., 0].T
+
+    def coord_time(self, S: np.ndarray, D: np.ndarray) -> np.ndarray:
+        """dt of Cartesian vectors D at fixed Kerr–Schild time: dt = T'(r) dr = 2 M r ds / sinh(s) / b."""
+        dS = self.coord_directions(S, D)
+        r = self.radius(S[0])
+        return 2.0 * self.mass * r * dS[0] / (self.b * np.sinh(S[0]))
+
+    def cartesian_velocity(self, S: np.ndarray, dS: np.ndarray) -> np.ndarray:
+        """Cartesian velocity (3, N) from (ds, dtheta, dphi)/dσ."""
+        return np.einsum("nij,jn->in", self.jacobian(S), dS)
+
+    def axial_killing(self, S: np.ndarray) -> np.ndarray:
         """Components of d/dphi: (0, 0, 1)."""
         z = np.zeros_like(S[0])
         return np.stack([z, z, np.ones_like(z)])
@@ -142,6 +236,10 @@ class IsotropicChart:
         """Isotropic components of world directions: the same (see the class)."""
         return D.copy()
 
+    def coord_time(self, S: np.ndarray, D: np.ndarray) -> np.ndarray:
+        """Coordinate-time component of Cartesian vectors D (the same time slices): 0."""
+        return np.zeros(S.shape[1])
+
     def cartesian_velocity(self, S: np.ndarray, dS: np.ndarray) -> np.ndarray:
         """World velocity J dS of an isotropic one: J = λ I + λ'(ρ) x xᵀ / ρ, λ = (1 + M/2ρ)²."""
         rho = np.sqrt(np.einsum("ij,ij->j", S, S))
@@ -156,8 +254,13 @@ class IsotropicChart:
         return np.stack([-S[1], S[0], np.zeros_like(S[0])])
 
 
-def chart_for(model: Hamiltonian) -> CartesianChart | SpheroidalChart | IsotropicChart:
+Chart = CartesianChart | SpheroidalChart | IsotropicChart | KerrBLChart
+
+
+def chart_for(model: Hamiltonian) -> Chart:
     """The chart a model's coordinates are written in."""
+    if model.chart == "kerr_bl":
+        return KerrBLChart(model.mass, model.a)
     if model.chart == "isotropic":
         return IsotropicChart(model.mass)
     if model.chart == "spherical":

@@ -79,6 +79,7 @@ def spacetime_momenta(model, chart, S: np.ndarray, D: np.ndarray):
         unit = np.zeros((3, n_rays))
         unit[a] = 1.0
         V[:, 1:, a] = chart.coord_directions(S, unit).T
+        V[:, 0, a] = chart.coord_time(S, unit)  # charts whose time slices differ (kerr_bl)
     V += u[:, :, None] * np.einsum("nij,ni,nja->na", g, u, V)[:, None, :]  # project out u
     E, spacelike = _orthonormalize(g, V)
     if not spacelike.all():

@@ -8,7 +8,7 @@ from . import compose
 from ._common import Method
 from .implicit import Gauss4, ImplicitMidpoint, StormerVerlet, SymplecticEuler
 from .rk import RK4, Dopri5
-from .splitting import blanes_moan4, blanes_moan6, leapfrog
+from .splitting import blanes_moan4, blanes_moan6, blanes_moan_s6, blanes_moan_s10, leapfrog
 from .tao import Tao2
 
 METHODS: dict[str, Method] = {
@@ -26,6 +26,8 @@ METHODS: dict[str, Method] = {
     "leapfrog": leapfrog(),
     "blanes_moan4": blanes_moan4(),
     "blanes_moan6": blanes_moan6(),
+    "blanes_moan_s6": blanes_moan_s6(),
+    "blanes_moan_s10": blanes_moan_s10(),
     "rk4": RK4(),
     "dopri5": Dopri5(),
 }

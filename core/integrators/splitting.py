@@ -19,6 +19,11 @@ Coefficients:
   6 stages, for T quadratic in p (Runge–Kutta–Nyström), with an error constant far below
   the triple jump's.
 - blanes_moan6: the same paper, SRKN_11^b: order 6, 11 stages.
+- blanes_moan_s6, blanes_moan_s10: the same paper, Table 2, the partitioned Runge–Kutta
+  methods S_6 (order 4, 6 stages) and S_10 (order 6, 10 stages) for a *general* split
+  A + B. The RKN methods above reach their order only where [V, [V, [V, T]]] = 0 (T
+  quadratic in p); a split whose kinetic part is not (Kerr's square-root Hamiltonian,
+  core/models/kerr_split.py) needs these.
 """
 
 from __future__ import annotations
@@ -84,6 +89,30 @@ def _bm6() -> tuple[tuple[float, ...], tuple[float, ...]]:
     b: tuple[float, ...] = b5 + (0.5 - sum(b5),)
     a: tuple[float, ...] = a5 + (1.0 - 2.0 * sum(a5),) + a5[::-1]
     return b + b[::-1], a
+
+
+def _s6() -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """S_6 of Blanes & Moan (2002), Table 2 (order 4, general splits): (kicks, drifts)."""
+    b = (0.0792036964311957, 0.353172906049774, -0.0420650803577195)
+    a = (0.209515106613362, -0.143851773179818)
+    kicks = b + (1.0 - 2.0 * sum(b),) + b[::-1]
+    drifts = a + (0.5 - sum(a),) + (0.5 - sum(a),) + a[::-1]
+    return kicks, drifts
+
+
+def _s10() -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """S_10 of Blanes & Moan (2002), Table 2 (order 6, general splits): (kicks, drifts)."""
+    b = (
+        0.0502627644003922,
+        0.413514300428344,
+        0.0450798897943977,
+        -0.188054853819569,
+        0.541960678450780,
+    )
+    a = (0.148816447901042, -0.132385865767784, 0.067307604692185, 0.432666402578175)
+    kicks = b + (1.0 - 2.0 * sum(b),) + b[::-1]
+    drifts = a + (0.5 - sum(a),) + (0.5 - sum(a),) + a[::-1]
+    return kicks, drifts
 
 
 class Splitting(Method):
@@ -194,3 +223,18 @@ def blanes_moan4() -> Splitting:
 def blanes_moan6() -> Splitting:
     """Blanes & Moan (2002) SRKN_11^b, order 6, 11 force evaluations per step."""
     return Splitting("blanes_moan6", 6, *_bm6(), error_constant=2e-5)
+
+
+# Error constants of the general splittings: measured on the split they are for, Kerr's
+# square-root split (core/models/kerr_split.py), a/M = 0.9 from 30 rg (bench_perf.py
+# --only calibrate, 800 rays): C = 2.1e-3 (blanes_moan_s6), 2.7e-4 (blanes_moan_s10), x 1.5.
+
+
+def blanes_moan_s6() -> Splitting:
+    """Blanes & Moan (2002) S_6, order 4 for any split A + B, 6 stages per step."""
+    return Splitting("blanes_moan_s6", 4, *_s6(), error_constant=3e-3)
+
+
+def blanes_moan_s10() -> Splitting:
+    """Blanes & Moan (2002) S_10, order 6 for any split A + B, 10 stages per step."""
+    return Splitting("blanes_moan_s10", 6, *_s10(), error_constant=4e-4)

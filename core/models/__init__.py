@@ -13,6 +13,7 @@ from ..integrators.system import FrozenQ
 from .base import BLOCK, Hamiltonian, blocked
 from .expression import ExpressionHamiltonian, from_expression
 from .kerr_schild import KerrSchild
+from .kerr_split import KerrBoyerLindquist
 from .medium import Medium, medium
 from .metric import MetricHamiltonian, metric
 from .spacetimes import (
@@ -29,6 +30,7 @@ __all__ = [
     "ExpressionHamiltonian",
     "FrozenQ",
     "Hamiltonian",
+    "KerrBoyerLindquist",
     "KerrSchild",
     "Medium",
     "MetricHamiltonian",

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Mapping, Sequence
+from types import MappingProxyType
 
 import numpy as np
 
@@ -138,6 +139,9 @@ class Hamiltonian(System):
     split_method: str | None = None
     """The explicit splitting measured cheapest on this model's split (split_parts), for
     the renderer's default method; None where the model offers no split."""
+    error_constants: Mapping[str, float] = MappingProxyType({})
+    """Error constants (C in err = C h^order, core.tracing.steps) measured on this model's
+    own form, by method name, in place of the methods' own; empty: the methods' own."""
 
     def for_backward_tracing(self, explicit_split: bool = False) -> Hamiltonian:
         """The same light rays in the chart the tracer follows them in (regular where rays

@@ -9,6 +9,7 @@ from ..dual import Dual
 from ..integrators.system import FrozenQ
 from .base import Hamiltonian, blocked
 from .expression import ExpressionHamiltonian
+from .kerr_split import KerrBoyerLindquist
 
 
 class KerrSchild(Hamiltonian):
@@ -75,8 +76,12 @@ class KerrSchild(Hamiltonian):
             keys |= set(d.d)
         return {self.coords[k] for k in keys} | set(self.momenta)
 
-    def for_backward_tracing(self, explicit_split: bool = False) -> KerrSchild:
-        """The outgoing chart: rays followed into the past cross the past horizon smoothly."""
+    def for_backward_tracing(self, explicit_split: bool = False) -> Hamiltonian:
+        """The outgoing chart: rays followed into the past cross the past horizon smoothly.
+        With ``explicit_split`` (and |a| < M): Kerr in Boyer–Lindquist with its explicit
+        square-root split (core/models/kerr_split.py), in a chart on this one's frame."""
+        if explicit_split and abs(self.a) < self.mass:
+            return KerrBoyerLindquist(self.rg, self.a)
         return self if self.outgoing else KerrSchild(self.rg, self.a, self.horizon, True)
 
     # --- evaluation in Kerr–Schild form ---

@@ -69,17 +69,27 @@ def solver_tolerance(tolerance: float) -> float:
     return min(1e-8, max(1e-14, float(tolerance) * SOLVE_SHARE))
 
 
-def default_step(method: Any, tolerance: float, length: float, scaled: bool = False) -> float:
+def default_step(
+    method: Any,
+    tolerance: float,
+    length: float,
+    scaled: bool = False,
+    constant: float | None = None,
+) -> float:
     """Fictitious-time step for ``method`` to reach ``tolerance`` (radians).
 
     Around a mass (``scaled``: g(q) grows with the distance) from the method's error
     constant, so that the integration error stays below tolerance / 2 (the far field gets
-    the other half, see core.tracing.regions). Otherwise (media, user models, methods
+    the other half, see core.tracing.regions); ``constant`` replaces the method's own where
+    the model measured its own for it (``Hamiltonian.error_constants``). Otherwise (media, user models, methods
     without a constant): h = 0.5 length tol^(1/order).
     """
     tol = min(max(float(tolerance), 1e-14), 1e-1)
     order = max(int(method.order), 1)
-    constant = method.error_constant if scaled else None
+    if constant is None:
+        constant = method.error_constant
+    if not scaled:
+        constant = None
     if constant is None:
         return length * min(MAX_STEP, 0.5 * tol ** (1.0 / order))
     largest = MAX_SPLIT_STEP if isinstance(method, Splitting) else MAX_STEP

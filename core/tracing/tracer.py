@@ -96,6 +96,7 @@ class Tracer:
                 options.tolerance,
                 self.region.length_scale(model),
                 scaled=self.region.scaled(model),
+                constant=model.error_constants.get(self.method.name),
             )
         )
 

@@ -1,0 +1,275 @@
+"""Kerr light rays split explicitly, in Boyer–Lindquist coordinates (issue #14).
+
+Null geodesics of Kerr in BL (t, r, theta, phi) with E = -p_t, L = p_phi (t, phi cyclic)
+have, in Mino time (K = Sigma H, Sigma = r^2 + a^2 cos^2 theta), the separated form
+
+    K = 1/2 Delta p_r^2 + 1/2 p_theta^2 - U0,   U0 = P(r)^2 / (2 Delta) - Theta(theta) / 2,
+    P = (r^2 + a^2) E - a L,   Theta = (L - a E sin^2 theta)^2 / sin^2 theta.
+
+In s with r = M + b cosh s (b = sqrt(M^2 - a^2), ds = dr / sqrt(Delta), p_s = sqrt(Delta) p_r)
+the kinetic part is T = (p_s^2 + p_theta^2) / 2: K = T - U is separable, with
+U = U0 + H0 Sigma on the rays H = H0 (K = Sigma H0 there). Fixed steps of Mino time are
+no good for rendering (far away a step covers a distance ~ r^2), so the rays are followed
+on the level set T = U of the square-root Hamiltonian
+
+    Λ = 2 sqrt(T + c) - 2 sqrt(U + c),   c = C0 M^2 E^2 > 0,
+
+whose flow is K's slowed by sqrt(T + c) (the time transformation dσ = sqrt(U + c) dλ): the
+drift moves (s, theta) at a speed |p| / sqrt(T + c) < sqrt(2), so far away a step covers a
+fixed step in s ~ ln r (a length ~ r, like the Kerr–Schild tracing's g = r), and c keeps Λ
+regular where T = U = 0 (a radial and a polar turning point at once). Both parts are solved
+exactly (E, L are constants of both flows):
+
+- drift (p fixed): s, theta += t p / sqrt(T + c); t += -t 2 C0 M^2 E / sqrt(T + c);
+- kick ((s, theta) fixed): p_s, p_theta += t dU / sqrt(U + c);
+  t += t (dU/dE + 2 c / E) / sqrt(U + c); phi += -t (dU/dL) / sqrt(U + c).
+
+Λ is homogeneous of degree 1 in p: a ray's steps do not depend on its momentum's scale.
+Λ is not of Runge–Kutta–Nyström type (its kinetic part is not quadratic in p), so the
+splittings for general A + B (core.integrators.splitting: blanes_moan_s6, blanes_moan_s10)
+keep their order on it. BL cannot cross the horizon: rays that reach r_capture (below every
+spherical photon orbit, see capture_radius) are captured. The model is the renderer's form of
+a Kerr–Schild Kerr for an explicit splitting (KerrSchild.for_backward_tracing): its chart
+(core.charts.KerrBLChart) maps positions to and from the tracer's Kerr–Schild frame.
+"""
+
+from __future__ import annotations
+
+import math
+from types import MappingProxyType
+
+import numpy as np
+
+from ..integrators.splitting import SplitSystem
+from .base import Hamiltonian
+
+C0 = 1.0
+"""c = C0 M^2 E^2 in Λ (see the module)."""
+
+
+def capture_radius(mass: float, a: float) -> float:
+    """r+ + (r_ph - r+) / 2, with r_ph = 2 M (1 + cos(2/3 arccos(-|a|/M))) the innermost
+    spherical photon orbit (prograde, equatorial): a ray followed backwards that gets below
+    r_ph moving in cannot turn back out (no radial turning point there), so it is captured."""
+    b = math.sqrt(max(mass * mass - a * a, 0.0))
+    r_plus = mass + b
+    r_ph = 2.0 * mass * (1.0 + math.cos(2.0 / 3.0 * math.acos(-abs(a) / mass)))
+    return r_plus + 0.5 * (r_ph - r_plus)
+
+
+class KerrBoyerLindquist(Hamiltonian):
+    """Kerr in BL (t, s, theta, phi) with r = M + b cosh s: H = K / Sigma (see the module),
+    offering the explicit split Λ (split_parts)."""
+
+    kind = "spacetime"
+    chart = "kerr_bl"
+    split_method = "blanes_moan_s10"
+    """Measured cheapest at equal image accuracy among the splittings (README)."""
+    error_constants = MappingProxyType(
+        {
+            "leapfrog": 1.2,
+            "blanes_moan4": 7e-3,
+            "blanes_moan6": 6e-3,
+            "blanes_moan_s6": 3e-3,
+            "blanes_moan_s10": 4e-4,
+        }
+    )
+    """Measured on this split like core.tracing.steps' constants (a/M = 0.9 from 30 rg, 800
+    rays, the largest equivalent direction error over h^order, times 1.5; bench_perf.py
+    --only calibrate). The RKN methods (blanes_moan4/6) do not reach their order on it."""
+
+    def __init__(self, rg: float, a: float):
+        super().__init__(
+            ("t", "s", "theta", "phi"),
+            ("p_t", "p_s", "p_theta", "p_phi"),
+            parameters={"rg": rg, "a": a},
+        )
+        self.rg, self.a = float(rg), float(a)
+        m = self.mass
+        if not abs(self.a) < m:
+            raise ValueError(f"the BL split needs |a| < M (a non-extremal hole), got a/M = {a / m}")
+        self.b = math.sqrt(m * m - self.a * self.a)
+        self.horizon = m + self.b
+        self.r_capture = capture_radius(m, self.a)
+        self.s_capture = math.acosh((self.r_capture - m) / self.b)
+
+    @property
+    def scales_time(self) -> bool:
+        """Λ's steps scale with the distance from the hole (see the module)."""
+        return True
+
+    def parts(self, Q: np.ndarray, P: np.ndarray, H0=0.0, derivatives: bool = True):
+        """The potential V and its derivatives (dV/ds, dV/dtheta, dV/dE, dV/dL), with Sigma
+        and (dSigma/ds, dSigma/dtheta); each (N,). V = P^2 / (2 Delta) + a E L
+        - a^2 E^2 sin^2(theta) / 2 + H0 Sigma (the module's U plus L^2 / (2 sin^2 theta))."""
+        s, theta = Q[1], Q[2]
+        E, L, a, b = -P[0], P[3], self.a, self.b
+        sh = np.sinh(s)
+        r = self.mass + b * np.cosh(s)
+        delta = (b * sh) ** 2
+        st, ct = np.sin(theta), np.cos(theta)
+        ra2 = r * r + a * a
+        pr = ra2 * E - a * L
+        sigma = r * r + a * a * ct * ct
+        with np.errstate(divide="ignore", invalid="ignore"):
+            V = pr * pr / (2.0 * delta) + a * E * L - 0.5 * (a * E * st) ** 2 + H0 * sigma
+            if not derivatives:
+                return V, sigma
+            dsig = (2.0 * r * b * sh, -2.0 * a * a * ct * st)
+            # d/ds of P^2/(2 Delta) = (P 2 r E / Delta - P^2 (r - M) / Delta^2) dr/ds, dr/ds = b sh
+            dV_s = (pr * 2.0 * r * E - pr * pr * b * np.cosh(s) / delta) / (b * sh) + H0 * dsig[0]
+            dV_t = -a * a * E * E * st * ct + H0 * dsig[1]
+            dV_E = pr * ra2 / delta + a * L - a * a * E * st * st
+            dV_L = -a * pr / delta + a * E
+        return V, sigma, (dV_s, dV_t, dV_E, dV_L), dsig
+
+    @staticmethod
+    def kinetic(Q: np.ndarray, P: np.ndarray):
+        """T = (p_s^2 + p_theta^2 + p_phi^2 / sin^2 theta) / 2 and dT/dtheta, (N,)."""
+        st, ct = np.sin(Q[2]), np.cos(Q[2])
+        with np.errstate(divide="ignore", invalid="ignore"):
+            l2 = P[3] * P[3] / (st * st)
+            T = 0.5 * (P[1] * P[1] + P[2] * P[2] + l2)
+            return T, -l2 * ct / st
+
+    def value_soa(self, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
+        """H = (T - V) / Sigma, (N,)."""
+        V, sigma = self.parts(Q, P, derivatives=False)
+        return (self.kinetic(Q, P)[0] - V) / sigma
+
+    def _value_gradient(self, Q, P, wrt):
+        V, sigma, dV, dsig = self.parts(Q, P)
+        T, dT_t = self.kinetic(Q, P)
+        H = (T - V) / sigma
+        dq = dp = None
+        if "q" in wrt:
+            dq = np.zeros_like(Q)
+            dq[1] = (-dV[0] - H * dsig[0]) / sigma
+            dq[2] = (dT_t - dV[1] - H * dsig[1]) / sigma
+        if "p" in wrt:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                dp_phi = P[3] / np.sin(Q[2]) ** 2 - dV[3]
+            dp = np.stack([dV[2], P[1], P[2], dp_phi]) / sigma
+        return H, dq, dp
+
+    def radius_at(self, X: np.ndarray) -> np.ndarray:
+        """BL (= Kerr–Schild) r at local Cartesian positions X (3, N)."""
+        x, y, z = X
+        rho2 = x * x + y * y + z * z - self.a**2
+        return np.sqrt(0.5 * (rho2 + np.sqrt(rho2 * rho2 + 4 * self.a**2 * z * z)))
+
+    def capture_test(self):
+        """Rays below r_capture (see captured_soa)."""
+        return self.captured_soa
+
+    def captured_soa(self, Q: np.ndarray) -> np.ndarray:
+        """Rays at s < s(r_capture), or past the horizon (s NaN), (N,)."""
+        return ~(Q[1] >= self.s_capture)
+
+    def invariants_soa(self, Q, P):
+        """E = -p_t, L = p_phi and the Carter constant (photons)."""
+        cos2 = np.cos(Q[2]) ** 2
+        carter = P[2] ** 2 + cos2 * (-(self.a**2) * P[0] ** 2 + P[3] ** 2 / (1.0 - cos2))
+        return {"p_t": P[0].copy(), "p_phi": P[3].copy(), "carter": carter}
+
+    def split_parts(self, H0=0.0, clocked: bool = False):
+        """Λ = 2 sqrt(T + c) - 2 sqrt(U + c) with its exact drift and kick (the module); no
+        clocked form."""
+        if clocked:
+            return None
+        return SqrtSplit(self, H0)
+
+
+class SqrtSplit(SplitSystem):
+    """Λ = 2 sqrt(T + c) - 2 sqrt(V + c) of a KerrBoyerLindquist (see the module)."""
+
+    separable = False  # T depends on theta (the sphere), both parts on E and L
+
+    def __init__(self, model: KerrBoyerLindquist, H0) -> None:
+        self.model = model
+        self.H0 = np.asarray(H0, dtype=np.float64)
+        self.dim = 4
+        self.c0 = C0 * model.mass**2
+
+    def subset(self, keep) -> SqrtSplit:
+        """The split for the rays keep (per-ray H0)."""
+        return SqrtSplit(self.model, self.H0 if self.H0.ndim == 0 else self.H0[keep])
+
+    def _root_T(self, Q: np.ndarray, P: np.ndarray):
+        """sqrt(T + c), dT/dtheta and E."""
+        T, dT_t = self.model.kinetic(Q, P)
+        E = -P[0]
+        return np.sqrt(T + self.c0 * E * E), dT_t, E
+
+    def _root_V(self, Q: np.ndarray, P: np.ndarray):
+        """1 / sqrt(V + c) and dV."""
+        V, _, dV, _ = self.model.parts(Q, P, self.H0)
+        E = -P[0]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return 1.0 / np.sqrt(V + self.c0 * E * E), dV
+
+    def drift(self, Q: np.ndarray, P: np.ndarray, t) -> None:
+        """Exact flow of 2 sqrt(T + c) over t: s moves at p_s / sqrt(T + c), the direction
+        n on the unit sphere turns about the angular momentum J at |J| / sqrt(T + c)."""
+        root, _, E = self._root_T(Q, P)
+        c = t / root
+        Q[0] -= c * (2.0 * self.c0 * E)
+        Q[1] += c * P[1]
+        sphere_geodesic(Q, P, c)
+
+    def kick(self, Q: np.ndarray, P: np.ndarray, t) -> None:
+        """Exact flow of -2 sqrt(V + c) over t ((s, theta), E, L fixed)."""
+        w, dV = self._root_V(Q, P)
+        c = t * w
+        P[1] += c * dV[0]
+        P[2] += c * dV[1]
+        Q[0] += c * (dV[2] + 2.0 * self.c0 * (-P[0]))
+        Q[3] -= c * dV[3]
+
+    def value_soa(self, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
+        """Λ(q, p), (N,)."""
+        V, _ = self.model.parts(Q, P, self.H0, derivatives=False)
+        root, _, E = self._root_T(Q, P)
+        with np.errstate(invalid="ignore"):
+            return 2.0 * root - 2.0 * np.sqrt(V + self.c0 * E * E)
+
+    def gradient_soa(self, Q: np.ndarray, P: np.ndarray, wrt: str = "qp"):
+        """(dΛ/dq or None, dΛ/dp or None), each (4, N)."""
+        w, dV = self._root_V(Q, P)
+        root, dT_t, E = self._root_T(Q, P)
+        dq = dp = None
+        if "q" in wrt:
+            dq = np.zeros_like(Q)
+            dq[1] = -w * dV[0]
+            dq[2] = dT_t / root - w * dV[1]
+        if "p" in wrt:
+            dp = np.empty_like(P)
+            dp[0] = -2.0 * self.c0 * E / root + w * (dV[2] + 2.0 * self.c0 * E)
+            dp[1], dp[2] = P[1] / root, P[2] / root
+            with np.errstate(divide="ignore", invalid="ignore"):
+                dp[3] = P[3] / (np.sin(Q[2]) ** 2 * root) - w * dV[3]
+        return dq, dp
+
+
+def sphere_geodesic(Q: np.ndarray, P: np.ndarray, c) -> None:
+    """The flow of c (p_theta^2 + p_phi^2 / sin^2 theta) / 2 over unit time, in place on
+    (theta, phi, p_theta, p_phi) = (Q[2], Q[3], P[2], P[3]): the unit vector n turns about
+    J = p_theta e_phi - (p_phi / sin theta) e_theta by c |J| (a great circle, through the
+    poles as well: no coordinate singularity in the flow; J_z = p_phi is kept)."""
+    th, ph = Q[2], Q[3]
+    st, ct, sp, cp = np.sin(th), np.cos(th), np.sin(ph), np.cos(ph)
+    n = np.stack([st * cp, st * sp, ct])
+    e_t = np.stack([ct * cp, ct * sp, -st])
+    e_p = np.stack([-sp, cp, np.zeros_like(sp)])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        J = P[2] * e_p - (P[3] / st) * e_t
+    size = np.sqrt(np.einsum("ij,ij->j", J, J))
+    omega = c * size
+    with np.errstate(divide="ignore", invalid="ignore"):
+        axis = J / np.where(size > 0, size, 1.0)
+    n = np.cos(omega) * n + np.sin(omega) * np.cross(axis, n, axis=0)
+    rho = np.hypot(n[0], n[1])
+    Q[2] = np.arctan2(rho, n[2])
+    turned = np.arctan2(n[1], n[0])
+    Q[3] = ph + np.remainder(turned - ph + np.pi, 2.0 * np.pi) - np.pi
+    P[2] = -J[0] * np.sin(Q[3]) + J[1] * np.cos(Q[3])
