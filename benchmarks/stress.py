@@ -419,7 +419,58 @@ def long_split(steps: int = 1_000_000, step: float = 0.25):
             f"{late.energy_error:.2e} after {steps} ({growth:.2f}x), "
             f"{outcome(late)}, {sec:.0f} s"
         )
+    rows.update(long_split_kerr(steps))
     return report(f"long_split ({steps:.0e} steps of {step}, one ray, graded-index fibre)", **rows)
+
+
+def kerr_bound_orbit(a: float = 0.45):
+    """(model, q, p, H0) of a bound, eccentric and inclined timelike orbit (m = 1, H0 = -1/2)
+    around Kerr in the split's BL (t, s, theta, phi): E = 0.98, L = 2.2, from r = 12 rg at
+    its radial turning point, 0.5 rad above the equator."""
+    from core.models import KerrBoyerLindquist
+
+    model = KerrBoyerLindquist(RG, a)
+    r0, theta0, E, L, H0 = 12.0, 0.5 * math.pi - 0.5, 0.98, 2.2, -0.5
+    q = np.array([[0.0], [math.acosh((r0 - M) / model.b)], [theta0], [0.0]])
+    p = np.array([[-E], [0.0], [0.0], [L]])
+    V, _ = model.parts(q, p, H0, derivatives=False)
+    T_free = 0.5 * L * L / math.sin(theta0) ** 2
+    p[2] = math.sqrt(2.0 * (float(V[0]) - T_free))
+    return model, q, p, H0
+
+
+def long_split_kerr(steps: int = 1_000_000, step: float = 0.5) -> dict:
+    """A bound timelike orbit around Kerr a/M = 0.9 (kerr_bound_orbit) on the BL square-root
+    split (core/models/kerr_split.py): |Λ| and |H - H0| after 1 % of the run and at its end,
+    leapfrog over ``steps`` steps, blanes_moan_s10 over a tenth of them (one ray: the
+    per-call cost of numpy dominates, ~0.1 ms per flow)."""
+    model, q0, p0, H0 = kerr_bound_orbit()
+    split = model.split_parts(H0)
+    rows = {}
+    for name, n in (("leapfrog", steps), ("blanes_moan_s10", steps // 10)):
+        method = core.METHODS[name]
+        state = method.init(split, q0, p0)
+        start = time.perf_counter()
+        worst = {}
+        every = max(1, n // 10_000)
+        for k in range(1, n + 1):
+            state, ok = method.step(split, state, step)
+            if k % every == 0:
+                Q, P = method.qp(state)
+                lam = float(abs(split.value_soa(Q, P)[0]))
+                dh = float(abs(model.value_soa(Q, P)[0] - H0))
+                label = "early" if k <= n // 100 else "late"
+                old = worst.get(label, (0.0, 0.0))
+                worst[label] = (max(old[0], lam), max(old[1], dh))
+        Q, P = method.qp(state)
+        r = model.mass + model.b * np.cosh(Q[1, 0])
+        rows[f"kerr bound orbit, {name}"] = (
+            f"max |Λ| {worst['early'][0]:.2e} over the first {n // 100} steps, "
+            f"{worst['late'][0]:.2e} over the rest of {n}; max |H - H0| {worst['early'][1]:.2e}"
+            f" / {worst['late'][1]:.2e}; r = {r:.3f} rg at the end, "
+            f"{'ok' if ok.all() else 'flagged failed'}, {time.perf_counter() - start:.0f} s"
+        )
+    return rows
 
 
 def n_zero(size: int = 12):

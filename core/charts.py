@@ -185,11 +185,18 @@ class KerrBLChart:
         return J
 
     def coord_directions(self, S: np.ndarray, D: np.ndarray) -> np.ndarray:
-        """(ds, dtheta, dphi) of Cartesian vectors D (3, N) at S."""
-        return np.linalg.solve(self.jacobian(S), D.T[..., None])[..., 0].T
+        """(ds, dtheta, dphi) of Cartesian vectors D (3, N) at S (NaN where the chart is
+        singular: on the axis, at the horizon)."""
+        J = self.jacobian(S)
+        ok = np.isfinite(J).all(axis=(1, 2)) & (np.abs(np.linalg.det(np.nan_to_num(J))) > 1e-300)
+        J[~ok] = np.eye(3)
+        out = np.linalg.solve(J, D.T[..., None])[..., 0].T
+        out[:, ~ok] = np.nan
+        return out
 
     def coord_time(self, S: np.ndarray, D: np.ndarray) -> np.ndarray:
-        """dt of Cartesian vectors D at fixed Kerr–Schild time: dt = T'(r) dr = 2 M r ds / sinh(s) / b."""
+        """dt of Cartesian vectors D at fixed Kerr–Schild time: dt = T'(r) dr, that is
+        2 M r ds / (b sinh s)."""
         dS = self.coord_directions(S, D)
         r = self.radius(S[0])
         return 2.0 * self.mass * r * dS[0] / (self.b * np.sinh(S[0]))

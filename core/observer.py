@@ -118,11 +118,17 @@ def _diagnose(model, chart, Q: np.ndarray, ginv: np.ndarray, bad: np.ndarray) ->
     on a spherical chart's axis, inside the horizon, g^ij singular, of the wrong
     signature, or (a valid metric) no observer at rest there. Only runs on failure."""
     Q, ginv = Q[:, bad], ginv[bad]
-    if chart.name == "spherical" and np.any(np.abs(np.sin(Q[2])) < _AXIS):
+    if chart.name in ("spherical", "kerr_bl") and np.any(np.abs(np.sin(Q[2])) < _AXIS):
         return CoordinateAxisError(
             "the camera is on the polar axis (theta = 0 or pi) of the model's spherical / "
             "Boyer–Lindquist coordinates, where they are singular: move it off the axis "
             "(x = y = 0 in the centre's frame), or use the Kerr–Schild chart"
+            + (
+                " with an implicit method such as gauss4 (Kerr's explicit split is traced"
+                " in Boyer–Lindquist)"
+                if chart.name == "kerr_bl"
+                else ""
+            )
         )
     inside = _inside_horizon(model, Q)
     if inside.any():

@@ -12,7 +12,7 @@ from __future__ import annotations
 import re
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -21,9 +21,11 @@ from . import checks
 from . import workers as workers_module
 from .geometry import Intersector
 from .imageio import FAILED_COLOR
-from .observer import check_camera
+from .integrators import Splitting
+from .observer import ObserverError, check_camera
 from .sky import Background
 from .tracing import ENDING, RayResults, Scene, TraceOptions, Tracer
+from .tracing.steps import DEFAULT_METHOD
 
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
@@ -70,7 +72,7 @@ def render(
     passes = _check_render_call(passes, chunk_size, workers, cores)
     start_time = time.perf_counter()
     extent = _scene_extent(scene, camera)
-    tracer = Tracer(scene, options, extent)
+    tracer = tracer_for_camera(scene, options, extent, camera.frame.position)
     if tracer.curved:
         checks.check_render_method(tracer.method, time_scaled(tracer.model))
     check_camera(tracer, camera.frame.position)
@@ -132,7 +134,24 @@ def check_scene_camera(scene: Scene, position, tolerance: float = 1e-8) -> None:
     (camera inside a horizon or on a coordinate axis, metric singular or of the wrong
     signature there); nothing for a camera where rays can start."""
     far = float(np.linalg.norm(np.asarray(position, dtype=np.float64) - scene.center))
-    check_camera(Tracer(scene, TraceOptions(tolerance=tolerance), max(far, 1e-9)), position)
+    options = TraceOptions(tolerance=tolerance)
+    check_camera(tracer_for_camera(scene, options, max(far, 1e-9), position), position)
+
+
+def tracer_for_camera(scene: Scene, options: TraceOptions, extent: float, position) -> Tracer:
+    """The scene's tracer; with the default method (options.method None) and a model whose
+    explicit split cannot start rays at the camera (Kerr's Boyer–Lindquist split: a camera
+    on the polar axis or within its capture radius, where Kerr–Schild still can), the
+    tracer of the implicit default (DEFAULT_METHOD) in the model's own chart instead."""
+    tracer = Tracer(scene, options, extent)
+    if options.method is not None or not isinstance(tracer.method, Splitting):
+        return tracer
+    try:
+        with np.errstate(all="ignore"):
+            check_camera(tracer, position)
+    except ObserverError:
+        return Tracer(scene, replace(options, method=DEFAULT_METHOD), extent)
+    return tracer
 
 
 def _trace_chunk(tracer: Tracer, origins, directions, with_error: bool, cancel):

@@ -81,8 +81,8 @@ def default_step(
     Around a mass (``scaled``: g(q) grows with the distance) from the method's error
     constant, so that the integration error stays below tolerance / 2 (the far field gets
     the other half, see core.tracing.regions); ``constant`` replaces the method's own where
-    the model measured its own for it (``Hamiltonian.error_constants``). Otherwise (media, user models, methods
-    without a constant): h = 0.5 length tol^(1/order).
+    the model measured its own for it (``Hamiltonian.error_constants``). Otherwise (media,
+    user models, methods without a constant): h = 0.5 length tol^(1/order).
     """
     tol = min(max(float(tolerance), 1e-14), 1e-1)
     order = max(int(method.order), 1)

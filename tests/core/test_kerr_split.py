@@ -20,7 +20,7 @@ from core.charts import CartesianChart, KerrBLChart
 from core.integrators import METHODS, SplitRequired
 from core.models import KerrBoyerLindquist
 from core.models.kerr_split import C0
-from core.observer import inverse_metric_soa, spacetime_momenta
+from core.observer import check_camera, inverse_metric_soa, spacetime_momenta
 from core.trace import TraceOptions, Tracer
 
 RG, A = 1.0, 0.45  # a/M = 0.9
@@ -223,3 +223,23 @@ def test_splittings_refuse_kerr_without_the_split():
         scene = core.Scene(model=model)
         with pytest.raises(SplitRequired, match="split"):
             Tracer(scene, TraceOptions(method="blanes_moan_s6"), 30.0)
+
+
+def test_default_method_falls_back_where_the_split_cannot_start():
+    """A Kerr–Schild camera on the polar axis, or between r+ and BL's capture radius: the
+    default method is then gauss4 in Kerr–Schild (the split is refused there when asked
+    for by name); elsewhere it is the split's."""
+    from core.render import tracer_for_camera
+
+    scene = core.Scene(model=hm.kerr(RG, A, chart="kerr_schild"))
+    r_c = MODEL.r_capture
+    assert MODEL.horizon < 0.5 * (MODEL.horizon + r_c) < r_c
+    for position, expect in (
+        ((0.0, -30.0, 2.0), "blanes_moan_s10"),
+        ((0.0, 0.0, 30.0), "gauss4"),
+        ((0.0, 0.0, 0.5 * (MODEL.horizon + r_c)), "gauss4"),
+    ):
+        tracer = tracer_for_camera(scene, TraceOptions(), 30.0, position)
+        assert tracer.method.name == expect, position
+    with pytest.raises(core.CoordinateAxisError, match="gauss4"):
+        check_camera(Tracer(scene, TraceOptions(method="blanes_moan_s10"), 30.0), (0.0, 0.0, 30.0))

@@ -15,7 +15,7 @@ import core
 from core import hamiltonians as hm
 from core.integrators import METHODS, PoincareTransformed, SplitRequired, Splitting
 
-SPLITTINGS = ("leapfrog", "blanes_moan4", "blanes_moan6")
+SPLITTINGS = ("leapfrog", "blanes_moan4", "blanes_moan6", "blanes_moan_s6", "blanes_moan_s10")
 
 
 @pytest.mark.parametrize("name", SPLITTINGS)
@@ -25,7 +25,8 @@ def test_coefficients_are_consistent_and_symmetric(name):
     assert math.fsum(m.kicks) == pytest.approx(1.0, abs=1e-14)
     assert math.fsum(m.drifts) == pytest.approx(1.0, abs=1e-14)
     assert m.kicks == m.kicks[::-1] and m.drifts == m.drifts[::-1]
-    assert m.stages == {"leapfrog": 1, "blanes_moan4": 6, "blanes_moan6": 11}[name]
+    stages = {"leapfrog": 1, "blanes_moan4": 6, "blanes_moan6": 11}
+    assert m.stages == {**stages, "blanes_moan_s6": 6, "blanes_moan_s10": 10}[name]
 
 
 KEPLER = hm.from_expression(
@@ -39,6 +40,8 @@ KEPLER = hm.from_expression(
         ("leapfrog", [80, 160, 320, 640]),
         ("blanes_moan4", [40, 80, 160, 320]),
         ("blanes_moan6", [40, 60, 80, 120]),
+        ("blanes_moan_s6", [40, 80, 160, 320]),
+        ("blanes_moan_s10", [40, 60, 80, 120]),
     ],
 )
 def test_observed_order_on_a_kepler_ellipse(name, steps):
@@ -80,7 +83,7 @@ def test_refused_without_a_split():
             steps=3,
             method="blanes_moan4",
         )
-    scene = core.Scene(model=hm.kerr(1.0, 0.45, chart="kerr_schild"))
+    scene = core.Scene(model=hm.kerr(1.0, 0.45))  # Boyer–Lindquist as text: no split
     cam = core.Camera.perspective(
         position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=40, width=4, height=4
     )
@@ -319,6 +322,7 @@ def test_default_method_per_model():
 
     assert default_method(hm.schwarzschild(1.0)) == "blanes_moan6"
     assert default_method(hm.medium("1 + 0.1*z")) == "blanes_moan4"
-    assert default_method(hm.kerr(1.0, 0.45, chart="kerr_schild")) == "gauss4"
+    assert default_method(hm.kerr(1.0, 0.45, chart="kerr_schild")) == "blanes_moan_s10"
+    assert default_method(hm.kerr(1.0, 0.5, chart="kerr_schild")) == "gauss4"  # extremal
     assert default_method(hm.kerr(1.0, 0.3)) == "gauss4"  # Boyer–Lindquist chart
     assert default_method(hm.kerr(1.0, 0.0)) == "blanes_moan6"  # that is Schwarzschild
