@@ -182,8 +182,8 @@ def split_flows(H: Any, method: str) -> tuple[Any, Any]:
         f"method '{method}' is an explicit splitting: it needs the model's split into "
         "two exactly solvable parts K = T(p) + V(q), which this Hamiltonian does not offer "
         "(media do, traced with the Poincaré time transformation: core.render, or "
-        "core.integrate(..., adaptive=True)); use an implicit symplectic method such as "
-        "gauss4 for it"
+        "core.integrate(..., adaptive=True); so do Schwarzschild and Kerr–Schild Kerr with "
+        "|a| < M in core.render); use an implicit symplectic method such as gauss4 for it"
     )
 
 

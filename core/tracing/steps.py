@@ -14,11 +14,14 @@ from typing import Any
 from ..integrators import METHODS, Splitting
 
 DEFAULT_METHOD = "gauss4"
-"""The default integrator of images where the model offers no split (Kerr, user metrics and
-Hamiltonians): around a black hole Gauss–Legendre 4 reaches a given escape accuracy at about
-a third of yoshida4's cost (smaller error constant, so fewer, longer steps; see
-ERROR_CONSTANTS and benchmarks/bench_perf.py). Where the model (or its form for the tracer)
-offers an explicit split, its ``split_method`` (default_method)."""
+"""The default integrator of images where the model offers no split (Kerr in BL as text,
+extremal Kerr, user metrics and Hamiltonians): around a black hole Gauss–Legendre 4
+reaches a given escape accuracy at about a third of yoshida4's cost (smaller error
+constant, so fewer, longer steps; see ERROR_CONSTANTS and benchmarks/bench_perf.py).
+Where the model (or its form for the tracer) offers an explicit split, its
+``split_method`` (default_method): Schwarzschild blanes_moan6, media blanes_moan4, Kerr
+with |a| < M blanes_moan_s10 (README, "Error against run time"); core.render falls back
+to this one where the split cannot start rays at the camera."""
 SOLVE_SHARE = 1e-4
 """Implicit stage equations are solved to tolerance x SOLVE_SHARE, within [1e-14, 1e-8]
 (solver_tolerance). Measured on the Kerr frame (3000 rays; tolerances 1e-4, 1e-6, 1e-8):
