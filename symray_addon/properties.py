@@ -45,16 +45,26 @@ METHOD_ITEMS = [
     (
         "leapfrog",
         "Leapfrog",
-        "2nd order, explicit splitting (needs a model with a split: Schwarzschild, media)",
+        "2nd order, explicit splitting (needs a model with a split: Schwarzschild, Kerr, media)",
     ),
     ("blanes_moan4", "Blanes–Moan 4", "4th order, explicit splitting (Schwarzschild, media)"),
     ("blanes_moan6", "Blanes–Moan 6", "6th order, explicit splitting (Schwarzschild, media)"),
     (
         "AUTO",
         "Automatic",
-        "The measured cheapest for the model: Blanes–Moan 6 for "
-        "Schwarzschild, Blanes–Moan 4 for media (explicit symplectic splittings), "
-        "Gauss–Legendre 4 otherwise",
+        "The measured cheapest for the model: Blanes–Moan 6 for Schwarzschild, "
+        "Blanes–Moan S10 for Kerr below extremal, Blanes–Moan 4 for media (explicit "
+        "symplectic splittings), Gauss–Legendre 4 otherwise",
+    ),
+    (
+        "blanes_moan_s6",
+        "Blanes–Moan S6",
+        "4th order, explicit splitting for any split (Kerr, Schwarzschild, media)",
+    ),
+    (
+        "blanes_moan_s10",
+        "Blanes–Moan S10",
+        "6th order, explicit splitting for any split (Kerr, Schwarzschild, media)",
     ),
 ]
 

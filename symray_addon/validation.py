@@ -34,8 +34,9 @@ HAMILTONIAN_NAMES: tuple[str, ...] = HAMILTONIAN_COORDS + HAMILTONIAN_MOMENTA
 METRIC_SIZE = 4
 TIME_SCALED_MODELS = frozenset({"SCHWARZSCHILD", "KERR"})
 """Models the renderer integrates with a Poincaré time scale g(q) (Tao's methods fail there)."""
-SPLIT_MODELS = frozenset({"SCHWARZSCHILD", "MEDIUM"})
-"""Models whose tracing form offers an explicit split (the splitting methods need one)."""
+SPLIT_MODELS = frozenset({"SCHWARZSCHILD", "MEDIUM", "KERR"})
+"""Models whose tracing form offers an explicit split (the splitting methods need one);
+Kerr only below extremal (|a/M| < 1: its Boyer–Lindquist split)."""
 
 
 @dataclass(frozen=True)
@@ -207,12 +208,15 @@ def spin_problem(spin: Any) -> str:
     return ""
 
 
-def _check_split(method: str, model: str) -> None:
+def _check_split(method: str, model: str, spin: Any = 0.0) -> None:
     """ValueError if an explicit splitting is chosen for a model that offers no split."""
-    if isinstance(METHODS.get(method), Splitting) and model not in SPLIT_MODELS:
+    if not isinstance(METHODS.get(method), Splitting):
+        return
+    if model not in SPLIT_MODELS or (model == "KERR" and abs(float(spin)) >= 1.0):
         raise ValueError(
-            f"method '{method}' is an explicit splitting: only Schwarzschild and "
-            "media offer the split it needs; choose Automatic or gauss4"
+            f"method '{method}' is an explicit splitting: only Schwarzschild, Kerr below "
+            "extremal (|a/M| < 1) and media offer the split it needs; choose Automatic or "
+            "gauss4"
         )
 
 
@@ -224,7 +228,7 @@ def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
         lambda: checks.check_int("Max Steps", settings.max_steps),
         lambda: checks.check_int("Workers", settings.workers, 0),
         lambda: checks.check_render_method(settings.method, model in TIME_SCALED_MODELS),
-        lambda: _check_split(settings.method, model),
+        lambda: _check_split(settings.method, model, settings.spin),
     ]
     if model in TIME_SCALED_MODELS:
         found.append(lambda: checks.check_positive("Schwarzschild Radius", settings.rg))

@@ -10,7 +10,7 @@ METHOD_ORDER = (
     # the order Blender stores the enum in (by position): the first 13 never move
     ("symplectic_euler", "stormer_verlet", "implicit_midpoint", "gauss4", "yoshida4")
     + ("yoshida6", "yoshida8", "suzuki4", "suzuki6", "tao2", "tao4", "rk4", "dopri5")
-    + ("leapfrog", "blanes_moan4", "blanes_moan6", "AUTO")
+    + ("leapfrog", "blanes_moan4", "blanes_moan6", "AUTO", "blanes_moan_s6", "blanes_moan_s10")
 )
 
 

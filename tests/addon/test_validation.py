@@ -101,13 +101,17 @@ def test_errors_refreshed_after_load(scene, tmp_path):
 
 
 def test_splitting_methods_need_a_model_with_a_split(scene, addon):
-    """Automatic is the default; an explicit splitting on Kerr is named in the panel's
-    problems before a render, and accepted for Schwarzschild and media."""
+    """Automatic is the default; an explicit splitting on extremal Kerr or a user metric is
+    named in the panel's problems before a render, and accepted for Schwarzschild, media
+    and Kerr below extremal."""
     validation = addon.module("symray_addon.validation")
     s = scene.symray
     assert s.method == "AUTO"
-    s.model, s.method = "KERR", "blanes_moan4"
+    s.model, s.method, s.spin = "KERR", "blanes_moan_s10", 1.0
     assert any("explicit splitting" in p for p in validation.settings_problems(s))
-    for model in ("SCHWARZSCHILD", "MEDIUM"):
+    s.model = "METRIC"
+    assert any("explicit splitting" in p for p in validation.settings_problems(s))
+    s.spin = 0.9
+    for model in ("SCHWARZSCHILD", "MEDIUM", "KERR"):
         s.model = model
         assert not any("explicit splitting" in p for p in validation.settings_problems(s))

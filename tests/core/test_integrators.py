@@ -216,6 +216,8 @@ def test_registry_and_options():
         "leapfrog",
         "blanes_moan4",
         "blanes_moan6",
+        "blanes_moan_s6",
+        "blanes_moan_s10",
     }
     for name, m in METHODS.items():
         assert m.name == name
