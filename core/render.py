@@ -144,7 +144,9 @@ def tracer_for_camera(scene: Scene, options: TraceOptions, extent: float, positi
     on the polar axis or within its capture radius, where Kerr–Schild still can), the
     tracer of the implicit default (DEFAULT_METHOD) in the model's own chart instead."""
     tracer = Tracer(scene, options, extent)
-    if options.method is not None or not isinstance(tracer.method, Splitting):
+    if options.method is not None or not tracer.curved:
+        return tracer
+    if not isinstance(tracer.method, Splitting):
         return tracer
     try:
         with np.errstate(all="ignore"):
