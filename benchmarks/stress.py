@@ -9,8 +9,10 @@ render, that every pixel is finite and failed rays carry the failed colour.
 Cases: near_critical (b within 1e-6 of critical), horizon (rays grazing and crossing the
 horizon), spin (a/M = 0.9999), pole (rays over the Kerr pole in both charts), index_jump
 (an index step 1e-3 thick), stability (step sizes at and past stability limits), long
-(1e7 steps of one ray), n_zero (an index going to zero), far (positions at 1e8 rg),
-tao_render (Tao's methods in the renderer: a known weakness, reported, not hidden).
+(1e7 steps of one ray), long_split (10⁶ steps of a medium's split), long_split_kerr
+(10⁶ steps of Kerr's split on a bound orbit, ~10 min), n_zero (an index going to zero),
+far (positions at 1e8 rg), tao_render (Tao's methods in the renderer: a known weakness,
+reported, not hidden).
 The fast versions of the important cases are tests in tests/core/test_stress.py.
 """
 
@@ -419,12 +421,11 @@ def long_split(steps: int = 1_000_000, step: float = 0.25):
             f"{late.energy_error:.2e} after {steps} ({growth:.2f}x), "
             f"{outcome(late)}, {sec:.0f} s"
         )
-    rows.update(long_split_kerr(steps))
     return report(f"long_split ({steps:.0e} steps of {step}, one ray, graded-index fibre)", **rows)
 
 
 def kerr_bound_orbit(a: float = 0.45):
-    """(model, q, p, H0) of a bound, eccentric and inclined timelike orbit (m = 1, H0 = -1/2)
+    """(model, q, p, H0) of a bound, inclined timelike orbit (m = 1, H0 = -1/2; r 12 to 12.4)
     around Kerr in the split's BL (t, s, theta, phi): E = 0.98, L = 2.2, from r = 12 rg at
     its radial turning point, 0.5 rad above the equator."""
     from core.models import KerrBoyerLindquist
@@ -470,7 +471,7 @@ def long_split_kerr(steps: int = 1_000_000, step: float = 0.5) -> dict:
             f" / {worst['late'][1]:.2e}; r = {r:.3f} rg at the end, "
             f"{'ok' if ok.all() else 'flagged failed'}, {time.perf_counter() - start:.0f} s"
         )
-    return rows
+    return report(f"long_split_kerr ({steps:.0e} steps of {step}, one bound orbit, Kerr)", **rows)
 
 
 def n_zero(size: int = 12):
@@ -589,6 +590,7 @@ CASES = {
     "stability": stability,
     "long": long,
     "long_split": long_split,
+    "long_split_kerr": long_split_kerr,
     "n_zero": n_zero,
     "far": far,
     "tao_render": tao_render,

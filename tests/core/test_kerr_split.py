@@ -243,3 +243,37 @@ def test_default_method_falls_back_where_the_split_cannot_start():
         assert tracer.method.name == expect, position
     with pytest.raises(core.CoordinateAxisError, match="gauss4"):
         check_camera(Tracer(scene, TraceOptions(method="blanes_moan_s10"), 30.0), (0.0, 0.0, 30.0))
+
+
+def test_split_keeps_a_bound_orbit_on_its_level_set():
+    """A bound timelike orbit (m = 1, inclined, r = 12.0 ... 12.4 rg) around a/M = 0.9, 4000
+    leapfrog steps of 0.5 on the split with H0 = -1/2: |Λ| over the last three quarters stays
+    within 1.5x of its level over the first quarter (bounded, no drift; benchmarks/stress.py
+    long_split_kerr runs 10^6 steps: the same level), and E, L are kept exactly."""
+    model, q0, p0, H0 = stress_orbit()
+    split = model.split_parts(H0)
+    method = METHODS["leapfrog"]
+    state = method.init(split, q0, p0)
+    lam = []
+    r = []
+    for _ in range(4000):
+        state, ok = method.step(split, state, 0.5)
+        Q, P = method.qp(state)
+        lam.append(abs(split.value_soa(Q, P)[0]))
+        r.append(M + B * math.cosh(Q[1, 0]))
+    assert ok.all()
+    assert 11.9 < min(r) and max(r) < 12.5  # bound: r = 12.0 ... 12.42 rg
+    assert max(lam[1000:]) < 1.5 * max(lam[:1000])
+    assert P[0, 0] == p0[0, 0] and P[3, 0] == p0[3, 0]
+
+
+def stress_orbit():
+    """benchmarks/stress.py's kerr_bound_orbit."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).parents[2] / "benchmarks" / "stress.py"
+    spec = importlib.util.spec_from_file_location("stress_for_kerr", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.kerr_bound_orbit(A)
