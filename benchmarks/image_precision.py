@@ -311,7 +311,7 @@ def main(argv: list[str] | None = None) -> list[str]:
     """Run the chosen scenes; write CSVs and plots; print and return the verdicts."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small images, fewer runs")
-    parser.add_argument("--scenes", default="schwarzschild,mirage")
+    parser.add_argument("--scenes", default="schwarzschild,mirage,kerr,kerr998")
     parser.add_argument("--out", default=OUT)
     args = parser.parse_args(argv)
     found = run_scenes([s for s in args.scenes.split(",") if s], args.quick, args.out)

@@ -884,8 +884,9 @@ def main(argv: list[str] | None = None) -> None:
         )
         rows, _ = image_level(size, args.quick, args.out)
         found += _image_verdict(rows)
-        print("image: Schwarzschild and mirage scenes (benchmarks/image_precision.py)")
-        found += image_precision.run_scenes(["schwarzschild", "mirage"], args.quick, args.out)
+        print("image: Schwarzschild, mirage and Kerr scenes (benchmarks/image_precision.py)")
+        scenes = ["schwarzschild", "mirage", "kerr", "kerr998"]
+        found += image_precision.run_scenes(scenes, args.quick, args.out)
     print("verdict (cheapest method at each accuracy):")
     print("\n".join(found))
     print(f"done in {time.perf_counter() - start:.0f} s; results in {args.out}/")
