@@ -21,9 +21,10 @@ Coefficients:
 - blanes_moan6: the same paper, SRKN_11^b: order 6, 11 stages.
 - blanes_moan_s6, blanes_moan_s10: the same paper, Table 2, the partitioned Runge–Kutta
   methods S_6 (order 4, 6 stages) and S_10 (order 6, 10 stages) for a *general* split
-  A + B. The RKN methods above reach their order only where [V, [V, [V, T]]] = 0 (T
-  quadratic in p); a split whose kinetic part is not (Kerr's square-root Hamiltonian,
-  core/models/kerr_split.py) needs these.
+  A + B. blanes_moan6 is order 6 only where [V, [V, [V, T]]] = 0 (T quadratic in p),
+  order 4 on a split whose kinetic part is not (Kerr's square-root Hamiltonian,
+  core/models/kerr_split.py: measured 3.98); blanes_moan4's order 4 holds for any split
+  (a symmetric method's order-4 conditions do not depend on it).
 """
 
 from __future__ import annotations

@@ -3,34 +3,41 @@
 Null geodesics of Kerr in BL (t, r, theta, phi) with E = -p_t, L = p_phi (t, phi cyclic)
 have, in Mino time (K = Sigma H, Sigma = r^2 + a^2 cos^2 theta), the separated form
 
-    K = 1/2 Delta p_r^2 + 1/2 p_theta^2 - U0,   U0 = P(r)^2 / (2 Delta) - Theta(theta) / 2,
-    P = (r^2 + a^2) E - a L,   Theta = (L - a E sin^2 theta)^2 / sin^2 theta.
+    K = 1/2 Delta p_r^2 + 1/2 p_theta^2 + L^2 / (2 sin^2 theta) - V,
+    V = P(r)^2 / (2 Delta) + a E L - a^2 E^2 sin^2(theta) / 2 (+ H0 Sigma on H = H0),
+    P = (r^2 + a^2) E - a L.
 
 In s with r = M + b cosh s (b = sqrt(M^2 - a^2), ds = dr / sqrt(Delta), p_s = sqrt(Delta) p_r)
-the kinetic part is T = (p_s^2 + p_theta^2) / 2: K = T - U is separable, with
-U = U0 + H0 Sigma on the rays H = H0 (K = Sigma H0 there). Fixed steps of Mino time are
-no good for rendering (far away a step covers a distance ~ r^2), so the rays are followed
-on the level set T = U of the square-root Hamiltonian
 
-    Λ = 2 sqrt(T + c) - 2 sqrt(U + c),   c = C0 M^2 E^2 > 0,
+    K = T - V,   T = (p_s^2 + p_theta^2 + p_phi^2 / sin^2 theta) / 2:
 
-whose flow is K's slowed by sqrt(T + c) (the time transformation dσ = sqrt(U + c) dλ): the
-drift moves (s, theta) at a speed |p| / sqrt(T + c) < sqrt(2), so far away a step covers a
-fixed step in s ~ ln r (a length ~ r, like the Kerr–Schild tracing's g = r), and c keeps Λ
-regular where T = U = 0 (a radial and a polar turning point at once). Both parts are solved
-exactly (E, L are constants of both flows):
+free motion in s and on the unit sphere (T's angular part is the sphere's |J|^2 / 2, with
+J the angular momentum of the direction n(theta, phi)), and a potential V with no 1/sin^2
+at the poles. Fixed steps of Mino time are no good for rendering (far away a step covers a
+distance ~ r^2), so the rays are followed on the level set T = V of the square-root
+Hamiltonian
 
-- drift (p fixed): s, theta += t p / sqrt(T + c); t += -t 2 C0 M^2 E / sqrt(T + c);
-- kick ((s, theta) fixed): p_s, p_theta += t dU / sqrt(U + c);
-  t += t (dU/dE + 2 c / E) / sqrt(U + c); phi += -t (dU/dL) / sqrt(U + c).
+    Λ = 2 sqrt(T + c) - 2 sqrt(V + c),   c = C0 M^2 E^2 > 0,
+
+whose flow is K's slowed by sqrt(T + c) (dσ = sqrt(V + c) dλ): the drift moves s and n at a
+speed |(p_s, J)| / sqrt(T + c) < sqrt(2), so far away a step covers a fixed step in
+s ~ ln r (a length ~ r, like the Kerr–Schild tracing's g = r), and c keeps Λ regular where
+T = V = 0. Both parts are solved exactly (E and L are constants of both flows):
+
+- drift (flow of 2 sqrt(T + c); R = sqrt(T + c) and J constant): s += t p_s / R, n turns
+  about J by the angle t |J| / R (a great circle: exact through the poles, see
+  sphere_geodesic), t_BL += -t 2 C0 M^2 E / R;
+- kick (flow of -2 sqrt(V + c); s, theta fixed, w = 1 / sqrt(V + c)): p_s += t w dV/ds,
+  p_theta += t w dV/dtheta, t_BL += t w (dV/dE + 2 c / E), phi += -t w dV/dL.
 
 Λ is homogeneous of degree 1 in p: a ray's steps do not depend on its momentum's scale.
-Λ is not of Runge–Kutta–Nyström type (its kinetic part is not quadratic in p), so the
-splittings for general A + B (core.integrators.splitting: blanes_moan_s6, blanes_moan_s10)
-keep their order on it. BL cannot cross the horizon: rays that reach r_capture (below every
-spherical photon orbit, see capture_radius) are captured. The model is the renderer's form of
-a Kerr–Schild Kerr for an explicit splitting (KerrSchild.for_backward_tracing): its chart
-(core.charts.KerrBLChart) maps positions to and from the tracer's Kerr–Schild frame.
+Λ is not of Runge–Kutta–Nyström type (its kinetic part is not quadratic in p, and depends
+on theta), so the splittings for general A + B (core.integrators.splitting: blanes_moan_s6,
+blanes_moan_s10) are the ones that keep their order on it. BL cannot cross the horizon: rays
+that reach r_capture (below every spherical photon orbit, see capture_radius) are captured.
+The model is the renderer's form of a Kerr–Schild Kerr for an explicit splitting
+(KerrSchild.for_backward_tracing): its chart (core.charts.KerrBLChart) maps positions to
+and from the tracer's Kerr–Schild frame.
 """
 
 from __future__ import annotations
@@ -76,7 +83,7 @@ class KerrBoyerLindquist(Hamiltonian):
     )
     """Measured on this split like core.tracing.steps' constants (a/M = 0.9 from 30 rg, 800
     rays, the largest equivalent direction error over h^order, times 1.5; bench_perf.py
-    --only calibrate). The RKN methods (blanes_moan4/6) do not reach their order on it."""
+    --only calibrate). blanes_moan6 (Runge–Kutta–Nyström) is order 4 on it, not 6."""
 
     def __init__(self, rg: float, a: float):
         super().__init__(
