@@ -31,6 +31,7 @@ from .sampling import (
     TileResult,
     TileSampler,
     richardson_error,
+    seen_direction,
     tiles,
 )
 from .sky import Background
@@ -38,8 +39,11 @@ from .tracing import ENDING, FAR_FIELD_CONSTANT, RayResults, Scene, TraceOptions
 
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
-ALL_PASSES = ("error", "error_px", "steps", "ending")
-"""The passes, in their one order (the add-on's render passes and EXR channels follow it)."""
+ALL_PASSES = ("error", "error_px", "steps", "ending", "direction")
+"""The passes, in their one order. ``direction`` (h, w, 3): what each pixel's centre sees
+(the escape direction, or the unit vector to the hit point; NaN where captured or failed)."""
+DEFAULT_PASSES = ("error", "error_px", "steps", "ending")
+"""The passes core.render computes unless asked otherwise."""
 _MIN_CHUNK = 2048
 TRACE_SHARE = 0.5
 """With ``tolerance_px``, the integration and far field get this share of it (the tracer's
@@ -68,7 +72,7 @@ def render(
     filter_size: float = 1.5,
     step: float | None = None,
     max_steps: int = 20_000,
-    passes: Sequence[str] = ALL_PASSES,
+    passes: Sequence[str] = DEFAULT_PASSES,
     chunk_size: int = 16_384,
     workers: int | None = None,
     parallel: str = "auto",
@@ -253,12 +257,13 @@ def check_scene_camera(scene: Scene, position, tolerance: float = 1e-8) -> None:
 def _trace_chunk(tracer: Tracer, origins, directions, with_error: bool, cancel, far_field=0.0):
     """Trace one chunk; with the error pass, a companion run at COMPANION_RATIO x the step."""
     rays = tracer.trace(origins, directions, cancel=cancel)
+    seen = seen_direction(rays, origins)
     if not with_error:
-        return rays, None
+        return rays, seen, None
     assert tracer.step is not None  # with_error: the scene is curved
     coarse = tracer.trace(origins, directions, step=COMPANION_RATIO * tracer.step, cancel=cancel)
     error = richardson_error(rays, coarse, origins, tracer.method.order)
-    return rays, error + np.where(rays.ending == ENDING["escaped"], far_field, 0.0)
+    return rays, seen, error + np.where(rays.ending == ENDING["escaped"], far_field, 0.0)
 
 
 class _Buffers:
@@ -270,6 +275,7 @@ class _Buffers:
         self.steps = np.zeros(n, dtype=np.int32)
         self.ending = np.full(n, -1, dtype=np.int8)
         self.energy = np.zeros(n)
+        self.direction = np.full((n, 3), np.nan, dtype=np.float32)
         self.with_error = with_error
         self.width = width
         self.rays = 0
@@ -280,8 +286,9 @@ class _Buffers:
         if isinstance(chunk[0], Tile):
             return self._store_tile(*chunk)
         a, b = span
-        rays, error = chunk
+        rays, seen, error = chunk
         self.rgba[a:b] = shade(rays, background)
+        self.direction[a:b] = seen
         self.steps[a:b] = rays.steps
         self.ending[a:b] = rays.ending
         self.energy[a:b] = rays.energy_error
@@ -305,6 +312,7 @@ class _Buffers:
         self.ending[idx] = part.ending
         self.energy[idx] = part.energy
         self.error[idx] = part.error
+        self.direction[idx] = part.direction
         self.rays += part.rays
         self.error_rays += part.error_rays
         return idx.size
@@ -335,6 +343,10 @@ class _Buffers:
             out.passes["ending"] = self.ending.reshape(h, w)
         if "error_px" in passes:
             out.passes["error_px"] = self.error.reshape(h, w).copy()
+        if "direction" in passes:
+            dead = (self.ending == ENDING["captured"]) | (self.ending == ENDING["failed"])
+            self.direction[dead] = np.nan
+            out.passes["direction"] = self.direction.reshape(h, w, 3)
         out.summary = self.summary(seconds, tracer)
         return out
 

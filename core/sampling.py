@@ -105,6 +105,7 @@ class TileResult:
     steps: np.ndarray  # (h, w) int32
     ending: np.ndarray  # (h, w) int8
     energy: np.ndarray  # (h, w) |H - H0|
+    direction: np.ndarray  # (h, w, 3) float32: what each pixel's centre sees (seen_direction)
     rays: int
     error_rays: int
 
@@ -153,21 +154,23 @@ class TileSampler:
     # --- tracing nodes -----------------------------------------------------------------
     def _trace_points(
         self, xy: np.ndarray, cancel, companion: bool = True
-    ) -> tuple[RayResults, np.ndarray | None]:
-        """Trace camera rays through image points xy (M, 2); with the error pass (and
-        ``companion``), their Richardson error (radians) from a companion run at
-        COMPANION_RATIO x the step (sub-pixel samples need none: the pass reports centres)."""
+    ) -> tuple[RayResults, np.ndarray, np.ndarray | None]:
+        """Trace camera rays through image points xy (M, 2) -> (rays, seen directions, and
+        with the error pass (and ``companion``) their Richardson error in radians from a
+        companion run at COMPANION_RATIO x the step; sub-pixel samples need none: the pass
+        reports pixel centres)."""
         origins, directions = self.camera.rays_at(xy)
         self.rays += xy.shape[0]
         rays = self.tracer.trace(origins, directions, cancel=cancel)
+        seen = seen_direction(rays, origins)
         if not (self.with_error and companion):
-            return rays, None
+            return rays, seen, None
         assert self.tracer.step is not None
         coarse = self.tracer.trace(
             origins, directions, step=COMPANION_RATIO * self.tracer.step, cancel=cancel
         )
         self.error_rays += xy.shape[0]
-        return rays, richardson_error(rays, coarse, origins, self.tracer.method.order)
+        return rays, seen, richardson_error(rays, coarse, origins, self.tracer.method.order)
 
     def _trace_nodes(self, nodes: _Nodes, jj: np.ndarray, ii: np.ndarray, origin, cancel):
         """Trace the untraced nodes among (jj, ii) (flat index arrays) and store them."""
@@ -178,9 +181,9 @@ class TileSampler:
         if jj.size == 0:
             return
         xy = np.stack([origin[1] + ii + 0.5, origin[0] + jj + 0.5], axis=1)
-        rays, error = self._trace_points(xy, cancel)
+        rays, seen, error = self._trace_points(xy, cancel)
         nodes.traced[jj, ii] = True
-        nodes.direction[jj, ii] = rays.direction
+        nodes.direction[jj, ii] = seen
         nodes.ending[jj, ii] = rays.ending
         nodes.rgba[jj, ii] = self.shade(rays, self.background)
         nodes.steps[jj, ii] = rays.steps
@@ -262,6 +265,7 @@ class TileSampler:
         rgba = centre.rgba.reshape(h + 2, w + 2, 4)
         error = centre.error.reshape(h + 2, w + 2)
         ending = centre.ending.reshape(h + 2, w + 2)
+        direction = centre.direction.reshape(h + 2, w + 2, 3)
         inner = (slice(1, h + 1), slice(1, w + 1))
         steps = nodes.steps[inner]
         energy = nodes.energy[inner]
@@ -271,7 +275,8 @@ class TileSampler:
             colour[busy] = self._supersample(nodes, blocks, busy, origin, cancel)
         return TileResult(
             colour.astype(np.float32), error[inner].astype(np.float32), steps,
-            ending[inner], energy, self.rays, self.error_rays,
+            ending[inner], energy, direction[inner].astype(np.float32), self.rays,
+            self.error_rays,
         )  # fmt: skip
 
     def _evaluate(self, nodes: _Nodes, blocks: _Blocks, y, x) -> _Points:
@@ -279,7 +284,9 @@ class TileSampler:
         node's own where a point is one, else interpolated in its accepted block; points in
         no accepted block and on no traced node get ending -1 (to be traced)."""
         m = y.shape[0]
-        out = _Points(np.zeros((m, 4)), np.full(m, -1, dtype=np.int8), np.zeros(m))
+        out = _Points(
+            np.zeros((m, 4)), np.full(m, -1, dtype=np.int8), np.zeros(m), np.full((m, 3), np.nan)
+        )
         cell_j = np.clip(np.floor(y).astype(np.int64), 0, blocks.block.shape[0] - 1)
         cell_i = np.clip(np.floor(x).astype(np.int64), 0, blocks.block.shape[1] - 1)
         b = blocks.block[cell_j, cell_i]
@@ -293,6 +300,7 @@ class TileSampler:
         out.rgba[t] = nodes.rgba[nj[t], ni[t]]
         out.ending[t] = nodes.ending[nj[t], ni[t]]
         out.error[t] = nodes.error[nj[t], ni[t]]
+        out.direction[t] = nodes.direction[nj[t], ni[t]]
         return out
 
     def _interpolate(self, nodes: _Nodes, blocks: _Blocks, b, y, x, out: _Points, rows):
@@ -309,9 +317,10 @@ class TileSampler:
         sky = ending == ENDING["escaped"]
         colour = np.zeros((b.size, 4))
         colour[:, 3] = 1.0
+        d = d / np.linalg.norm(d, axis=1, keepdims=True)
         if sky.any():
-            dirs = d[sky] / np.linalg.norm(d[sky], axis=1, keepdims=True)
-            colour[sky] = self.background(dirs)
+            colour[sky] = self.background(d[sky])
+        out.direction[rows] = np.where(sky[:, None], d, np.nan)
         shape = 2.0 * (u * (1 - u) + v * (1 - v))
         out.rgba[rows] = colour
         out.ending[rows] = ending
@@ -328,7 +337,7 @@ class TileSampler:
         todo = np.flatnonzero(points.ending < 0)
         if todo.size:
             xy = np.stack([origin[1] + x[todo] + 0.5, origin[0] + y[todo] + 0.5], axis=1)
-            rays, _ = self._trace_points(xy, cancel, companion=False)
+            rays, _, _ = self._trace_points(xy, cancel, companion=False)
             points.rgba[todo] = self.shade(rays, self.background)
         colour = points.rgba.reshape(pj.size, k, 4)
         return np.einsum("pkc,k->pc", colour, self.weights) / self.weights.sum()
@@ -339,6 +348,7 @@ class _Points:
     rgba: np.ndarray
     ending: np.ndarray
     error: np.ndarray
+    direction: np.ndarray
 
 
 class _Blocks:
@@ -379,15 +389,23 @@ def _contrast(rgba: np.ndarray, ending: np.ndarray) -> np.ndarray:
     return busy
 
 
+def seen_direction(rays: RayResults, origins: np.ndarray) -> np.ndarray:
+    """(N, 3) what a pixel's ray points at: the escape direction of an escaped ray, else
+    the unit vector from the ray's origin to where it ended (a hit point)."""
+    escaped = rays.ending == ENDING["escaped"]
+    to_end = rays.position - origins
+    with np.errstate(all="ignore"):
+        to_end /= np.linalg.norm(to_end, axis=1, keepdims=True)
+    return np.where(escaped[:, None], rays.direction, to_end)
+
+
 def richardson_error(fine: RayResults, coarse: RayResults, origins, order: int) -> np.ndarray:
     """Richardson estimate of the fine run's final-direction error (radians, (N,)) from a
     run at COMPANION_RATIO x its step: the escape direction's, or for a hit the direction
     from the camera to the hit point; pi where the endings differ, +inf where failed."""
-    escaped = fine.ending == ENDING["escaped"]
-    vec_c = np.where(escaped[:, None], coarse.direction, coarse.position - origins)
-    vec_f = np.where(escaped[:, None], fine.direction, fine.position - origins)
     with np.errstate(all="ignore"):
-        err = _angle(vec_c, vec_f) / (COMPANION_RATIO**order - 1.0)
+        err = _angle(seen_direction(coarse, origins), seen_direction(fine, origins))
+        err /= COMPANION_RATIO**order - 1.0
     err = np.where(coarse.ending == fine.ending, err, np.pi)
     err = np.where(fine.ending == ENDING["captured"], 0.0, err)
     bad = (fine.ending == ENDING["failed"]) | (fine.ending == ENDING["max_steps"])

@@ -13,6 +13,7 @@ import time
 from typing import Any
 
 import bpy
+import numpy as np
 
 from . import output, properties, render_job
 
@@ -73,10 +74,20 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
         for _core_name, name in passes:
             self.add_pass(name, 1, "X")
         self.update_stats("", "SymRay: tracing")
-        result = render_job.run(job, self._progress_callback(), self.test_break)
-        if result.cancelled or self.test_break():
-            return
-        self._write_result(depsgraph, job, result, passes)
+        view_layer = depsgraph.view_layer.name if depsgraph.view_layer else ""
+        # Coordinates are relative to the render region (border), which is what we traced.
+        res = self.begin_result(0, 0, job.camera.width, job.camera.height, layer=view_layer)
+        try:
+            shown = _Progressive(self, res, job.camera.width, job.camera.height)
+            result = render_job.run(job, self._progress_callback(), self.test_break, shown.tile)
+            if result.cancelled or self.test_break():
+                self.end_result(res, cancel=True)
+                return
+            self._write_result(res, result, passes)
+        except BaseException:
+            self.end_result(res, cancel=True)  # nothing of a failed frame is committed
+            raise
+        self.end_result(res)
         text = render_job.finished(result.summary)
         self.update_stats("", f"SymRay: {text}")
         if bpy.app.background:
@@ -92,33 +103,35 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
             now = time.monotonic()
             if now - last_report[0] > 0.25:
                 last_report[0] = now
-                self.update_stats("", f"SymRay: traced {done} of {total}")
+                self.update_stats("", f"SymRay: {done} of {total} pixels")
 
         return progress
 
-    def _write_result(
-        self,
-        depsgraph: bpy.types.Depsgraph,
-        job: render_job.RenderJob,
-        result: Any,
-        passes: list[tuple[str, str]],
-    ) -> None:
-        """Copy the image and passes into Blender's render result; nothing on a failure."""
-        view_layer = depsgraph.view_layer.name if depsgraph.view_layer else ""
-        # Coordinates are relative to the render region (border), which is what we traced.
-        res = self.begin_result(0, 0, job.camera.width, job.camera.height, layer=view_layer)
-        try:
-            layer = res.layers[0]
-            layer.passes["Combined"].rect = output.bottom_up(result.rgba, 4)
-            for core_name, name in passes:
-                data = result.passes.get(core_name)
-                render_pass = layer.passes.get(name)
-                if data is not None and render_pass is not None:
-                    render_pass.rect = output.bottom_up(data, 1)
-        except BaseException:
-            self.end_result(res, cancel=True)
-            raise
-        self.end_result(res)
+    def _write_result(self, res: Any, result: Any, passes: list[tuple[str, str]]) -> None:
+        """Copy the image and passes into Blender's render result ``res`` (not committed)."""
+        layer = res.layers[0]
+        layer.passes["Combined"].rect = output.bottom_up(result.rgba, 4)
+        for core_name, name in passes:
+            data = result.passes.get(core_name)
+            render_pass = layer.passes.get(name)
+            if data is not None and render_pass is not None:
+                render_pass.rect = output.bottom_up(data, 1)
+
+
+class _Progressive:
+    """Shows each finished tile in the open render result (``update_result``), as Cycles
+    shows its tiles; the result is committed (or discarded) by the engine at the end."""
+
+    def __init__(self, engine: SymRayRenderEngine, res: Any, width: int, height: int) -> None:
+        self.engine, self.res = engine, res
+        self.rgba = np.zeros((height, width, 4), dtype=np.float32)  # row 0 at the top
+
+    def tile(self, rect: tuple[int, int, int, int], part: Any) -> None:
+        """Copy a finished tile (x0, y0, x1, y1; row 0 at the top) and redraw."""
+        x0, y0, x1, y1 = rect
+        self.rgba[y0:y1, x0:x1] = part.rgba.reshape(y1 - y0, x1 - x0, 4)
+        self.res.layers[0].passes["Combined"].rect = output.bottom_up(self.rgba, 4)
+        self.engine.update_result(self.res)
 
 
 # Built-in panels shown for SYMRAY: every generic panel (those listing BLENDER_RENDER in

@@ -109,11 +109,20 @@ def prepare(
 
 
 def run(
-    job: RenderJob, progress: Progress | None = None, should_cancel: Cancel | None = None
+    job: RenderJob,
+    progress: Progress | None = None,
+    should_cancel: Cancel | None = None,
+    on_tile: Callable[[tuple[int, int, int, int], Any], None] | None = None,
 ) -> Any:
-    """Trace ``job`` with core.render; no bpy is touched (safe in a worker thread)."""
+    """Trace ``job`` with core.render; no bpy is touched (safe in a worker thread).
+    ``on_tile(rect, part)`` sees each finished tile (core.render's, in the caller's thread)."""
     result = core.render(
-        job.scene, job.camera, progress=progress, should_cancel=should_cancel, **job.options
+        job.scene,
+        job.camera,
+        progress=progress,
+        should_cancel=should_cancel,
+        on_tile=on_tile,
+        **job.options,
     )
     if job.transparent and not getattr(result, "cancelled", False):
         ending = result.passes.get("ending")

@@ -309,6 +309,7 @@ class Tracer:
         most, while they deviate more than allowed); ``hits`` takes the refined hits, in
         place. A ray whose finer chords all miss (a grazing edge) keeps its chord's hit."""
         deviation, allowed = limits
+        allowed = allowed * dense.HIT_SHARE
         todo = np.flatnonzero(hits.hit & (deviation > allowed))
         lo = np.full(todo.size, t0)
         m = dense.REFINE_PIECES
