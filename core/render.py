@@ -24,6 +24,7 @@ from .geometry import Intersector
 from .imageio import FAILED_COLOR
 from .observer import check_camera
 from .sampling import (
+    CLEARANCE,
     COMPANION_RATIO,
     FILTERS,
     STRIDE,
@@ -127,7 +128,7 @@ def render(
         sampler = TileSampler(
             tracer, camera, background, shade, interpolation=interpolation, samples=samples,
             pixel_filter=pixel_filter, filter_size=filter_size, with_error=with_error,
-            far_field=_far_field_error(tracer),
+            far_field=_far_field_error(tracer), pixel_angle=pixel_angle,
         )  # fmt: skip
         chunks = [(k, k + 1) for k in range(len(tiles(camera.width, camera.height)))]
         work = _tile_work(sampler, tiles(camera.width, camera.height))
@@ -204,14 +205,14 @@ def _camera_distance(scene: Scene, camera) -> float:
 
 
 def _watch_margin(tracer: Tracer, camera, pixel_angle: float) -> float:
-    """World margin around geometry within which rays are not interpolated: a coarsest
-    block (core.sampling.STRIDE pixels) seen at the geometry's farthest corner."""
+    """World margin around geometry within which straight segments stop interpolation: a
+    coarsest block (core.sampling.STRIDE pixels) seen at the geometry's farthest corner."""
     box = tracer.geometry.local_box(lambda x: x)
     if box is None:
         return 0.0
     corners = np.array(np.meshgrid(*zip(box[0], box[1], strict=True))).reshape(3, -1).T
     far = float(np.max(np.linalg.norm(corners - camera.frame.position, axis=1)))
-    return 2.0 * STRIDE * pixel_angle * far if np.isfinite(far) else 0.0
+    return CLEARANCE * STRIDE * pixel_angle * far if np.isfinite(far) else np.inf
 
 
 def _far_field_error(tracer: Tracer) -> float:

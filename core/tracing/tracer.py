@@ -103,16 +103,19 @@ class Tracer:
         )
 
     def watch_geometry(self, margin: float) -> None:
-        """Flag (``RayResults.near``) every ray whose path passes within about ``margin``
-        (world units) of an object's or volume's bounds (adaptive sampling: a block of
-        pixels is interpolated only where no ray of it came near geometry)."""
+        """Record each ray's clearance (``RayResults.clearance``): the smallest angle, seen
+        from the camera, between its path and the bounds of every object and volume
+        (adaptive sampling interpolates a block of pixels only where its rays kept clear by
+        more than the block's width). Straight segments count as 0 where they pass within
+        ``margin`` (world units) of the bounds, else not at all (they leave a black hole's
+        region moving away from it)."""
         world = self.geometry.local_box(lambda x: x)
         if world is None:
             return
         self._watch = (world[0] - margin, world[1] + margin)
         local = self.geometry.local_box(self._to_local)
         assert local is not None
-        self._watch_local = (local[0] - margin, local[1] + margin)
+        self._watch_local = local
 
     @property
     def objects(self) -> Any:
@@ -212,7 +215,7 @@ class Tracer:
             if not ok.all():
                 out.ending[idx[ended]] = ENDING["failed"]
                 out.position[idx[ended]] = self._to_world(X_prev[:, ended].T)
-            self._watch_steps(idx, X_prev, X, out)
+            self._watch_steps(idx, X, camera, out)
             if self._near is not None:  # surfaces and volumes along this step's segment
                 step_ends = _StepEnds(self, K, start, (Q, P), h)
                 ended |= self._segments(idx, X_prev, X, ok, out, step_ends, camera)
@@ -330,20 +333,24 @@ class Tracer:
             todo, lo = todo[ok][keep], ta[first][keep]
 
     def _watch_segments(self, rows, a, b, out: RayResults) -> None:
-        """Flag the rays whose straight world segment a -> b meets the watched box."""
+        """Clearance 0 for the rays whose straight world segment a -> b meets the watched
+        box (with its margin)."""
         if self._watch is not None:
-            out.near[rows[segment_meets_box(a, b, *self._watch)]] = True
+            out.clearance[rows[segment_meets_box(a, b, *self._watch)]] = 0.0
 
-    def _watch_steps(self, idx, X_prev, X, out: RayResults) -> None:
-        """Flag the rays whose step X_prev -> X (local, (3, M)) has bounds meeting the
-        watched box (the steps are short: their bounds stand for them)."""
+    def _watch_steps(self, idx, X, camera, out: RayResults) -> None:
+        """Lower the clearance of the rays at local X (3, M) to their angular distance, from
+        the camera (local, (3, M)), to the watched box (steps are short: their ends stand
+        for them, the block test's factor 2 covers the rest)."""
         if self._watch_local is None:
             return
         lo, hi = self._watch_local
-        meets = np.ones(idx.size, dtype=bool)
-        for i in range(3):
-            meets &= (np.minimum(X_prev[i], X[i]) <= hi[i]) & (np.maximum(X_prev[i], X[i]) >= lo[i])
-        out.near[idx[meets]] = True
+        outside = np.maximum(np.maximum(lo[:, None] - X, X - hi[:, None]), 0.0)
+        gap = np.sqrt(np.einsum("ij,ij->j", outside, outside))
+        seen = np.sqrt(np.einsum("ij,ij->j", X - camera, X - camera))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            angle = np.where(gap > 0, gap / seen, 0.0)
+        out.clearance[idx] = np.minimum(out.clearance[idx], angle)
 
     def _finish_energy(self, out, rows, Q, P, H0):
         with np.errstate(all="ignore"):
