@@ -70,6 +70,8 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
         job = render_job.prepare(
             scene, depsgraph, use_border=True, camera_object=self.camera_override
         )
+        for warning in job.warnings:
+            self.report({"WARNING"}, warning)
         passes = enabled_passes(scene.symray)
         for _core_name, name in passes:
             self.add_pass(name, 1, "X")

@@ -114,6 +114,8 @@ class SYMRAY_OT_render(bpy.types.Operator):
         if exr_path:
             output.check_writable(exr_path)
         job = render_job.prepare(scene, context.evaluated_depsgraph_get())
+        for warning in job.warnings:
+            self.report({"WARNING"}, warning)
         return job, image_name, exr_path
 
     def _failed(self, err: Exception) -> set[str]:
