@@ -402,10 +402,14 @@ def _copy_materials(stack: ExitStack, original: bpy.types.Object, copy: bpy.type
         slot.material = material
 
 
-def _context(temp: bpy.types.Scene, obj: bpy.types.Object) -> Any:
-    """A context override making ``obj`` the one selected, active object of ``temp``."""
+def _context(temp: bpy.types.Scene, obj: bpy.types.Object, editing: bool = False) -> Any:
+    """A context override making ``obj`` the one selected, active (``editing``: edited)
+    object of ``temp``'s view layer (the user's own selection is another layer's)."""
     layer = temp.view_layers[0]
+    for other in layer.objects:
+        other.select_set(other == obj, view_layer=layer)
     layer.objects.active = obj
+    extra = {"edit_object": obj} if editing else {}
     return bpy.context.temp_override(
         scene=temp,
         view_layer=layer,
@@ -413,6 +417,7 @@ def _context(temp: bpy.types.Scene, obj: bpy.types.Object) -> Any:
         object=obj,
         selected_objects=[obj],
         selected_editable_objects=[obj],
+        **extra,
     )
 
 
@@ -420,10 +425,12 @@ def _smart_project(temp: bpy.types.Scene, obj: bpy.types.Object) -> None:
     """Smart UV Project the whole mesh of ``obj`` (a temporary object of ``temp``)."""
     with _context(temp, obj):
         bpy.ops.object.mode_set(mode="EDIT")
-        try:
+    try:
+        with _context(temp, obj, editing=True):
             bpy.ops.mesh.select_all(action="SELECT")
             bpy.ops.uv.smart_project(island_margin=0.02)
-        finally:
+    finally:
+        with _context(temp, obj, editing=True):
             bpy.ops.object.mode_set(mode="OBJECT")
 
 

@@ -188,3 +188,106 @@ def test_baked_surfaces_match_cycles(addon, scene, helpers, tmp_path):
     diff = np.abs(result.rgba[..., :3] - want[..., :3])[hit]
     print(f"mean |SymRay - Cycles| on {hit.sum()} surface pixels: {diff.mean():.4f}")
     assert diff.mean() < 0.05
+
+
+def _state(scene) -> dict:
+    """What of the .blend a render must leave as it was (datablocks, materials, selection)."""
+    layer = bpy.context.view_layer
+    materials = {
+        m.name: (
+            sorted(n.name for n in m.node_tree.nodes),
+            getattr(m.node_tree.nodes.active, "name", None),
+            len(m.node_tree.links),
+        )
+        for m in bpy.data.materials
+    }
+    objects = {
+        o.name: (
+            o.hide_render,
+            o.mode,
+            o.select_get(),
+            tuple(np.array(o.matrix_world).ravel()),
+            tuple((s.link, getattr(s.material, "name", None)) for s in o.material_slots),
+            getattr(o.data, "name", None),
+        )
+        for o in bpy.data.objects
+    }
+    meshes = {
+        m.name: ([uv.name for uv in m.uv_layers], len(m.vertices), len(m.polygons))
+        for m in bpy.data.meshes
+    }
+    counts = {
+        kind: sorted(x.name for x in getattr(bpy.data, kind))
+        for kind in ("scenes", "objects", "meshes", "materials", "images", "worlds", "lights")
+    }
+    return dict(
+        materials=materials,
+        objects=objects,
+        meshes=meshes,
+        counts=counts,
+        active=getattr(layer.objects.active, "name", None),
+        engine=scene.render.engine,
+        samples=scene.cycles.samples,
+        frame=scene.frame_current,
+        scene=bpy.context.scene.name,
+    )
+
+
+def test_baking_leaves_the_blend_as_it_was(addon, scene, helpers):
+    """Bakes run in a temporary scene; image nodes, copies and images are all removed."""
+    _lit_scene(scene, helpers)
+    scene.symray.bake_texel_size = 0.3
+    scene.symray.bake_samples = 4
+    bpy.context.view_layer.objects.active = bpy.data.objects["Floor"]
+    bpy.data.objects["Box"].select_set(True)
+    before = _state(scene)
+    addon.module("symray_addon.bake").clear_cache()
+    assert bpy.ops.symray.render() == {"FINISHED"}
+    after = _state(scene)
+    after["counts"]["images"].remove("SymRay Result")
+    assert after == before
+
+
+def test_bakes_are_reused_and_redone_on_change(addon, scene, helpers, tmp_path):
+    """A bake is reused while nothing lighting-relevant changes (new camera, new frame),
+    and redone when a material, a light or an object changes; F12 bakes too."""
+    cam = _lit_scene(scene, helpers)
+    scene.symray.bake_texel_size = 0.3
+    scene.symray.bake_samples = 4
+    bake = addon.module("symray_addon.bake")
+    bake.clear_cache()
+
+    def renders() -> tuple[int, int]:
+        baked, reused = bake.stats["baked"], bake.stats["reused"]
+        _job, result = _trace(addon, scene)
+        renders.last = result  # type: ignore[attr-defined]
+        return bake.stats["baked"] - baked, bake.stats["reused"] - reused
+
+    assert renders() == (3, 0)
+    cam.location.x += 0.5
+    scene.frame_set(2)
+    assert renders() == (0, 3)
+    ball = renders.last.rgba[_hit(addon, renders.last)]  # type: ignore[attr-defined]
+    bpy.data.materials["Red"].node_tree.nodes["Diffuse BSDF"].inputs["Color"].default_value = (
+        0.1,
+        0.8,
+        0.1,
+        1.0,
+    )
+    assert renders() == (3, 0)
+    changed = renders.last.rgba[_hit(addon, renders.last)]  # type: ignore[attr-defined]
+    assert np.abs(changed - ball).max() > 0.1
+    bpy.data.lights["Sun"].energy = 4.0
+    assert renders() == (3, 0)
+    bpy.data.objects["Box"].location.z += 0.2
+    bpy.context.view_layer.update()
+    assert renders() == (3, 0)
+    # the engine (F12 in background mode, blender -b) bakes on the main thread as well
+    baked = bake.stats["baked"]
+    bpy.data.lights["Lamp"].energy = 100.0
+    scene.render.engine = "SYMRAY"
+    scene.render.filepath = str(tmp_path / "f12.png")
+    scene.render.use_file_extension = False
+    bpy.ops.render.render(write_still=True)
+    assert (tmp_path / "f12.png").is_file()
+    assert bake.stats["baked"] - baked == 3
