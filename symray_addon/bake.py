@@ -3,9 +3,10 @@
 ``bake_surfaces(scene, depsgraph)`` bakes, with Cycles, the radiance every rendered object
 sends out in all directions alike (Combined with Diffuse direct + indirect and Emission;
 no Glossy, no Transmission) into a float image per object, on the object's active UV map,
-or, where it has none (or is no mesh, or a slot has no node material), on a temporary
-Smart UV Project of a copy of its evaluated mesh. The SymRay renderer then shows that
-texture where a curved ray hits (``export_meshes.BakedSurface``). Light reaches the
+or, where it has none (or is no mesh, or a slot has no node material, or its UVs leave
+[0, 1]² or cover it more than once: tiled or mirrored UVs cannot hold a bake), on a
+temporary Smart UV Project of a copy of its evaluated mesh. The SymRay renderer then shows
+that texture where a curved ray hits (``export_meshes.BakedSurface``). Light reaches the
 surfaces on straight paths (Cycles' flat-space lighting); what a surface sends towards
 the camera through curved space is SymRay's.
 
@@ -307,7 +308,8 @@ def _usable(material: bpy.types.Material | None) -> bool:
 
 
 def _needs_copy(obj: bpy.types.Object) -> bool:
-    """Whether ``obj`` (evaluated) must be baked as a temporary copy."""
+    """Whether ``obj`` (evaluated) must be baked as a temporary copy: no mesh, no UV map,
+    or a material slot Cycles cannot bake into."""
     original = obj.original
     if original.type != "MESH" or not obj.data.uv_layers:
         return True
@@ -315,20 +317,31 @@ def _needs_copy(obj: bpy.types.Object) -> bool:
     return not slots or not all(_usable(slot.material) for slot in slots)
 
 
+def _unique_uvs(mesh: bpy.types.Mesh) -> bool:
+    """Whether the active UV map can hold a bake: inside [0, 1]² and not covering more than
+    its area (tiled or mirrored UVs would share texels; smaller overlaps go unnoticed)."""
+    uv = _mesh_arrays(mesh)[3]
+    if uv.size == 0 or np.any(uv < -1e-6) or np.any(uv > 1.0 + 1e-6):
+        return False
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    return float(0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()) <= 1.001
+
+
 def _bake_object(
     temp: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, obj: bpy.types.Object, settings: Any
 ) -> BakedSurface:
     """Bake one evaluated object in the temporary scene; everything added is removed."""
     with ExitStack() as stack:
-        if _needs_copy(obj):
-            target = _temporary_copy(stack, temp, depsgraph, obj)
-            loop_uv = _loop_uv(target.data)
-            mesh, matrix = target.data, obj.matrix_world
-        else:
-            target, loop_uv = obj.original, None
-            mesh, matrix = obj.to_mesh(), obj.matrix_world
+        target, loop_uv = None, None
+        if not _needs_copy(obj):
+            mesh = obj.to_mesh()
             stack.callback(obj.to_mesh_clear)
-        area, uv_area = _areas(mesh, matrix, loop_uv)
+            if _unique_uvs(mesh):
+                target = obj.original
+        if target is None:
+            target = _temporary_copy(stack, temp, depsgraph, obj)
+            mesh, loop_uv = target.data, _loop_uv(target.data)
+        area, uv_area = _areas(mesh, obj.matrix_world, loop_uv)
         side = resolution(
             area, uv_area, float(settings.bake_texel_size), int(settings.bake_max_resolution)
         )
@@ -366,8 +379,8 @@ def _temporary_copy(
     original = obj.original
     stack.callback(setattr, original, "hide_render", original.hide_render)
     original.hide_render = True
-    if not mesh.uv_layers:
-        mesh.uv_layers.new(name=TEMP_NAME)
+    if not mesh.uv_layers or not _unique_uvs(mesh):
+        mesh.uv_layers.active = mesh.uv_layers.new(name=TEMP_NAME)
         _smart_project(temp, copy)
     return copy
 

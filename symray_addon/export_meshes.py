@@ -241,6 +241,10 @@ def build_intersector(
         co = co @ matrix[:3, :3].T + matrix[:3, 3]
         if np.linalg.det(matrix[:3, :3]) < 0.0:  # mirrored: keep faces pointing outwards
             tri, uv = tri[:, ::-1], uv[:, ::-1]
+        if baked and instance.is_instance and warnings is not None:
+            note = "Instanced objects are not baked: they show their materials unlit"
+            if note not in warnings:
+                warnings.append(note)
         if surface is not None:
             samplers.append(surface.sampler())
             slot_map = np.array([len(samplers) - 1], dtype=np.int64)

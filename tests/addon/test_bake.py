@@ -7,6 +7,8 @@ bakes of at most 64x64 texels) to keep the suite quick on 2 cores.
 
 from __future__ import annotations
 
+import threading
+
 import bpy
 import numpy as np
 import pytest
@@ -113,11 +115,15 @@ def test_unsupported_nodes_are_reported_once(addon, scene, helpers):
 
 
 def _lit_scene(scene, helpers):
-    """A floor (own UVs, procedural checker), a UV sphere and a cube without UVs (both
-    diffuse), under a Sun and a point light, in a dim grey world."""
+    """A floor (procedural checker; UVs tiled 4x: no use for a bake), a UV sphere (baked on
+    its own UVs) and a cube without UVs (both diffuse), under a Sun and a point light, in a
+    dim grey world."""
     bpy.ops.mesh.primitive_plane_add(size=8.0)
     floor = bpy.context.object
     floor.name = "Floor"
+    uv = floor.data.uv_layers.active.data
+    for loop in uv:
+        loop.uv = (4.0 * loop.uv[0], 4.0 * loop.uv[1])
     floor.data.materials.append(_checker("Floor"))
     bpy.ops.mesh.primitive_uv_sphere_add(radius=1.0, location=(-1.2, 0.5, 1.0))
     sphere = bpy.context.object
@@ -291,3 +297,50 @@ def test_bakes_are_reused_and_redone_on_change(addon, scene, helpers, tmp_path):
     bpy.ops.render.render(write_still=True)
     assert (tmp_path / "f12.png").is_file()
     assert bake.stats["baked"] - baked == 3
+
+
+def test_f12_off_the_main_thread_reuses_a_bake(addon, scene, helpers):
+    """F12 in the UI renders on another thread, where Cycles cannot be run: after Bake
+    Lighting it reuses the bake; without one it says what to do (never a silent unlit)."""
+    _lit_scene(scene, helpers)
+    scene.symray.bake_texel_size = 0.3
+    scene.symray.bake_samples = 4
+    bake = addon.module("symray_addon.bake")
+    bake.clear_cache()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    outcome: list = []
+
+    def in_a_thread() -> None:
+        thread = threading.Thread(target=lambda: outcome.append(_try(bake, scene, depsgraph)))
+        thread.start()
+        thread.join()
+
+    in_a_thread()
+    assert "press Bake Lighting" in str(outcome[-1])
+    assert bpy.ops.symray.bake_lighting() == {"FINISHED"}
+    in_a_thread()
+    assert sorted(outcome[-1]) == ["Ball", "Box", "Floor"]
+
+
+def _try(bake, scene, depsgraph):
+    try:
+        return bake.bake_surfaces(scene, depsgraph)
+    except ValueError as err:
+        return err
+
+
+@pytest.mark.parametrize(
+    "name, value, words",
+    [
+        ("bake_texel_size", float("nan"), "Texel Size must be"),
+        ("bake_texel_size", 0.0, "Texel Size must be"),
+    ],
+)
+def test_bad_bake_settings_are_refused(addon, scene, helpers, name, value, words):
+    helpers.add_cube(scene, "Cube")
+    helpers.add_camera(scene)
+    scene.symray.model = "FLAT"
+    scene.symray.lighting = "BAKE"
+    scene.symray[name] = value  # past the property's own limits, as a .blend or script can
+    text = helpers.operator_error(lambda: bpy.ops.symray.render())
+    assert words in text, text
