@@ -82,7 +82,6 @@ class RENDER_PT_symray_launch(bpy.types.Panel):
     bl_region_type = "WINDOW"
     bl_context = "render"
     bl_label = "SymRay"
-    bl_options = {"DEFAULT_CLOSED"}
 
     @classmethod
     def poll(cls, context: bpy.types.Context) -> bool:
