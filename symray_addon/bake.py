@@ -303,8 +303,9 @@ def _areas(mesh: bpy.types.Mesh, matrix: Any, loop_uv: np.ndarray | None) -> tup
 
 
 def _usable(material: bpy.types.Material | None) -> bool:
-    """Whether Cycles can bake into ``material`` (it has a node tree to add an image to)."""
-    return material is not None and node_tree_of(material) is not None
+    """Whether Cycles can bake into ``material`` as it is: a local node material (an image
+    node is added to it for the bake)."""
+    return material is not None and material.library is None and node_tree_of(material) is not None
 
 
 def _needs_copy(obj: bpy.types.Object) -> bool:
@@ -403,11 +404,15 @@ def _temporary_material(stack: ExitStack, color: Any) -> bpy.types.Material:
 
 
 def _copy_materials(stack: ExitStack, original: bpy.types.Object, copy: bpy.types.Object) -> None:
-    """Give ``copy`` the original's slot materials; node-less ones as diffuse stand-ins."""
+    """Give ``copy`` the original's slot materials (linked ones as local copies, node-less
+    ones as diffuse stand-ins)."""
     materials = [slot.material for slot in original.material_slots] or [None]
     while len(copy.material_slots) < len(materials):
         copy.data.materials.append(None)
     for slot, material in zip(copy.material_slots, materials, strict=False):
+        if material is not None and material.library is not None:  # linked: a local copy
+            material = material.copy()
+            stack.callback(bpy.data.materials.remove, material)
         if not _usable(material):
             color = DEFAULT_COLOR if material is None else material.diffuse_color
             material = _temporary_material(stack, color)

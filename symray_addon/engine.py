@@ -1,6 +1,7 @@
 """The SYMRAY render engine: F12, ``bpy.ops.render.render`` and ``blender -b -E SYMRAY``.
 
-Each frame traces the evaluated depsgraph's scene (``render_job``), honouring the render
+Each frame traces the evaluated depsgraph's scene (``render_job``; lit surfaces are baked
+by Cycles first, or reused from the cache: bake.py), honouring the render
 region (border), resolution percentage, Esc (``test_break``) and film transparency, and
 writes the Combined pass plus "SymRay Error", "SymRay Steps" and "SymRay Ending" (one
 channel 'X' each, when enabled in the SymRay panel). Saving is Blender's business: choose
