@@ -15,11 +15,10 @@ from typing import Any
 
 import bpy
 
-from ..core.render import ALL_PASSES
-from . import output, render_job
+from . import output, properties, render_job
 
-PASSES = tuple((name, f"SymRay {name.capitalize()}", f"pass_{name}") for name in ALL_PASSES)
-"""(core pass, Blender pass name, scene.symray toggle), in core.render.ALL_PASSES order."""
+PASSES = tuple((name, f"SymRay {label}", toggle) for name, label, toggle in properties.PASSES)
+"""(core pass, Blender pass name, scene.symray toggle), in properties.PASSES order."""
 
 
 def enabled_passes(settings: Any) -> list[tuple[str, str]]:

@@ -153,12 +153,17 @@ class RENDER_PT_symray_integration(SymRayPanelMixin, bpy.types.Panel):
     bl_parent_id = "RENDER_PT_symray"
 
     def draw(self, context: bpy.types.Context) -> None:
-        """Draw method, tolerance, step limit and how the cores are shared."""
+        """Draw method, quality (accuracy), step limit and how the cores are shared."""
         settings = context.scene.symray
         layout = self.layout
         layout.use_property_split = True
         layout.prop(settings, "method")
-        layout.prop(settings, "tolerance")
+        layout.prop(settings, "quality")
+        if settings.quality == "CUSTOM":
+            layout.prop(settings, "tolerance_px")
+            layout.prop(settings, "samples")
+        elif settings.quality == "RADIANS":
+            layout.prop(settings, "tolerance")
         layout.prop(settings, "max_steps")
         layout.prop(settings, "parallel")
         layout.prop(settings, "workers")

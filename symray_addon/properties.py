@@ -5,8 +5,23 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from ..core.render import ALL_PASSES
 from . import presets, validation
+
+PASSES = (("error_px", "Error", "pass_error"), ("steps", "Steps", "pass_steps"),
+          ("ending", "Ending", "pass_ending"))  # fmt: skip
+"""(core pass, label, toggle) of the passes the add-on writes, in their one order: 'SymRay
+<label>' render passes and the operator's passes EXR channels. 'SymRay Error' is the
+core's ``error_px`` (pixels of the camera)."""
+
+QUALITY_ITEMS = [
+    ("PREVIEW", "Preview", "Every pixel within 1 px, one ray per pixel at most: quick look"),
+    ("FINAL", "Final", "Every pixel within 0.25 px, up to 16 rays per pixel (anti-aliased)"),
+    ("CUSTOM", "Custom", "Accuracy (pixels) and samples per pixel set below"),
+    ("RADIANS", "Radians", "Tolerance in radians, one ray through every pixel's centre "
+     "(as before version 0.5; no adaptive sampling)"),
+]  # fmt: skip
+QUALITY_PRESETS = {"PREVIEW": (1.0, 1), "FINAL": (0.25, 16)}
+"""Quality -> (tolerance in pixels, samples per pixel)."""
 
 MODEL_ITEMS = [
     ("FLAT", "Flat", "No bending: straight rays, an ordinary ray tracer"),
@@ -266,6 +281,30 @@ class SymRaySettings(bpy.types.PropertyGroup):
         default="AUTO",
         description="Integrator for Hamilton's equations",
     )
+    quality: bpy.props.EnumProperty(  # type: ignore[valid-type]
+        name="Quality",
+        items=QUALITY_ITEMS,
+        default="FINAL",
+        description="How accurate the image is, in pixels of the camera: Preview or Final",
+    )
+    tolerance_px: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Accuracy (px)",
+        default=0.25,
+        min=1e-6,
+        max=100.0,
+        precision=3,
+        step=1,
+        description="Target accuracy of every pixel's final direction or hit point, in "
+        "pixels (Custom quality)",
+    )
+    samples: bpy.props.IntProperty(  # type: ignore[valid-type]
+        name="Samples",
+        default=16,
+        min=1,
+        max=1024,
+        description="Most camera rays per pixel, spent where the contrast asks for them "
+        "(Custom quality; 1 = no anti-aliasing)",
+    )
     tolerance: bpy.props.FloatProperty(  # type: ignore[valid-type]
         name="Tolerance",
         default=1e-6,
@@ -274,7 +313,7 @@ class SymRaySettings(bpy.types.PropertyGroup):
         precision=6,
         step=0.0001,
         description="Target accuracy of the rays' directions (radians), 1e-14 to 0.1; sets "
-        "the integration step",
+        "the integration step (Radians quality)",
     )
     max_steps: bpy.props.IntProperty(  # type: ignore[valid-type]
         name="Max Steps",
@@ -301,7 +340,8 @@ class SymRaySettings(bpy.types.PropertyGroup):
         name="Error",
         default=True,
         update=_update_passes,
-        description="Per-pixel error estimate (radians): 'SymRay Error' pass",
+        description="Per-pixel error estimate in pixels (integration, far field, hit point "
+        "and interpolation): 'SymRay Error' pass",
     )
     pass_steps: bpy.props.BoolProperty(  # type: ignore[valid-type]
         name="Steps",
@@ -365,10 +405,17 @@ class SymRaySettings(bpy.types.PropertyGroup):
         "'//' = next to the .blend, which must be saved)",
     )
 
+    def accuracy(self) -> dict:
+        """core.render's accuracy options for the chosen quality: tolerance_px and samples,
+        or (Radians) tolerance."""
+        if self.quality == "RADIANS":
+            return {"tolerance": float(self.tolerance)}
+        px, samples = QUALITY_PRESETS.get(self.quality, (self.tolerance_px, self.samples))
+        return {"tolerance_px": float(px), "samples": int(samples)}
+
     def passes(self) -> tuple[str, ...]:
-        """Names of the core passes to compute (core.render.ALL_PASSES switched on here:
-        each has a toggle pass_<name> above)."""
-        return tuple(name for name in ALL_PASSES if getattr(self, f"pass_{name}"))
+        """Names of the core passes to compute (PASSES switched on here)."""
+        return tuple(name for name, _label, toggle in PASSES if getattr(self, toggle))
 
 
 @persistent

@@ -101,7 +101,9 @@ def prepare(
         passes += ("ending",)  # needed to cut the background out
     options = {
         "method": None if settings.method == "AUTO" else settings.method,
-        "tolerance": validation.typed_float(settings.tolerance),
+        **settings.accuracy(),
+        # Blender's pixel filter (Film > Filter Size), Cycles' Blackman-Harris
+        "filter_size": min(max(float(scene.render.filter_size), 0.01), 2.0),
         "max_steps": int(settings.max_steps),
         "passes": passes,
         "parallel": settings.parallel.lower(),

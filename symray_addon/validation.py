@@ -221,6 +221,8 @@ def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
     model = settings.model
     found = [
         lambda: checks.check_tolerance(typed_float(settings.tolerance), "Tolerance"),
+        lambda: checks.check_positive("Accuracy (px)", typed_float(settings.tolerance_px)),
+        lambda: checks.check_int("Samples", settings.samples),
         lambda: checks.check_int("Max Steps", settings.max_steps),
         lambda: checks.check_int("Workers", settings.workers, 0),
         lambda: checks.check_render_method(settings.method, model in TIME_SCALED_MODELS),

@@ -19,6 +19,7 @@ import numpy as np
 
 from .. import checks, integrators
 from ..charts import chart_for
+from ..geometry import segment_meets_box
 from ..observer import medium_momenta, spacetime_momenta
 from . import dense
 from .regions import Region, region_for
@@ -64,6 +65,8 @@ class Tracer:
 
     step: float | None = None
     region: Region | None = None
+    _watch: tuple[np.ndarray, np.ndarray] | None = None  # world box (Tracer.watch_geometry)
+    _watch_local: tuple[np.ndarray, np.ndarray] | None = None
 
     def __init__(self, scene: Scene, options: TraceOptions, extent: float = 1.0):
         self.scene = scene
@@ -98,6 +101,18 @@ class Tracer:
                 scaled=self.region.scaled(model),
             )
         )
+
+    def watch_geometry(self, margin: float) -> None:
+        """Flag (``RayResults.near``) every ray whose path passes within about ``margin``
+        (world units) of an object's or volume's bounds (adaptive sampling: a block of
+        pixels is interpolated only where no ray of it came near geometry)."""
+        world = self.geometry.local_box(lambda x: x)
+        if world is None:
+            return
+        self._watch = (world[0] - margin, world[1] + margin)
+        local = self.geometry.local_box(self._to_local)
+        assert local is not None
+        self._watch_local = (local[0] - margin, local[1] + margin)
 
     @property
     def objects(self) -> Any:
@@ -136,6 +151,7 @@ class Tracer:
     # --- straight parts --------------------------------------------------------------
     def _straight(self, rows, a, d, out: RayResults, far: float = _FAR):
         """Rays that stay straight from a along d: one cast each, ending hit or escaped."""
+        self._watch_segments(rows, a, a + far * d, out)
         h = self.geometry.record(rows, a, a + far * d, out)
         out.ending[rows[~h]] = ENDING["escaped"]
         out.direction[rows] = d
@@ -146,6 +162,7 @@ class Tracer:
         enters = np.isfinite(X_entry[:, 0])
         a = origins[rows]
         b = np.where(enters[:, None], self._to_world(X_entry), a + _FAR * directions[rows])
+        self._watch_segments(rows, a, b, out)
         h = self.geometry.record(rows, a, b, out)
         miss = ~h & ~enters
         if miss.any():
@@ -195,6 +212,7 @@ class Tracer:
             if not ok.all():
                 out.ending[idx[ended]] = ENDING["failed"]
                 out.position[idx[ended]] = self._to_world(X_prev[:, ended].T)
+            self._watch_steps(idx, X_prev, X, out)
             if self._near is not None:  # surfaces and volumes along this step's segment
                 step_ends = _StepEnds(self, K, start, (Q, P), h)
                 ended |= self._segments(idx, X_prev, X, ok, out, step_ends, camera)
@@ -309,6 +327,22 @@ class Tracer:
             deviation = deviation / (m * m)
             keep = deviation[todo[ok]] > allowed[todo[ok]]
             todo, lo = todo[ok][keep], ta[first][keep]
+
+    def _watch_segments(self, rows, a, b, out: RayResults) -> None:
+        """Flag the rays whose straight world segment a -> b meets the watched box."""
+        if self._watch is not None:
+            out.near[rows[segment_meets_box(a, b, *self._watch)]] = True
+
+    def _watch_steps(self, idx, X_prev, X, out: RayResults) -> None:
+        """Flag the rays whose step X_prev -> X (local, (3, M)) has bounds meeting the
+        watched box (the steps are short: their bounds stand for them)."""
+        if self._watch_local is None:
+            return
+        lo, hi = self._watch_local
+        meets = np.ones(idx.size, dtype=bool)
+        for i in range(3):
+            meets &= (np.minimum(X_prev[i], X[i]) <= hi[i]) & (np.maximum(X_prev[i], X[i]) >= lo[i])
+        out.near[idx[meets]] = True
 
     def _finish_energy(self, out, rows, Q, P, H0):
         with np.errstate(all="ignore"):

@@ -80,6 +80,9 @@ def test_contract_properties(scene):
         "metric",
         "hamiltonian",
         "tolerance",
+        "quality",
+        "tolerance_px",
+        "samples",
         "max_steps",
         "pass_error",
         "pass_steps",
@@ -89,7 +92,7 @@ def test_contract_properties(scene):
     assert settings.tolerance > 0 and settings.max_steps > 0
     assert settings.passes() == ("steps",)  # the fixture switched the error pass off
     settings.pass_error = settings.pass_steps = settings.pass_ending = True
-    assert settings.passes() == ("error", "steps", "ending")
+    assert settings.passes() == ("error_px", "steps", "ending")
 
 
 def test_center_picker_offers_empties(scene, helpers):
