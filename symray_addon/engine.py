@@ -127,15 +127,14 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
 # Built-in panels shown for SYMRAY: every generic panel (those listing BLENDER_RENDER in
 # COMPAT_ENGINES: camera, output, format, colour management, mesh data, ...) except
 # Freestyle, which SymRay does not draw; plus the EEVEE material and world surface panels,
-# which edit the Principled BSDF / Background nodes SymRay reads; Film › Transparent (the
-# Workbench's Film panel: exactly the film setting SymRay honours; Filter Size waits for
-# the core's pixel filter); and View Layer › Passes, where SymRay lists its own passes.
+# which edit the Principled BSDF / Background nodes SymRay reads; and View Layer › Passes,
+# where SymRay lists its own passes. Film (Filter Size, Transparent) is SymRay's own panel:
+# the built-in ones carry engine settings SymRay does not have (EEVEE's overscan).
 EXTRA_PANELS = (
     "EEVEE_MATERIAL_PT_context_material",
     "EEVEE_MATERIAL_PT_surface",
     "EEVEE_WORLD_PT_surface",
     "DATA_PT_lens",
-    "RENDER_PT_opengl_film",
     "VIEWLAYER_PT_layer_passes",
 )
 EXCLUDED_PREFIXES = ("RENDER_PT_freestyle", "VIEWLAYER_PT_freestyle", "MATERIAL_PT_freestyle")

@@ -221,9 +221,23 @@ class VIEWLAYER_PT_symray_passes(SymRayPanelMixin, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         col = layout.column(heading="Include", align=True)
-        col.prop(settings, "pass_error")
-        col.prop(settings, "pass_steps")
-        col.prop(settings, "pass_ending")
+        for _core_name, _label, toggle in properties.PASSES:
+            col.prop(settings, toggle)
+
+
+class RENDER_PT_symray_film(SymRayPanelMixin, bpy.types.Panel):
+    """Blender's film settings that SymRay honours"""
+
+    bl_label = "Film"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context: bpy.types.Context) -> None:
+        """Filter Size (the anti-aliasing filter's width) and Transparent."""
+        layout = self.layout
+        layout.use_property_split = True
+        col = layout.column()
+        col.prop(context.scene.render, "filter_size")
+        col.prop(context.scene.render, "film_transparent", text="Transparent")
 
 
 CLASSES = (
@@ -232,6 +246,7 @@ CLASSES = (
     RENDER_PT_symray_lighting,
     RENDER_PT_symray_output,
     RENDER_PT_symray_launch,
+    RENDER_PT_symray_film,
     VIEWLAYER_PT_symray_passes,
 )
 

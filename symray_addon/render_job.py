@@ -38,9 +38,6 @@ class RenderJob:
     width: int = 0
     height: int = 0
     transparent: bool = False
-    filter_size: float = 1.5
-    """Blender's pixel filter width (Film › Filter Size), in pixels: read, not yet used (the
-    core has no reconstruction filter yet; it goes to core.render as ``filter_size``)."""
     warnings: list[str] = field(default_factory=list)
     """What the render cannot do as asked (unevaluated nodes, ...): reported once each."""
 
@@ -113,7 +110,6 @@ def prepare(
         "cores": int(scene.render.threads),
     }
     job = RenderJob(core_scene, camera, options, camera.width, camera.height, transparent)
-    job.filter_size = float(scene.render.filter_size)
     job.warnings = warnings
     return job
 

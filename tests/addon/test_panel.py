@@ -108,6 +108,11 @@ def test_lighting_panel_states_the_limits(scene):
     assert ("prop", "lighting") in log and ("prop", "bake_texel_size") in log
 
 
+def test_film_panel_shows_what_symray_honours(scene):
+    log = _draw("RENDER_PT_symray_film", scene)
+    assert ("prop", "filter_size") in log and ("prop", "film_transparent") in log
+
+
 def test_passes_listed_under_view_layer(scene):
     log = _draw("VIEWLAYER_PT_symray_passes", scene)
     assert {("prop", f"pass_{name}") for name in ("error", "steps", "ending")} <= set(log)

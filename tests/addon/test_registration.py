@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import inspect
 from types import SimpleNamespace
 
 import bpy
@@ -113,6 +112,7 @@ def test_panels_and_compat_engines(addon, scene):
         "RENDER_PT_symray_integration",
         "RENDER_PT_symray_lighting",
         "RENDER_PT_symray_output",
+        "RENDER_PT_symray_film",
     )
     for name in own:
         panel = getattr(bpy.types, name)
@@ -135,12 +135,12 @@ def test_panels_and_compat_engines(addon, scene):
         "DATA_PT_context_mesh",
         "EEVEE_MATERIAL_PT_surface",
         "EEVEE_WORLD_PT_surface",
-        "RENDER_PT_opengl_film",
         "VIEWLAYER_PT_layer_passes",
     ):
         assert "SYMRAY" in getattr(bpy.types, name).COMPAT_ENGINES, name
-    film = inspect.getsource(bpy.types.RENDER_PT_opengl_film)
-    assert "film_transparent" in film and "filter_size" not in film  # the core has no filter
+    for name in ("RENDER_PT_eevee_film", "RENDER_PT_eevee_next_film", "RENDER_PT_opengl_film"):
+        panel = getattr(bpy.types, name, None)  # Film is SymRay's own (no EEVEE overscan)
+        assert panel is None or "SYMRAY" not in panel.COMPAT_ENGINES, name
 
 
 def test_engine_passes_declared(scene):
