@@ -319,13 +319,16 @@ def _needs_copy(obj: bpy.types.Object) -> bool:
 
 
 def _unique_uvs(mesh: bpy.types.Mesh) -> bool:
-    """Whether the active UV map can hold a bake: inside [0, 1]² and not covering more than
-    its area (tiled or mirrored UVs would share texels; smaller overlaps go unnoticed)."""
+    """Whether the active UV map can hold a bake: inside [0, 1]², not covering more than
+    its area (tiled or mirrored UVs would share texels; smaller overlaps go unnoticed), and
+    no more than 1 % of the triangles collapsed to a line or a point (a curve's default
+    UVs, an unfinished unwrap)."""
     uv = _mesh_arrays(mesh)[3]
     if uv.size == 0 or np.any(uv < -1e-6) or np.any(uv > 1.0 + 1e-6):
         return False
     e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
-    return float(0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]).sum()) <= 1.001
+    area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    return float(area.sum()) <= 1.001 and float(np.mean(area <= 1e-12)) <= 0.01
 
 
 def _bake_object(

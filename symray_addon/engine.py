@@ -66,7 +66,8 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
     def _render(self, depsgraph: bpy.types.Depsgraph) -> None:
         """render() itself; raises on any failure."""
         scene = depsgraph.scene
-        self.update_stats("", "SymRay: reading the scene")
+        baking = "" if scene.symray.lighting == "UNLIT" else " (Cycles bakes the lighting)"
+        self.update_stats("", f"SymRay: reading the scene{baking}")
         job = render_job.prepare(
             scene, depsgraph, use_border=True, camera_object=self.camera_override
         )

@@ -349,3 +349,31 @@ def test_bad_bake_settings_are_refused(addon, scene, helpers, name, value, words
     scene.symray[name] = value  # past the property's own limits, as a .blend or script can
     text = helpers.operator_error(lambda: bpy.ops.symray.render())
     assert words in text, text
+
+
+def test_curves_bake_on_a_temporary_mesh(addon, scene, helpers):
+    """A curve object (a filled disc: no mesh, no UVs, no material) bakes as a temporary
+    mesh copy with Smart UV Project and Cycles' default surface (diffuse, albedo 0.8):
+    under a Sun straight above, its texels hold 0.8 E / pi (Lambert)."""
+    bpy.ops.curve.primitive_bezier_circle_add(radius=1.0)
+    disc = bpy.context.object
+    disc.name = "Disc"
+    disc.data.dimensions = "2D"
+    disc.data.fill_mode = "BOTH"
+    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+    sun.data.energy = 3.0  # irradiance E in W/m², shining along -Z
+    scene.collection.objects.link(sun)
+    scene.symray.bake_texel_size = 0.05
+    scene.symray.bake_samples = 4
+    bpy.context.view_layer.update()
+    bake = addon.module("symray_addon.bake")
+    surfaces = bake.bake_surfaces(scene, bpy.context.evaluated_depsgraph_get())
+    assert list(surfaces) == ["Disc"]
+    surface = surfaces["Disc"]
+    assert surface.loop_uv is not None
+    assert 0.0 <= surface.loop_uv.min() and surface.loop_uv.max() <= 1.0
+    lit = surface.pixels[..., 0][surface.pixels[..., 0] > 0.1]
+    assert lit.size > 200
+    # texels inside the disc; the edge texels (partly outside) are below it
+    assert np.median(lit) == pytest.approx(0.8 * 3.0 / np.pi, rel=0.01)
+    assert not disc.hide_render and disc.type == "CURVE"
