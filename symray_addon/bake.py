@@ -223,7 +223,8 @@ def _scene_key(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> str:
         if obj.type == "LIGHT" and inst.show_self and not obj.original.hide_render:
             light = obj.data
             tree = _tree_key(getattr(light, "node_tree", None))
-            parts.append(("light", _matrix(inst.matrix_world), _own_properties(light), tree))
+            own = _own_properties(light, bpy.types.ID)  # not users, tags, ...
+            parts.append(("light", _matrix(inst.matrix_world), own, tree))
         elif _is_rendered(inst):
             if obj.name not in meshes:
                 meshes[obj.name] = _mesh_key(obj)
