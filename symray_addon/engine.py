@@ -1,6 +1,7 @@
 """The SYMRAY render engine: F12, ``bpy.ops.render.render`` and ``blender -b -E SYMRAY``.
 
-Each frame traces the evaluated depsgraph's scene (``render_job``), honouring the render
+Each frame traces the evaluated depsgraph's scene (``render_job``; lit surfaces are baked
+by Cycles first, or reused from the cache: bake.py), honouring the render
 region (border), resolution percentage, Esc (``test_break``) and film transparency, and
 writes the Combined pass plus "SymRay Error", "SymRay Steps" and "SymRay Ending" (one
 channel 'X' each, when enabled in the SymRay panel). Saving is Blender's business: choose
@@ -66,10 +67,13 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
     def _render(self, depsgraph: bpy.types.Depsgraph) -> None:
         """render() itself; raises on any failure."""
         scene = depsgraph.scene
-        self.update_stats("", "SymRay: reading the scene")
+        baking = "" if scene.symray.lighting == "UNLIT" else " (Cycles bakes the lighting)"
+        self.update_stats("", f"SymRay: reading the scene{baking}")
         job = render_job.prepare(
             scene, depsgraph, use_border=True, camera_object=self.camera_override
         )
+        for warning in job.warnings:
+            self.report({"WARNING"}, warning)
         passes = enabled_passes(scene.symray)
         for _core_name, name in passes:
             self.add_pass(name, 1, "X")
@@ -137,12 +141,15 @@ class _Progressive:
 # Built-in panels shown for SYMRAY: every generic panel (those listing BLENDER_RENDER in
 # COMPAT_ENGINES: camera, output, format, colour management, mesh data, ...) except
 # Freestyle, which SymRay does not draw; plus the EEVEE material and world surface panels,
-# which edit the Principled BSDF / Background nodes SymRay reads.
+# which edit the Principled BSDF / Background nodes SymRay reads; and View Layer › Passes,
+# where SymRay lists its own passes. Film (Filter Size, Transparent) is SymRay's own panel:
+# the built-in ones carry engine settings SymRay does not have (EEVEE's overscan).
 EXTRA_PANELS = (
     "EEVEE_MATERIAL_PT_context_material",
     "EEVEE_MATERIAL_PT_surface",
     "EEVEE_WORLD_PT_surface",
     "DATA_PT_lens",
+    "VIEWLAYER_PT_layer_passes",
 )
 EXCLUDED_PREFIXES = ("RENDER_PT_freestyle", "VIEWLAYER_PT_freestyle", "MATERIAL_PT_freestyle")
 _added_to: list[type] = []

@@ -84,6 +84,26 @@ BACKGROUND_ITEMS = [
     ("PROCEDURAL", "Procedural Sky", "SymRay's procedural star field and grid"),
 ]
 
+LIGHTING_ITEMS = [
+    (
+        "AUTO",
+        "Auto",
+        "Bake with Cycles when the scene has lights, else Unlit",
+    ),
+    (
+        "BAKE",
+        "Bake",
+        "Cycles bakes each object's view-independent light (diffuse direct + indirect, "
+        "emission; no glossy or refraction; light reaches surfaces on straight paths) into "
+        "a temporary texture that curved rays then see",
+    ),
+    (
+        "UNLIT",
+        "Unlit",
+        "Surfaces show their colour plus emission, as under uniform white light",
+    ),
+]
+
 # Blender 5 warns when a path property holding '//' does not declare it supports that
 # (4.2 does not know the option; 5.0 is the first version it is known to be in)
 _PATH_OPTIONS = {"ANIMATABLE"} | (
@@ -340,6 +360,36 @@ class SymRaySettings(bpy.types.PropertyGroup):
         items=BACKGROUND_ITEMS,
         default="AUTO",
         description="What rays that escape to infinity see",
+    )
+    lighting: bpy.props.EnumProperty(  # type: ignore[valid-type]
+        name="Surface Lighting",
+        items=LIGHTING_ITEMS,
+        default="AUTO",
+        description="How surfaces are lit: Blender (Cycles) bakes the light on them, or "
+        "they show their colour unlit",
+    )
+    bake_texel_size: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Texel Size",
+        default=0.05,
+        min=1e-5,
+        soft_max=1.0,
+        subtype="DISTANCE",
+        description="Size of one baked texel on a surface, in scene units (smaller = sharper "
+        "shadows, longer bakes)",
+    )
+    bake_max_resolution: bpy.props.IntProperty(  # type: ignore[valid-type]
+        name="Max Resolution",
+        default=1024,
+        min=8,
+        max=8192,
+        description="Largest side of an object's baked texture, in texels",
+    )
+    bake_samples: bpy.props.IntProperty(  # type: ignore[valid-type]
+        name="Bake Samples",
+        default=64,
+        min=1,
+        max=1 << 20,
+        description="Cycles samples per texel of a bake (more = less noise)",
     )
     image_name: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Image",

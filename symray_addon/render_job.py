@@ -19,7 +19,7 @@ import numpy as np
 
 from .. import core
 from ..core.render import summary_text as render_summary_text
-from . import export_camera, export_meshes, models, properties, validation, world
+from . import bake, export_camera, export_meshes, models, properties, validation, world
 
 Progress = Callable[[int, int], None]
 Cancel = Callable[[], bool]
@@ -38,6 +38,8 @@ class RenderJob:
     width: int = 0
     height: int = 0
     transparent: bool = False
+    warnings: list[str] = field(default_factory=list)
+    """What the render cannot do as asked (unevaluated nodes, ...): reported once each."""
 
 
 def _evaluated(obj: bpy.types.Object, depsgraph: bpy.types.Depsgraph) -> bpy.types.Object:
@@ -74,7 +76,9 @@ def prepare(
     model = models.build_model(settings, properties.metric_source(settings))
     models.check_camera(settings, model, where, np.array(kwargs["matrix_world"])[:3, 3])
 
-    intersector = export_meshes.build_intersector(depsgraph)
+    warnings: list[str] = []
+    baked = bake.bake_surfaces(scene, depsgraph) if bake.wants_baking(settings, depsgraph) else None
+    intersector = export_meshes.build_intersector(depsgraph, baked, warnings)
     if intersector is None and model is None:
         raise ValueError(
             "Nothing to render: the scene has no visible mesh objects and the "
@@ -105,7 +109,9 @@ def prepare(
         # bounds the automatic one worker per core
         "cores": int(scene.render.threads),
     }
-    return RenderJob(core_scene, camera, options, camera.width, camera.height, transparent)
+    job = RenderJob(core_scene, camera, options, camera.width, camera.height, transparent)
+    job.warnings = warnings
+    return job
 
 
 def run(
