@@ -81,10 +81,7 @@ def bake_surfaces(
     ValueError when Cycles is missing, a bake fails, or one is needed off the main thread.
     """
     settings = scene.symray
-    targets = _targets(depsgraph)
-    base = _scene_key(scene, depsgraph)
-    keys = {obj.name: _digest(base, obj.name) for obj in targets}
-    missing = [obj for obj in targets if keys[obj.name] not in _cache]
+    targets, keys, missing = _lookup(scene, depsgraph)
     if missing and threading.current_thread() is not threading.main_thread():
         raise ValueError(
             "Surface lighting is baked by Cycles on Blender's main thread, which F12 does "
@@ -102,6 +99,21 @@ def bake_surfaces(
     stats["baked"] += len(missing)
     stats["reused"] += len(targets) - len(missing)
     return found
+
+
+def can_bake_now(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> bool:
+    """Whether bake_surfaces would succeed here: on the main thread, or all bakes cached."""
+    if threading.current_thread() is threading.main_thread():
+        return True
+    return not _lookup(scene, depsgraph)[2]
+
+
+def _lookup(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph):
+    """(objects to bake, their cache keys by name, those not in the cache)."""
+    targets = _targets(depsgraph)
+    base = _scene_key(scene, depsgraph)
+    keys = {obj.name: _digest(base, obj.name) for obj in targets}
+    return targets, keys, [obj for obj in targets if keys[obj.name] not in _cache]
 
 
 def _targets(depsgraph: bpy.types.Depsgraph) -> list[bpy.types.Object]:

@@ -77,7 +77,7 @@ def prepare(
     models.check_camera(settings, model, where, np.array(kwargs["matrix_world"])[:3, 3])
 
     warnings: list[str] = []
-    baked = bake.bake_surfaces(scene, depsgraph) if bake.wants_baking(settings, depsgraph) else None
+    baked = _baked_surfaces(scene, depsgraph, warnings)
     intersector = export_meshes.build_intersector(depsgraph, baked, warnings)
     if intersector is None and model is None:
         raise ValueError(
@@ -112,6 +112,26 @@ def prepare(
     job = RenderJob(core_scene, camera, options, camera.width, camera.height, transparent)
     job.warnings = warnings
     return job
+
+
+UNBAKED_WARNING = (
+    "Surfaces are unlit: Cycles bakes their lighting on Blender's main thread, which F12 "
+    "does not run on. Press Bake Lighting in the SymRay panel (or use Render SymRay Image) "
+    "for lit surfaces"
+)
+
+
+def _baked_surfaces(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, warnings: list):
+    """Baked surfaces when the settings ask for them (bake.py), else None. Automatic
+    lighting that cannot bake here (F12's render thread, nothing cached) renders unlit
+    with UNBAKED_WARNING; Baked lighting then refuses (ValueError)."""
+    settings = scene.symray
+    if not bake.wants_baking(settings, depsgraph):
+        return None
+    if settings.lighting == "AUTO" and not bake.can_bake_now(scene, depsgraph):
+        warnings.append(UNBAKED_WARNING)
+        return None
+    return bake.bake_surfaces(scene, depsgraph)
 
 
 def run(

@@ -377,3 +377,30 @@ def test_curves_bake_on_a_temporary_mesh(addon, scene, helpers):
     # texels inside the disc; the edge texels (partly outside) are below it
     assert np.median(lit) == pytest.approx(0.8 * 3.0 / np.pi, rel=0.01)
     assert not disc.hide_render and disc.type == "CURVE"
+
+
+def test_f12_off_the_main_thread_without_a_bake(addon, scene, helpers):
+    """Automatic lighting that cannot bake on F12's render thread renders unlit and says
+    so (a warning naming what to do); Baked lighting refuses the frame instead."""
+    _lit_scene(scene, helpers)
+    bake = addon.module("symray_addon.bake")
+    job = addon.module("symray_addon.render_job")
+    bake.clear_cache()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    outcome: list = []
+
+    def attempt() -> None:
+        warnings: list[str] = []
+        try:
+            outcome.append((job._baked_surfaces(scene, depsgraph, warnings), warnings))
+        except ValueError as err:
+            outcome.append((err, warnings))
+
+    for lighting in ("AUTO", "BAKE"):
+        scene.symray.lighting = lighting
+        thread = threading.Thread(target=attempt)
+        thread.start()
+        thread.join()
+    (auto, auto_warnings), (baked, _) = outcome
+    assert auto is None and auto_warnings == [job.UNBAKED_WARNING]
+    assert isinstance(baked, ValueError) and "press Bake Lighting" in str(baked)
