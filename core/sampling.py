@@ -95,8 +95,9 @@ class Tile:
         return self.y1 - self.y0, self.x1 - self.x0
 
 
-def tiles(width: int, height: int, size: int = TILE) -> list[Tile]:
-    """The tiles covering a width x height image, row by row from the top."""
+def tiles(width: int, height: int, size: int | None = None) -> list[Tile]:
+    """The tiles covering a width x height image (TILE square), row by row from the top."""
+    size = size or TILE
     return [
         Tile(x, y, min(x + size, width), min(y + size, height))
         for y in range(0, height, size)
@@ -312,8 +313,9 @@ class TileSampler:
         energy = nodes.energy[inner]
         colour = rgba[inner].copy()
         if self.samples > 1:
-            busy = _contrast(rgba, ending)
-            colour[busy] = self._supersample(nodes, blocks, busy, origin, cancel)
+            differs = _contrast(rgba, ending)
+            busy = np.logical_or.reduce(differs)
+            colour[busy] = self._supersample(nodes, blocks, busy, differs, origin, cancel)
         return TileResult(
             colour.astype(np.float32), error[inner].astype(np.float32), steps,
             ending[inner], energy, direction[inner].astype(np.float32), self.rays,
@@ -400,16 +402,19 @@ class TileSampler:
         """Image points (M, 2) (column, row) of lattice points (y, x) of the current tile."""
         return np.stack([self._origin[1] + x + 0.5, self._origin[0] + y + 0.5], axis=1)
 
-    def _supersample(self, nodes: _Nodes, blocks: _Blocks, busy, origin, cancel) -> np.ndarray:
+    def _supersample(self, nodes: _Nodes, blocks: _Blocks, busy, differs, origin, cancel):
         """Filter-weighted colour (K, 4) of the ``busy`` pixels (h, w mask) from up to
         ``samples`` points each (interpolated where a block allows, traced elsewhere): the
-        first FIRST_SAMPLES, and the rest only where those disagree by > AA_CONTRAST."""
+        first FIRST_SAMPLES; the rest where those disagree by > AA_CONTRAST, or where a pixel
+        and a neighbour it differs from both looked uniform (_edge_unseen)."""
         pj, pi = np.nonzero(busy)
         first = min(FIRST_SAMPLES, self.offsets.shape[0])
         colour = self._sample(nodes, blocks, pj, pi, self.offsets[:first], origin, cancel)
         weight = np.broadcast_to(self.weights[:first], colour.shape[:2])
         spread = np.max(np.abs(colour - colour[:, :1]), axis=(1, 2))
-        more = np.flatnonzero(spread > AA_CONTRAST)
+        uniform = np.ones(busy.shape, dtype=bool)
+        uniform[pj, pi] = spread <= AA_CONTRAST
+        more = np.flatnonzero(~uniform[pj, pi] | _edge_unseen(differs, uniform)[pj, pi])
         total = np.einsum("pkc,pk->pc", colour, weight)
         norm = weight.sum(axis=1)
         if more.size and first < self.offsets.shape[0]:
@@ -462,20 +467,33 @@ class _Blocks:
         self.block[(bj[:, None] + dj).ravel(), (bi[:, None] + di).ravel()] = np.repeat(ids, s * s)
 
 
-def _contrast(rgba: np.ndarray, ending: np.ndarray) -> np.ndarray:
-    """(h, w) pixels (inner part of the (h+2, w+2) lattice) whose colour or ending differs
-    from one of their eight neighbours' (AA_CONTRAST)."""
+_NEIGHBOURS = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0)]
+
+
+def _contrast(rgba: np.ndarray, ending: np.ndarray) -> list[np.ndarray]:
+    """Per neighbour (_NEIGHBOURS order) the (h, w) mask of pixels (the inner part of the
+    (h+2, w+2) lattice) whose colour (by AA_CONTRAST) or ending differs from it."""
     h, w = rgba.shape[0] - 2, rgba.shape[1] - 2
     centre_c, centre_e = rgba[1 : h + 1, 1 : w + 1], ending[1 : h + 1, 1 : w + 1]
-    busy = np.zeros((h, w), dtype=bool)
-    for dy in (-1, 0, 1):
-        for dx in (-1, 0, 1):
-            if dy == dx == 0:
-                continue
-            other = (slice(1 + dy, h + 1 + dy), slice(1 + dx, w + 1 + dx))
-            diff = np.max(np.abs(rgba[other] - centre_c), axis=-1)
-            busy |= (diff > AA_CONTRAST) | (ending[other] != centre_e)
-    return busy
+    masks = []
+    for dy, dx in _NEIGHBOURS:
+        other = (slice(1 + dy, h + 1 + dy), slice(1 + dx, w + 1 + dx))
+        diff = np.max(np.abs(rgba[other] - centre_c), axis=-1)
+        masks.append((diff > AA_CONTRAST) | (ending[other] != centre_e))
+    return masks
+
+
+def _edge_unseen(differs: list[np.ndarray], uniform: np.ndarray) -> np.ndarray:
+    """(h, w) pixels that differ from a neighbour although both looked uniform inside (the
+    edge between them runs through a sliver of one): they get the rest of their samples.
+    Neighbours outside the tile count as uniform."""
+    h, w = uniform.shape
+    padded = np.ones((h + 2, w + 2), dtype=bool)
+    padded[1:-1, 1:-1] = uniform
+    unseen = np.zeros((h, w), dtype=bool)
+    for (dy, dx), differ in zip(_NEIGHBOURS, differs, strict=True):
+        unseen |= differ & padded[1 + dy : h + 1 + dy, 1 + dx : w + 1 + dx]
+    return unseen & uniform
 
 
 def seen_direction(rays: RayResults, origins: np.ndarray) -> np.ndarray:
