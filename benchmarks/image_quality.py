@@ -10,6 +10,10 @@
 - ``aa``: Schwarzschild + checker board at samples=16 (box filter) against 8x8
   supersampling box-filtered: mean and 99th-percentile absolute colour difference, and the
   cost relative to samples=1. Target: <= 0.02 mean, <= 0.1 p99, <= 3x the cost.
+- ``versus`` (with ``--baseline DIR``, a checkout of af19e2b): that commit's gauss4 at the
+  radian tolerance of 0.25 px against this code's default at 0.25 px (and Final), error
+  pass on in all, alternated in one run, each with the share of escaped pixels within
+  0.25 px of a dopri5 1e-11 render. Target: >= 4x faster at equal measured accuracy.
 - ``speed``: Preview and Final frames of the Kerr board scene at a resolution (default
   512x288; --full: 1920x1080), seconds, rays per pixel and steps. Targets (2 cores, 1080p):
   Final with anti-aliasing and the error pass <= 5 min, Preview <= 20 s.
@@ -22,6 +26,8 @@ from __future__ import annotations
 import argparse
 import csv
 import os
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -184,6 +190,65 @@ def before_after(out_dir: str, width: int = 320, height: int = 180) -> None:
     print(f"wrote {path} (top: one ray a pixel; bottom: Final)")
 
 
+def _frame(checkout: str, out: str, size, *flags: str) -> dict:
+    """benchmarks/frame.py under ``checkout`` (its own core) -> its saved figures."""
+    here = os.path.dirname(os.path.abspath(__file__))
+    env = dict(os.environ, PYTHONPATH=os.path.abspath(checkout))
+    command = [sys.executable, os.path.join(here, "frame.py"), out, "--width", str(size[0]),
+               "--height", str(size[1]), *flags]  # fmt: skip
+    subprocess.run(command, check=True, env=env, cwd=os.path.abspath(checkout))
+    return dict(np.load(out))
+
+
+def _within(ref: dict, run: dict, pixel: float, px: float = 0.25) -> float:
+    """Share of the reference's escaped pixels that the run sees within ``px`` pixels."""
+    escaped = (ref["ending"] == core.ENDING["escaped"]).ravel()
+    u, v = ref["seen"].reshape(-1, 3)[escaped], run["seen"].reshape(-1, 3)[escaped]
+    with np.errstate(all="ignore"):
+        angle = np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), np.sum(u * v, axis=1))
+    same = (run["ending"].ravel() == ref["ending"].ravel())[escaped]
+    return float(np.mean(same & (angle / pixel <= px)))
+
+
+def versus(baseline: str, width: int, height: int, repeats: int = 2) -> list[dict]:
+    """Today's main (a checkout at ``baseline``, gauss4 at 0.25 px in radians, error pass)
+    against this code's default (0.25 px, error pass; and Final with 16 samples), alternated
+    in one run; accuracy: the share of escaped pixels within 0.25 px of dopri5 1e-11."""
+    os.makedirs(OUT, exist_ok=True)
+    here = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    size = (width, height)
+    pixel = _black_hole_camera(width, height).pixel_angle()
+    ref_path = os.path.join(OUT, f"quality_ref_{width}x{height}.npz")
+    if not os.path.exists(ref_path):
+        _frame(here, ref_path, size, "--method", "dopri5", "--tolerance", "1e-11")
+    ref = dict(np.load(ref_path))
+    runs = {
+        "af19e2b gauss4 0.25 px (radians)": (baseline, ("--method", "gauss4", "--tolerance",
+                                                        f"{0.25 * pixel!r}")),
+        "new default, 0.25 px, 1 sample": (here, ("--tolerance-px", "0.25")),
+        "new default, Final (0.25 px, 16 samples)": (here, ("--tolerance-px", "0.25",
+                                                            "--samples", "16")),
+    }  # fmt: skip
+    times: dict[str, list[float]] = {name: [] for name in runs}
+    figures: dict[str, dict] = {}
+    for _ in range(repeats):
+        for name, (checkout, flags) in runs.items():
+            figures[name] = _frame(checkout, os.path.join(OUT, "quality_run.npz"), size, *flags)
+            times[name].append(float(figures[name]["seconds"]))
+    rows = []
+    base = min(times[next(iter(runs))])
+    for name in runs:
+        best = min(times[name])
+        row = {"test": "versus", "size": f"{width}x{height}", "run": name, "seconds": best,
+               "within_0.25px": _within(ref, figures[name], pixel),
+               "rays": int(figures[name]["rays"]), "speedup": base / best}  # fmt: skip
+        rows.append(row)
+        print(f"{width}x{height} {name}: {best:.1f} s (best of {repeats}), "
+              f"{100 * row['within_0.25px']:.2f} % of escaped pixels within 0.25 px, "
+              f"{row['rays']} rays, {row['speedup']:.2f}x af19e2b (target >= 4x)")  # fmt: skip
+    return rows
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small images")
@@ -191,6 +256,7 @@ def main() -> None:
     parser.add_argument("--only", default="honesty,aa,speed")
     parser.add_argument("--aa-size", type=int, default=128)
     parser.add_argument("--images", default=None, help="write the before/after figure here")
+    parser.add_argument("--baseline", default=None, help="a checkout of af19e2b (versus)")
     args = parser.parse_args()
     only = set(args.only.split(","))
     if args.images:
@@ -200,6 +266,8 @@ def main() -> None:
         rows.append(honesty(*((64, 36) if args.quick else (160, 90)), tolerance_px=0.25))
     if "aa" in only:
         rows.append(anti_aliasing(32 if args.quick else args.aa_size))
+    if "versus" in only and args.baseline:
+        rows += versus(args.baseline, *((192, 108) if args.quick else (512, 288)))
     if "speed" in only:
         size = (1920, 1080) if args.full else ((256, 144) if args.quick else (512, 288))
         rows += speed(*size)
