@@ -24,6 +24,10 @@ Sections (``--only``):
   Needs the ``bpy`` module (skipped without it).
 - ``hd`` (``--full``): a 1920x1080 Kerr frame in a child process: time (target
   <= 10 min) and peak memory (target < 2 GiB).
+- ``quality``: issue #13's targets (benchmarks/image_quality.py): error-pass honesty on the
+  Kerr board scene, anti-aliasing against 8x8 supersampling, Preview and Final frames
+  (512x288; ``--full``: 1920x1080, targets <= 20 s and <= 5 min), and with ``--baseline
+  DIR`` (a checkout of af19e2b) the speed-up over it at equal measured accuracy.
 - ``calibrate`` (``--full``): the error constants behind the tolerance -> step rule
   (core.trace.ERROR_CONSTANTS) and the far-field constant.
 
@@ -578,6 +582,18 @@ def bench_hd(method: str | None) -> None:
     line("steps per ray (mean)", f"{res['steps'] / max(res['rays'], 1):8.1f}")
 
 
+def bench_quality(full: bool, baseline: str | None) -> None:
+    """Issue #13's targets, printed by benchmarks/image_quality.py."""
+    import image_quality
+
+    print("\n== quality (issue #13) ==")
+    image_quality.honesty(160, 90, tolerance_px=0.25)
+    image_quality.anti_aliasing(128)
+    if baseline:
+        image_quality.versus(baseline, 512, 288)
+    image_quality.speed(*((1920, 1080) if full else (512, 288)))
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--full", action="store_true", help="also the 1920x1080 frame")
@@ -586,6 +602,7 @@ def main() -> None:
     parser.add_argument("--size", type=int, default=512, help="image section's size")
     parser.add_argument("--scaling-size", type=int, default=512)
     parser.add_argument("--hd-child", action="store_true", help=argparse.SUPPRESS)
+    parser.add_argument("--baseline", default=None, help="checkout of af19e2b (quality)")
     args = parser.parse_args()
     if args.hd_child:
         hd_child(args.method)
@@ -596,6 +613,7 @@ def main() -> None:
         "image",
         "cores",
         "flat",
+        "quality",
     ] + (["hd", "calibrate"] if args.full else [])
     print(
         f"SymRay performance (numpy {np.__version__}, Python {sys.version.split()[0]}, "
@@ -613,6 +631,8 @@ def main() -> None:
             bench_cores(args.scaling_size, args.method)
         elif section == "flat":
             bench_flat(args.size)
+        elif section == "quality":
+            bench_quality(args.full, args.baseline)
         elif section == "calibrate":
             bench_calibrate()
         elif section == "hd":

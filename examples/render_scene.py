@@ -43,7 +43,18 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument("--width", type=int, default=160)
     parser.add_argument("--height", type=int, default=120)
     parser.add_argument("--spin", type=float, default=0.0, help="a/M; nonzero = Kerr")
-    parser.add_argument("--tolerance", type=float, default=1e-5)
+    parser.add_argument(
+        "--quality",
+        default="FINAL",
+        choices=("PREVIEW", "FINAL", "CUSTOM", "RADIANS"),
+        help="Preview (1 px), Final (0.25 px, anti-aliased; the default), Custom "
+        "(--tolerance-px, --samples) or Radians (--tolerance, one ray a pixel)",
+    )
+    parser.add_argument("--tolerance-px", type=float, default=0.25, help="Custom quality")
+    parser.add_argument("--samples", type=int, default=16, help="Custom quality")
+    parser.add_argument(
+        "--tolerance", type=float, default=None, help="radians (sets quality Radians)"
+    )
     parser.add_argument(
         "--method",
         default="AUTO",
@@ -171,7 +182,10 @@ def main() -> None:
         scene = build_scene(args)
         scene.render.resolution_x, scene.render.resolution_y = args.width, args.height
         scene.render.resolution_percentage = 100
-        scene.symray.tolerance = args.tolerance
+        scene.symray.quality = "RADIANS" if args.tolerance is not None else args.quality
+        scene.symray.tolerance = args.tolerance or 1e-5
+        scene.symray.tolerance_px = args.tolerance_px
+        scene.symray.samples = args.samples
         scene.symray.method = args.method
     scene.render.engine = "SYMRAY"
     scene.view_settings.view_transform = "Standard"

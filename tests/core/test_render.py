@@ -202,7 +202,7 @@ def test_error_pass_is_honest_against_a_reference_render(method):
     scene = core.Scene(model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"))
     origins, directions = cam.rays()
     tracer = Tracer(scene, TraceOptions(method=method, step=0.08))
-    fine, estimate = _trace_chunk(tracer, origins, directions, True, None)  # render's own path
+    fine, _, estimate = _trace_chunk(tracer, origins, directions, True, None)  # render's path
     ref = Tracer(scene, TraceOptions(method="rk4", step=0.01)).trace(origins, directions)
     escaped = (fine.ending == core.ENDING["escaped"]) & (ref.ending == core.ENDING["escaped"])
     true = _angles(fine.direction, ref.direction)[escaped]

@@ -1,0 +1,86 @@
+"""One timed frame of the Kerr board scene, written so that an old checkout runs it too.
+
+    PYTHONPATH=<checkout> python benchmarks/frame.py OUT.npz --width W --height H
+        [--method gauss4 --tolerance RAD | --tolerance-px PX [--samples N]]
+
+Renders with core.render (error pass on), then saves the time, the rays, and what each
+pixel's centre sees (escape direction, or the unit vector to the hit point; NaN where
+captured) as that render drew it: for an old checkout, from its tracer at the render's
+displayed step (before issue 13 the image showed a run at half the step); for this one,
+from the ``direction`` pass. Uses only names that exist in every version since af19e2b.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+import core
+from core import hamiltonians as hm
+
+
+def kerr_board_scene():
+    """Kerr a/M = 0.9 (rg = 1, Kerr-Schild), a 16 rg checker board 12 rg behind the hole
+    (the scene of benchmarks/image_quality.py; repeated here for old checkouts)."""
+    board = core.Plane(point=(0, 12, 0), normal=(0, -1, 0), u_axis=(1, 0, 0),
+                       extent=(16, 16), color=core.checker(8, 8))  # fmt: skip
+    return core.Scene(model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"), objects=[board],
+                      background="procedural")  # fmt: skip
+
+
+def camera(width: int, height: int):
+    """The camera of benchmarks/image_precision.py (30 rg, fov 40 degrees)."""
+    return core.Camera.perspective(position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1),
+                                   fov_deg=40, width=width, height=height)  # fmt: skip
+
+
+def _old_directions(scene, cam, method: str, tolerance: float) -> tuple:
+    """What an old render drew per pixel: its tracer at half the step (step doubling)."""
+    from core.render import _scene_extent
+    from core.trace import TraceOptions, Tracer
+
+    extent = _scene_extent(scene, cam)
+    tracer = Tracer(scene, TraceOptions(method=method, tolerance=tolerance), extent)
+    origins, dirs = cam.rays()
+    rays = tracer.trace(origins, dirs, step=0.5 * tracer.step)
+    to_end = rays.position - origins
+    to_end /= np.linalg.norm(to_end, axis=1, keepdims=True)
+    seen = np.where((rays.ending == core.ENDING["escaped"])[:, None], rays.direction, to_end)
+    seen[rays.ending == core.ENDING["captured"]] = np.nan
+    return seen.reshape(cam.height, cam.width, 3), rays.ending.reshape(cam.height, cam.width)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("out")
+    parser.add_argument("--width", type=int, default=512)
+    parser.add_argument("--height", type=int, default=288)
+    parser.add_argument("--method", default=None)
+    parser.add_argument("--tolerance", type=float, default=None)
+    parser.add_argument("--tolerance-px", type=float, default=None)
+    parser.add_argument("--samples", type=int, default=1)
+    args = parser.parse_args()
+    scene, cam = kerr_board_scene(), camera(args.width, args.height)
+    kwargs = {"method": args.method} if args.method else {}
+    if args.tolerance_px is not None:
+        kwargs.update(tolerance_px=args.tolerance_px, samples=args.samples)
+        kwargs["passes"] = ("error", "error_px", "steps", "ending", "direction")
+    else:
+        kwargs["tolerance"] = args.tolerance
+    start = time.perf_counter()
+    result = core.render(scene, cam, **kwargs)
+    seconds = time.perf_counter() - start
+    if "direction" in result.passes:
+        seen, ending = result.passes["direction"], result.passes["ending"]
+    else:
+        seen, ending = _old_directions(scene, cam, args.method or "gauss4", args.tolerance)
+    rays = result.summary.get("rays", cam.width * cam.height)
+    np.savez(args.out, seconds=seconds, rays=rays, seen=seen, ending=ending,
+             steps=result.summary["steps"])  # fmt: skip
+    print(f"{seconds:.2f} s, {rays} rays, {result.summary['steps']} steps")
+
+
+if __name__ == "__main__":
+    main()
