@@ -506,13 +506,21 @@ def seen_direction(rays: RayResults, origins: np.ndarray) -> np.ndarray:
     return np.where(escaped[:, None], rays.direction, to_end)
 
 
+HIT_ORDER = 4
+"""Order of a hit point's error in the step: the cubic Hermite path's (tracing/dense.py)."""
+
+
 def richardson_error(fine: RayResults, coarse: RayResults, origins, order: int) -> np.ndarray:
     """Richardson estimate of the fine run's final-direction error (radians, (N,)) from a
     run at COMPANION_RATIO x its step: the escape direction's, or for a hit the direction
     from the camera to the hit point; pi where the endings differ, +inf where failed."""
+    hit = fine.ending == ENDING["hit"]
+    # a hit point lies on the cubic through its step's ends (core/tracing/dense.py): its
+    # error falls at most at that cubic's order, 4, whatever the method's
+    orders = np.where(hit, min(order, HIT_ORDER), order)
     with np.errstate(all="ignore"):
         err = _angle(seen_direction(coarse, origins), seen_direction(fine, origins))
-        err /= COMPANION_RATIO**order - 1.0
+        err /= COMPANION_RATIO**orders - 1.0
     err = np.where(coarse.ending == fine.ending, err, np.pi)
     err = np.where(fine.ending == ENDING["captured"], 0.0, err)
     bad = (fine.ending == ENDING["failed"]) | (fine.ending == ENDING["max_steps"])

@@ -139,6 +139,9 @@ class Hamiltonian(System):
     split_method: str | None = None
     """The explicit splitting measured cheapest on this model's split (split_parts), for
     the renderer's default method; None where the model offers no split."""
+    max_split_step: float | None = None
+    """Largest default step of the explicit splittings on this model's split; None: the
+    tracer's MAX_SPLIT_STEP (core.tracing.steps)."""
     error_constants: Mapping[str, float] = MappingProxyType({})
     """Error constants (C in err = C h^order, core.tracing.steps) measured on this model's
     own form, by method name, in place of the methods' own; empty: the methods' own."""

@@ -78,14 +78,16 @@ def default_step(
     length: float,
     scaled: bool = False,
     constant: float | None = None,
+    largest: float | None = None,
 ) -> float:
     """Fictitious-time step for ``method`` to reach ``tolerance`` (radians).
 
     Around a mass (``scaled``: g(q) grows with the distance) from the method's error
     constant, so that the integration error stays below tolerance / 2 (the far field gets
     the other half, see core.tracing.regions); ``constant`` replaces the method's own where
-    the model measured its own for it (``Hamiltonian.error_constants``). Otherwise (media,
-    user models, methods without a constant): h = 0.5 length tol^(1/order).
+    the model measured its own for it (``Hamiltonian.error_constants``), and ``largest``
+    the splittings' largest step where the model sets one (``max_split_step``). Otherwise
+    (media, user models, methods without a constant): h = 0.5 length tol^(1/order).
     """
     tol = min(max(float(tolerance), 1e-14), 1e-1)
     order = max(int(method.order), 1)
@@ -95,5 +97,8 @@ def default_step(
         constant = None
     if constant is None:
         return length * min(MAX_STEP, 0.5 * tol ** (1.0 / order))
-    largest = MAX_SPLIT_STEP if isinstance(method, Splitting) else MAX_STEP
+    if not isinstance(method, Splitting):
+        largest = MAX_STEP
+    elif largest is None:
+        largest = MAX_SPLIT_STEP
     return float(min(largest, (0.5 * tol / constant) ** (1.0 / order)))

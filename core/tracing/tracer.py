@@ -100,6 +100,7 @@ class Tracer:
                 self.region.length_scale(model),
                 scaled=self.region.scaled(model),
                 constant=model.error_constants.get(self.method.name),
+                largest=model.max_split_step,
             )
         )
 
