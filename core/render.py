@@ -3,8 +3,10 @@
 Passes: ``error`` (estimated final-direction error in radians, from step doubling:
 every traced ray is traced again at half the step; the image shows the finer run and
 the error is |d_h - d_h/2| / (2^p - 1), +inf where a ray failed), ``steps`` and
-``ending`` (``core.ENDING`` codes). Failed rays are drawn in ``FAILED_COLOR`` and rays
-that ran out of steps in ``MAX_STEPS_COLOR``, never as a plausible colour.
+``ending`` (``core.ENDING`` codes) and ``redshift`` (g = ν_obs / ν_emit of rays that end on
+the scene's accretion disk, NaN elsewhere; core/tracing/disklight.py). Failed rays are
+drawn in ``FAILED_COLOR`` and rays that ran out of steps in ``MAX_STEPS_COLOR``, never as a
+plausible colour.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from .tracing import ENDING, RayResults, Scene, TraceOptions, Tracer
 
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
-ALL_PASSES = ("error", "steps", "ending")
+ALL_PASSES = ("error", "steps", "ending", "redshift")
 """The passes, in their one order (the add-on's render passes and EXR channels follow it)."""
 _MIN_CHUNK = 2048
 
@@ -173,6 +175,7 @@ class _Buffers:
         self.steps = np.zeros(n, dtype=np.int32)
         self.ending = np.full(n, -1, dtype=np.int8)
         self.energy = np.zeros(n)
+        self.redshift = np.full(n, np.nan, dtype=np.float32)
         self.with_error = with_error
 
     def store(self, span, chunk, background: Background):
@@ -182,6 +185,7 @@ class _Buffers:
         self.steps[a:b] = rays.steps
         self.ending[a:b] = rays.ending
         self.energy[a:b] = rays.energy_error
+        self.redshift[a:b] = rays.redshift
         if error is not None:
             self.error[a:b] = error
         failed = rays.ending == ENDING["failed"]
@@ -196,6 +200,8 @@ class _Buffers:
             out.passes["steps"] = self.steps.reshape(h, w)
         if "ending" in passes:
             out.passes["ending"] = self.ending.reshape(h, w)
+        if "redshift" in passes:
+            out.passes["redshift"] = self.redshift.reshape(h, w)
         out.summary = self.summary(seconds, tracer)
         return out
 
@@ -271,6 +277,9 @@ def _scene_extent(scene: Scene, camera) -> float:
     objects = scene.objects
     bounds = [objects.bounds] if isinstance(objects, Intersector) else [o.bounds for o in objects]
     bounds += [(v.lo, v.hi) for v in scene.volumes]
+    annulus = scene.disk_annulus()
+    if annulus is not None:
+        bounds.append(annulus.bounds)
     for lo, hi in bounds:
         corners = np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T
         if np.all(np.isfinite(corners)):

@@ -27,6 +27,7 @@ class RayResults:
     transmittance: np.ndarray  # (N,) volume transmittance
     steps: np.ndarray  # (N,) int32 integration steps
     energy_error: np.ndarray  # (N,) |H - H0| at the end
+    redshift: np.ndarray  # (N,) g = nu_obs / nu_emit where the ray ended on a disk, else NaN
 
     @classmethod
     def empty(cls, n: int, origins: np.ndarray, directions: np.ndarray) -> RayResults:
@@ -40,6 +41,7 @@ class RayResults:
             transmittance=np.ones(n),
             steps=np.zeros(n, dtype=np.int32),
             energy_error=np.zeros(n),
+            redshift=np.full(n, np.nan),
         )
 
     def accumulate(
