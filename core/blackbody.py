@@ -64,6 +64,8 @@ def _rgb_from_xyz() -> np.ndarray:
 
 RGB_FROM_XYZ = _rgb_from_xyz()
 """XYZ -> linear Rec.709 / sRGB (D65), 3x3."""
+XYZ_FROM_RGB = np.linalg.inv(RGB_FROM_XYZ)
+"""Linear Rec.709 / sRGB -> XYZ (its row 1: the luminance Y of an RGB colour)."""
 
 
 def planck_xyz(temperature) -> np.ndarray:

@@ -6,7 +6,7 @@ import bpy
 from bpy.app.handlers import persistent
 
 from ..core.render import ALL_PASSES
-from . import presets, validation
+from . import disk_properties, presets, validation
 
 MODEL_ITEMS = [
     ("FLAT", "Flat", "No bending: straight rays, an ordinary ray tracer"),
@@ -295,6 +295,17 @@ class SymRaySettings(bpy.types.PropertyGroup):
         update=_update_passes,
         description="How each ray ended (core.ENDING code): 'SymRay Ending' pass",
     )
+    pass_redshift: bpy.props.BoolProperty(  # type: ignore[valid-type]
+        name="Redshift",
+        default=False,
+        update=_update_passes,
+        description="g = observed / emitted frequency where a ray ends on the accretion "
+        "disk, NaN elsewhere: 'SymRay Redshift' pass",
+    )
+    disk: bpy.props.PointerProperty(  # type: ignore[valid-type]
+        type=disk_properties.SymRayDiskSettings,
+        description="The accretion disk around the black hole",
+    )
     background: bpy.props.EnumProperty(  # type: ignore[valid-type]
         name="Background",
         items=BACKGROUND_ITEMS,
@@ -332,6 +343,7 @@ def _revalidate_on_load(_dummy: object = None) -> None:
 
 def register() -> None:
     """Register SymRaySettings as ``bpy.types.Scene.symray``."""
+    bpy.utils.register_class(disk_properties.SymRayDiskSettings)
     bpy.utils.register_class(SymRaySettings)
     bpy.types.Scene.symray = bpy.props.PointerProperty(type=SymRaySettings)
     if _revalidate_on_load not in bpy.app.handlers.load_post:
@@ -344,3 +356,4 @@ def unregister() -> None:
         bpy.app.handlers.load_post.remove(_revalidate_on_load)
     del bpy.types.Scene.symray
     bpy.utils.unregister_class(SymRaySettings)
+    bpy.utils.unregister_class(disk_properties.SymRayDiskSettings)

@@ -42,7 +42,7 @@ def isco(mass: float, a: float) -> float:
     chi = min(abs(a) / mass, 1.0)
     z1 = 1 + (1 - chi * chi) ** (1 / 3) * ((1 + chi) ** (1 / 3) + (1 - chi) ** (1 / 3))
     z2 = math.sqrt(3 * chi * chi + z1 * z1)
-    return mass * (3 + z2 - math.sqrt((3 - z1) * (3 + 2 * z1 - z2)))
+    return mass * (3 + z2 - math.sqrt((3 - z1) * (3 + z1 + 2 * z2)))
 
 
 def keplerian_omega(r: Any, mass: float, a: float) -> np.ndarray:
@@ -82,9 +82,10 @@ class AccretionDisk:
 
     ``r_in`` None: the prograde ISCO of the scene's model (filled in by ``bind``).
     ``temperature`` (K): the hottest point of the profile (the inner edge for the power
-    law; the Novikov–Thorne maximum, about 1.36 r_in at a = 0). ``doppler`` False: the gas
-    is at rest in the local zero-angular-momentum frame (static where a = 0) instead of
-    orbiting, so only the gravitational (and frame-dragging) shift remains, no beaming.
+    law; the Novikov–Thorne maximum, at r = 9.55 M = 1.59 r_in for a = 0). ``doppler``
+    False: the gas is at rest in the local zero-angular-momentum frame (static where
+    a = 0) instead of orbiting, so only the gravitational (and frame-dragging) shift
+    remains, no beaming.
     ``opacity``: the disk is opaque (1) for now.
     """
 
@@ -164,6 +165,6 @@ class AccretionDisk:
 @functools.lru_cache(maxsize=16)
 def _nt_peak(mass: float, a: float, r_in: float) -> float:
     """Largest Novikov–Thorne flux over r >= r_in (on a fine grid; the peak is smooth, at
-    1.2-1.4 r_in, so the grid's relative error is below 1e-8)."""
+    1.2-1.6 r_in, so the grid's relative error is below 1e-8)."""
     r = r_in * np.exp(np.linspace(0.0, math.log(20.0), 20_001))
     return float(np.max(novikov_thorne_flux(r, mass, a, r_in)))
