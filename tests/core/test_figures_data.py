@@ -130,9 +130,8 @@ def test_kerr_shadow_edges_match_bardeen(a):
 
 def test_disk_beamed_and_bent_over_the_shadow():
     """Fig. 13 (a/M = 0.9, inclination 80 deg): the approaching side (left half) has g > 1
-    and is brighter than the receding one; the middle column reads disk (its far side, bent
-    up over the shadow: a flat view would hide it behind the shadow), shadow, disk (the
-    near side, in front) from the top."""
+    and is brighter than the receding one; the middle column reads disk (its far side, lensed
+    up over the shadow), shadow, disk (the near side, in front) from the top."""
     out = figures.disk_view(0.45, 48, 27, tolerance=1e-4)
     g, ending = out.passes["redshift"], out.passes["ending"]
     on = np.isfinite(g)
