@@ -86,6 +86,8 @@ class Tracer:
         if not isinstance(options.method, integrators.Method) and self.method.accepts("tol"):
             self.method = self.method.with_options(tol=solver_tolerance(options.tolerance))
         radius = scene.region_radius or options.region_radius
+        if scene.disk is not None:  # the disk's hits need the rays' momenta: inside
+            extent = max(extent, scene.disk.cartesian_radii()[1])
         self.region = region_for(model, options.tolerance, extent, radius)
         if scene.disk is not None:
             self.disk = self._disk_light(scene)
@@ -104,8 +106,8 @@ class Tracer:
         )
 
     def _disk_light(self, scene: Scene) -> DiskLight:
-        """The disk's light; ValueError if the disk reaches past the model's region (its
-        hits there would have no momentum to take g from)."""
+        """The disk's light; ValueError if the disk reaches past the model's region (an
+        explicit region_radius: its hits there would have no momentum to take g from)."""
         assert scene.disk is not None and self.region is not None
         outer = scene.disk.cartesian_radii()[1]
         if self.region.radius is None or not self.region.radius > outer:

@@ -69,10 +69,11 @@ def kerr_g_reference(M, a, r, cam, p_t, p_phi):
     return ((p_t + omega * p_phi) / alpha) / emitted
 
 
-def test_kerr_redshift_matches_constants_of_motion():
+@pytest.mark.parametrize("chart", ["kerr_schild", "boyer_lindquist"])  # traced in either
+def test_kerr_redshift_matches_constants_of_motion(chart):
     M, a = 0.5, 0.45  # rg = 1, a/M = 0.9
     scene = core.Scene(
-        model=hm.kerr(rg=2 * M, a=a, chart="kerr_schild"), disk=core.AccretionDisk(r_out=8.0)
+        model=hm.kerr(rg=2 * M, a=a, chart=chart), disk=core.AccretionDisk(r_out=8.0)
     )
     cam = camera_at(20.0, 12, 8)
     tracer, origins, directions, res = trace(scene, cam)
@@ -80,10 +81,13 @@ def test_kerr_redshift_matches_constants_of_motion():
     assert on.sum() >= 30 and np.all(res.ending[on] == ENDING["hit"])
     # the rays' constants at the camera (inside the region: rays start there)
     X = (origins[on] - scene.center) @ tracer.rotation
+    S = tracer.chart.to_coords(X.T.copy())
     Q, P = spacetime_momenta(
-        tracer.model, tracer.chart, X.T.copy(), (directions[on] @ tracer.rotation).T.copy()
+        tracer.model, tracer.chart, S, (directions[on] @ tracer.rotation).T.copy()
     )
-    p_t, p_phi = P[0], Q[1] * P[2] - Q[2] * P[1]
+    # p_phi = p.xi_phi: x p_y - y p_x in Kerr–Schild, p_phi itself in Boyer–Lindquist
+    p_phi = Q[1] * P[2] - Q[2] * P[1] if chart == "kerr_schild" else P[3]
+    p_t = P[0]
     hit = res.position[on]
     assert np.allclose(hit[:, 2], 0.0, atol=1e-9)  # on the equatorial plane
     r = np.sqrt(np.sum(hit[:, :2] ** 2, axis=1) - a * a)  # BL r on the equator
@@ -315,3 +319,30 @@ def test_disk_refusals():
     )
     with pytest.raises(ValueError, match="region_radius must exceed"):
         Tracer(scene, TraceOptions())
+
+
+def test_a_disk_hit_without_a_finite_g_is_flagged_failed():
+    """A ray whose g cannot be computed (here: a NaN momentum) is counted failed and gets no
+    disk colour, never a plausible one."""
+    from core.geometry import Hits
+    from core.render import shade
+    from core.trace import RayResults
+    from core.tracing.scene import DISK_ID
+
+    scene = core.Scene(model=hm.schwarzschild(rg=2.0), disk=core.AccretionDisk(r_out=16.0))
+    tracer = Tracer(scene, TraceOptions(method="gauss4"), 50.0)
+    hits = Hits.miss(2)
+    hits.hit[:] = True
+    hits.object_id[:] = DISK_ID
+    hits.position[:] = [[8.0, 0.0, 0.0], [-8.0, 0.0, 0.0]]
+    Q = np.array([[0.0, 0.0], [20.0, -20.0], [0.0, 0.0], [5.0, 5.0]])
+    P = np.array([[1.0, np.nan], [0.0, 0.0], [0.9, 0.9], [0.0, 0.0]])
+    camera = np.array([[0.0, 0.0], [-50.0, -50.0], [0.0, 0.0]])
+    out = RayResults.empty(2, np.zeros((2, 3)), np.zeros((2, 3)))
+    out.ending[:] = ENDING["hit"]
+    tracer.disk.record(np.arange(2), hits, np.ones(2, bool), [Q, P, camera], out)
+    assert np.isfinite(out.redshift[0]) and out.ending[0] == ENDING["hit"]
+    assert np.isnan(out.redshift[1]) and out.ending[1] == ENDING["failed"]
+    assert np.all(out.surface[1, :3] == 0.0)
+    rgba = shade(out, core.Background((0.0, 0.0, 0.0)))
+    assert tuple(rgba[1]) == core.FAILED_COLOR
