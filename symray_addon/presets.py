@@ -28,22 +28,23 @@ PRESETS: dict[str, tuple[str, str, dict[str, object]]] = {
     ),
     "KERR_DISK": (
         "Kerr with Accretion Disk",
-        "Rotating black hole, a/M = 0.9, with a hot thin disk from the ISCO to 10 rg in the "
-        "centre's XY plane (Novikov–Thorne, 10000 K, Doppler) and the SymRay Redshift pass",
+        "Rotating black hole, a/M = 0.9, rg = 0.5, with a hot thin disk from the ISCO to "
+        "3 units in the centre's XY plane (Novikov–Thorne, 6000 K, Doppler; framed for "
+        "the default camera) and the SymRay Redshift pass",
         {
             "model": "KERR",
-            "rg": 1.0,
+            "rg": 0.5,
             "spin": 0.9,
             "method": "AUTO",
             "tolerance": 1e-6,
             "pass_redshift": True,
             "disk.enabled": True,
             "disk.use_isco": True,
-            "disk.outer_radius": 10.0,
+            "disk.outer_radius": 3.0,
             "disk.profile": "NOVIKOV_THORNE",
-            "disk.temperature": 10_000.0,
+            "disk.temperature": 6000.0,
             "disk.doppler": True,
-            "disk.brightness": 1.0,
+            "disk.brightness": 0.6,
             "disk.opacity": 1.0,
         },
     ),

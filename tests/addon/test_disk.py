@@ -13,10 +13,11 @@ OpenEXR = pytest.importorskip("OpenEXR")
 
 
 def _disk_scene(scene, helpers):
-    """A Kerr a/M = 0.9 hole with its disk, seen at inclination 80 deg from 30 rg."""
+    """The preset's Kerr a/M = 0.9 hole (rg 0.5) with its disk (to 3 units), seen at
+    inclination 80 deg from 12 units."""
     assert bpy.ops.symray.apply_preset(preset="KERR_DISK") == {"FINISHED"}
     inc = math.radians(80.0)
-    cam = helpers.add_camera(scene, location=(0.0, -30 * math.sin(inc), 30 * math.cos(inc)),
+    cam = helpers.add_camera(scene, location=(0.0, -12 * math.sin(inc), 12 * math.cos(inc)),
                              rotation=(inc, 0.0, 0.0))  # fmt: skip
     scene.render.resolution_x, scene.render.resolution_y = 32, 16
     scene.symray.tolerance = 1e-4
@@ -31,7 +32,7 @@ def test_preset_sets_the_scene(scene):
     assert settings.center is not None and settings.center.type == "EMPTY"
     disk = settings.disk
     assert disk.enabled and disk.use_isco and disk.doppler
-    assert disk.outer_radius == 10.0 and disk.profile == "NOVIKOV_THORNE"
+    assert disk.outer_radius == 3.0 and disk.profile == "NOVIKOV_THORNE"
     assert settings.pass_redshift and "redshift" in settings.passes()
     # another preset turns the disk off again
     assert bpy.ops.symray.apply_preset(preset="KERR") == {"FINISHED"}
@@ -64,12 +65,12 @@ def test_disk_settings_are_checked(addon, scene, helpers):
     settings = scene.symray
     assert validation.settings_problems(settings) == []
     isco = validation.inner_edge(settings)
-    assert isco == pytest.approx(0.5 * 2.320883041761887, rel=1e-6)  # a/M = 0.9, rg = 1
+    assert isco == pytest.approx(0.25 * 2.320883041761887, rel=1e-6)  # a/M = 0.9, M = 0.25
     settings.disk.use_isco = False
     settings.disk.inner_radius = 0.9 * isco
     assert any(p.startswith("Disk Inner Radius must be a finite number in [") for p in
                validation.settings_problems(settings))  # fmt: skip
-    settings.disk.inner_radius = 2.0
+    settings.disk.inner_radius = 1.0
     assert validation.settings_problems(settings) == []
     settings.disk.opacity = 0.5
     assert any("Disk Opacity" in p for p in validation.settings_problems(settings))
