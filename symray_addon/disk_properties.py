@@ -22,7 +22,7 @@ class SymRayDiskSettings(bpy.types.PropertyGroup):
     enabled: bpy.props.BoolProperty(  # type: ignore[valid-type]
         name="Accretion Disk",
         default=False,
-        description="A thin, opaque, black-body disk in the centre's XY plane, on "
+        description="A thin black-body disk in the centre's XY plane, on "
         "Keplerian orbits, with gravitational and Doppler shifts",
     )
     use_isco: bpy.props.BoolProperty(  # type: ignore[valid-type]
@@ -74,7 +74,8 @@ class SymRayDiskSettings(bpy.types.PropertyGroup):
     opacity: bpy.props.FloatProperty(  # type: ignore[valid-type]
         name="Opacity",
         default=1.0,
-        min=0.0,
+        min=0.001,
         max=1.0,
-        description="The disk is opaque (1) for now: translucent disks are not implemented",
+        description="1: opaque; below 1 the disk adds Opacity x its light to (1 - Opacity) "
+        "x what lies behind it (seen through it, the sky and its other images)",
     )

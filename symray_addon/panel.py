@@ -163,9 +163,7 @@ class RENDER_PT_symray_disk(SymRayPanelMixin, bpy.types.Panel):
         layout.prop(disk, "temperature")
         layout.prop(disk, "doppler")
         layout.prop(disk, "brightness")
-        row = layout.row()
-        row.enabled = False  # opaque only, for now
-        row.prop(disk, "opacity")
+        layout.prop(disk, "opacity")
 
 
 class RENDER_PT_symray_output(SymRayPanelMixin, bpy.types.Panel):

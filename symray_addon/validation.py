@@ -278,7 +278,7 @@ def _disk_checks(settings: Any) -> list[Callable[[], Any]]:
         lambda: checks.check_positive("Disk Outer Radius", disk.outer_radius),
         lambda: checks.check_range("Disk Temperature", disk.temperature, 100.0, 1e9),
         lambda: checks.check_range("Disk Brightness", disk.brightness, 0.0),
-        lambda: checks.check_range("Disk Opacity (opaque disks only, for now)", disk.opacity, 1, 1),
+        lambda: checks.check_range("Disk Opacity", disk.opacity, 0.0, 1.0, lo_open=True),
     ]
     if not disk.use_isco:
         found.append(

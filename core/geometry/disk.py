@@ -1,8 +1,9 @@
 """The relativistic thin accretion disk: its parameters, orbits and temperature.
 
-A geometrically thin, opaque disk in the equatorial plane of a Schwarzschild or Kerr hole
-(the model's local z = 0 plane), between the Boyer–Lindquist radii ``r_in`` (default: the
-prograde innermost stable circular orbit, ISCO) and ``r_out``. Its gas moves on prograde
+A geometrically thin disk (opaque, or translucent below opacity 1) in the equatorial plane
+of a Schwarzschild or Kerr hole (the model's local z = 0 plane), between the Boyer–Lindquist
+radii ``r_in`` (default: the prograde innermost stable circular orbit, ISCO) and ``r_out``.
+Its gas moves on prograde
 circular equatorial geodesics, Ω = ±√M / (r^{3/2} ± |a| √M) (co-rotating with the hole;
 a = 0: counter-clockwise about +z), and shines as a black body at T(r): the Novikov–Thorne
 profile (Page & Thorne 1974, flux F ∝ T⁴, zero torque at r_in) or a power law
@@ -86,7 +87,8 @@ class AccretionDisk:
     False: the gas is at rest in the local zero-angular-momentum frame (static where
     a = 0) instead of orbiting, so only the gravitational (and frame-dragging) shift
     remains, no beaming.
-    ``opacity``: the disk is opaque (1) for now.
+    ``opacity`` in (0, 1]: below 1 a ray crossing the disk takes ``opacity`` x its light
+    and goes on with (1 - opacity) of what lies behind (core/tracing/disklight.py).
     """
 
     r_out: float = 20.0
@@ -108,7 +110,7 @@ class AccretionDisk:
         if self.profile not in PROFILES:
             raise ValueError(f"disk profile must be one of {PROFILES}, got {self.profile!r}")
         checks.check_range("disk brightness", self.brightness, 0.0)
-        checks.check_range("disk opacity", self.opacity, 1.0, 1.0)  # translucency: not yet
+        checks.check_range("disk opacity", self.opacity, 0.0, 1.0, lo_open=True)
 
     def bind(self, model: Any) -> AccretionDisk:
         """This disk around ``model`` (Schwarzschild or Kerr): mass, spin and r_in filled in

@@ -63,10 +63,10 @@ class Scene:
         """False when nothing bends light: rays are traced straight, no integration."""
         return self.model is not None and not self.model.flat
 
-    def intersector(self) -> Intersector:
+    def intersector(self, disk: bool = True) -> Intersector:
         """The objects as one intersector (a list of them becomes a Group), with the disk's
-        annulus (object id DISK_ID) when there is one."""
-        annulus = self.disk_annulus()
+        annulus (object id DISK_ID) when there is one (and ``disk``)."""
+        annulus = self.disk_annulus() if disk else None
         if isinstance(self.objects, Intersector):
             if annulus is None:
                 return self.objects

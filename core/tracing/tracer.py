@@ -115,7 +115,8 @@ class Tracer:
                 f"region_radius must exceed the accretion disk's outer radius {outer:g} "
                 f"(Cartesian), got {self.region.radius}"
             )
-        return DiskLight(scene.disk, self.model, self.chart, self._to_local)
+        behind = SceneGeometry(scene.intersector(disk=False), list(scene.volumes))
+        return DiskLight(scene.disk, self.model, self.chart, self._to_local, self.geometry, behind)
 
     @property
     def objects(self) -> Any:
@@ -298,9 +299,12 @@ class Tracer:
             hits = self.geometry.cast(a, b)
             if hits.hit.any():
                 self._refine(path, live, hits, j / n, 1.0 / n, [x[live] for x in limits])
-            got = self.geometry.record_hits(rows[live], a, b, hits, out)
-            if self.disk is not None:
-                self.disk.record(rows[live], hits, got, [x[:, live] for x in state], out)
+            if self.disk is None:
+                got = self.geometry.record_hits(rows[live], a, b, hits, out)
+            else:
+                got = self.disk.record_hits(
+                    rows[live], a, b, hits, [x[:, live] for x in state], out
+                )
             hit[live[got]] = True
             alive[live[got]] = False
             if not alive.any():

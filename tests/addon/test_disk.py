@@ -73,7 +73,10 @@ def test_disk_settings_are_checked(addon, scene, helpers):
     settings.disk.inner_radius = 1.0
     assert validation.settings_problems(settings) == []
     settings.disk.opacity = 0.5
-    assert any("Disk Opacity" in p for p in validation.settings_problems(settings))
+    assert validation.settings_problems(settings) == []
+    settings["disk"]["opacity"] = 0.0  # a .blend or script past the limits
+    assert any(p.startswith("Disk Opacity must be a finite number in (0, 1]") for p in
+               validation.settings_problems(settings))  # fmt: skip
     settings.disk.opacity = 1.0
     settings["disk"]["temperature"] = float("nan")  # a .blend or script past the limits
     assert any(p.startswith("Disk Temperature must be") for p in

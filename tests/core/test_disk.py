@@ -311,7 +311,7 @@ def test_disk_refusals():
     with pytest.raises(ValueError, match="disk temperature must be"):
         core.AccretionDisk(temperature=float("nan"))
     with pytest.raises(ValueError, match="disk opacity must be"):
-        core.AccretionDisk(opacity=0.5)
+        core.AccretionDisk(opacity=0.0)
     with pytest.raises(ValueError, match="disk profile must be"):
         core.AccretionDisk(profile="shakura")
     scene = core.Scene(
@@ -339,10 +339,39 @@ def test_a_disk_hit_without_a_finite_g_is_flagged_failed():
     P = np.array([[1.0, np.nan], [0.0, 0.0], [0.9, 0.9], [0.0, 0.0]])
     camera = np.array([[0.0, 0.0], [-50.0, -50.0], [0.0, 0.0]])
     out = RayResults.empty(2, np.zeros((2, 3)), np.zeros((2, 3)))
-    out.ending[:] = ENDING["hit"]
-    tracer.disk.record(np.arange(2), hits, np.ones(2, bool), [Q, P, camera], out)
+    ends = np.array([[9.0, 0.0, 0.0], [-9.0, 0.0, 0.0]])
+    tracer.disk.record_hits(np.arange(2), ends, ends, hits, [Q, P, camera], out)
     assert np.isfinite(out.redshift[0]) and out.ending[0] == ENDING["hit"]
     assert np.isnan(out.redshift[1]) and out.ending[1] == ENDING["failed"]
     assert np.all(out.surface[1, :3] == 0.0)
     rgba = shade(out, core.Background((0.0, 0.0, 0.0)))
     assert tuple(rgba[1]) == core.FAILED_COLOR
+
+
+def test_translucent_disk_adds_its_light_to_what_lies_behind():
+    """opacity a: a ray crossing the disk once and escaping shows a x (the opaque disk's
+    colour) + (1 - a) x the background; its redshift is the same g."""
+    background = (0.2, 0.3, 0.4)
+    cam = camera_at(50.0, 32, 12)
+    images = {}
+    for alpha in (1.0, 0.4):
+        scene = core.Scene(
+            model=hm.schwarzschild(rg=2.0),
+            disk=core.AccretionDisk(r_out=16.0, opacity=alpha, brightness=0.7),
+            background=background,
+        )
+        images[alpha] = core.render(scene, cam, tolerance=1e-6, workers=1, parallel="threads")
+    opaque, thin = images[1.0], images[0.4]
+    ending = thin.passes["ending"]
+    on = np.isfinite(opaque.passes["redshift"])
+    outer = on & (np.abs(np.arange(32) - 15.5) > 11)[None, :]  # once through, then away
+    assert outer.sum() >= 6 and np.all(ending[outer] == ENDING["escaped"])
+    expected = 0.4 * opaque.rgba[..., :3] + 0.6 * np.array(background)
+    np.testing.assert_allclose(thin.rgba[outer][:, :3], expected[outer], atol=2e-6)
+    np.testing.assert_array_equal(thin.passes["redshift"][on], opaque.passes["redshift"][on])
+    # the near side in front of the shadow: its light, over the (black) shadow's
+    front = on & (opaque.passes["ending"] == ENDING["hit"]) & (ending == ENDING["captured"])
+    assert front.any()
+    np.testing.assert_allclose(
+        thin.rgba[front][:, :3], 0.4 * opaque.rgba[front][:, :3], rtol=1e-6, atol=1e-7
+    )
