@@ -295,18 +295,45 @@ class Camera:
         if not 0 <= start <= stop <= self.n_pixels:
             raise IndexError(f"pixel range [{start}, {stop}) outside [0, {self.n_pixels})")
         row, col = np.divmod(np.arange(start, stop, dtype=np.int64), self.width)
+        return self.image_window_coords(np.stack([col + 0.5, row + 0.5], axis=1))
+
+    def image_window_coords(self, xy: np.ndarray) -> np.ndarray:
+        """Window coordinates (M, 2) of image points xy (M, 2): x = column, y = row from
+        the top, in pixels of this image (pixel (c, r) spans [c, c + 1) x [r, r + 1))."""
+        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
         x0, _, _, y1 = self.region
-        xb = x0 + col + 0.5  # Blender raster: x right, y up, full frame
-        yb = y1 - row - 0.5
+        xb = x0 + xy[:, 0]  # Blender raster: x right, y up, full frame
+        yb = y1 - xy[:, 1]
         xmin, xmax, ymin, ymax = self.window
         winx, winy = self.full_size
         sx = xmin + (xmax - xmin) * (xb / winx)
         sy = ymin + (ymax - ymin) * (yb / winy)
         return np.stack([sx, sy], axis=1)
 
+    def pixel_angle(self, distance: float = 1.0) -> float:
+        """The angle (radians) one pixel spans at the image centre; for an orthographic
+        camera, a pixel's width over ``distance`` (the distance it is seen at)."""
+        xmin, xmax, _, _ = self.window
+        size = (xmax - xmin) / self.full_size[0]
+        if self.kind == "ortho":
+            return float(size / distance)
+        if self.kind == "pano":
+            return float(size)
+        cx, cy = self.image_window_coords(np.array([[0.5 * self.width, 0.5 * self.height]]))[0]
+        r2 = 1.0 + cx * cx + cy * cy  # a pixel's angle shrinks off axis as 1 / (1 + s^2)
+        return float(size / r2)
+
     def rays(self, start: int = 0, stop: int | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Origins (M, 3) and unit directions (M, 3) for flat pixel indices [start, stop)."""
-        s = self.window_coords(start, stop)
+        return self.rays_at_window(self.window_coords(start, stop))
+
+    def rays_at(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Origins (M, 3) and unit directions (M, 3) through image points xy (M, 2) (x =
+        column, y = row from the top, in pixels; pixel centres at +0.5)."""
+        return self.rays_at_window(self.image_window_coords(xy))
+
+    def rays_at_window(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Origins (M, 3) and unit directions (M, 3) for window coordinates s (M, 2)."""
         m = s.shape[0]
         right, up, back = self._basis.T
         if self.kind == "persp":

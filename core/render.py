@@ -1,12 +1,13 @@
 """core.render: a whole image in chunks (bounded memory), with passes and a summary.
 
-Passes: ``error`` (estimated final-direction error in radians, from step doubling:
-every traced ray is traced again at half the step; the image shows the finer run and
-the error is |d_h - d_h/2| / (2^p - 1), +inf where a ray failed), ``steps`` and
-``ending`` (``core.ENDING`` codes) and ``redshift`` (g = ν_obs / ν_emit of rays that end on
-the scene's accretion disk, NaN elsewhere; core/tracing/disklight.py). Failed rays are
-drawn in ``FAILED_COLOR`` and rays that ran out of steps in ``MAX_STEPS_COLOR``, never as a
-plausible colour.
+Passes: ``error`` (estimated final-direction error in radians: the integration's, from a
+companion run of every camera ray at twice the step, |d_h - d_2h| / (2^p - 1); the far
+field's beyond the region; the image interpolation's (core.sampling); +inf where a ray
+failed), ``error_px`` (the same in pixels of this camera), ``steps``, ``ending``
+(``core.ENDING`` codes) and ``redshift`` (g = ν_obs / ν_emit of rays that end on the scene's
+accretion disk, or first cross a translucent one; NaN elsewhere; core/tracing/disklight.py;
+the pixel centre's, like the error). Failed rays are drawn in ``FAILED_COLOR`` and rays
+that ran out of steps in ``MAX_STEPS_COLOR``, never as a plausible colour.
 """
 
 from __future__ import annotations
@@ -24,14 +25,32 @@ from . import workers as workers_module
 from .geometry import Intersector
 from .imageio import FAILED_COLOR
 from .observer import check_camera
+from .sampling import (
+    CLEARANCE,
+    COMPANION_RATIO,
+    FILTERS,
+    STRIDE,
+    Tile,
+    TileResult,
+    TileSampler,
+    richardson_error,
+    seen_direction,
+    tiles,
+)
 from .sky import Background
-from .tracing import ENDING, RayResults, Scene, TraceOptions, Tracer
+from .tracing import ENDING, FAR_FIELD_CONSTANT, RayResults, Scene, TraceOptions, Tracer
 
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
-ALL_PASSES = ("error", "steps", "ending", "redshift")
-"""The passes, in their one order (the add-on's render passes and EXR channels follow it)."""
+ALL_PASSES = ("error", "error_px", "steps", "ending", "direction", "redshift")
+"""The passes, in their one order. ``direction`` (h, w, 3): what each pixel's centre sees
+(the escape direction, or the unit vector to the hit point; NaN where captured or failed)."""
+DEFAULT_PASSES = ("error", "error_px", "steps", "ending", "redshift")
+"""The passes core.render computes unless asked otherwise."""
 _MIN_CHUNK = 2048
+TRACE_SHARE = 0.5
+"""With ``tolerance_px``, the integration and far field get this share of it (the tracer's
+``tolerance``); the image interpolation gets the rest."""
 
 
 @dataclass
@@ -50,26 +69,43 @@ def render(
     *,
     method: Any = None,
     tolerance: float = 1e-8,
+    tolerance_px: float | None = None,
+    samples: int = 1,
+    pixel_filter: str = "blackman_harris",
+    filter_size: float = 1.5,
     step: float | None = None,
     max_steps: int = 20_000,
-    passes: Sequence[str] = ALL_PASSES,
+    passes: Sequence[str] = DEFAULT_PASSES,
     chunk_size: int = 16_384,
     workers: int | None = None,
     parallel: str = "auto",
     cores: int | None = None,
     progress: Callable[[int, int], None] | None = None,
     should_cancel: Callable[[], bool] | None = None,
+    on_tile: Callable[[tuple[int, int, int, int], RenderResult], None] | None = None,
 ) -> RenderResult:
     """Render ``scene`` seen by ``camera`` (docs/design.md, "Rendering in the core").
 
-    The image is traced in chunks of at most ``chunk_size`` rays by ``workers`` forked
-    processes or threads (``parallel``: "auto", "processes", "threads"; see
-    core.workers); without ``workers``, one process per core (at most ``cores``) or two
-    threads. ``progress(done, total)`` and ``should_cancel()`` are called from the
+    ``tolerance_px`` (pixels of this camera; replaces ``tolerance``, radians) turns on
+    adaptive sampling (core.sampling): rays where the image needs them, interpolation
+    where it stays within tolerance. ``samples`` > 1: up to that many camera rays per
+    pixel where the contrast asks for them (anti-aliasing with ``pixel_filter`` "box" or
+    "blackman_harris" of width ``filter_size`` pixels, as Cycles). The image is traced in
+    chunks (tiles when sampling) by ``workers`` forked processes or threads
+    (``parallel``: "auto", "processes", "threads"; see core.workers); without
+    ``workers``, one process per core (at most ``cores``) or two threads.
+    ``progress(done, total)`` (pixels), ``should_cancel()`` and ``on_tile((x0, y0, x1,
+    y1), part)`` (a finished tile's pixels, row 0 at the top) are called from the
     caller's thread, or from the worker threads when there are threads.
     """
-    options = TraceOptions(method=method, tolerance=tolerance, step=step, max_steps=max_steps)
     passes = _check_render_call(passes, chunk_size, workers, cores)
+    _check_sampling(tolerance_px, samples, pixel_filter, filter_size)
+    pixel_angle = camera.pixel_angle(_camera_distance(scene, camera))
+    interpolation = 0.0
+    if tolerance_px is not None:
+        tolerance = TRACE_SHARE * tolerance_px * pixel_angle
+        interpolation = (1.0 - TRACE_SHARE) * tolerance_px * pixel_angle
+    options = TraceOptions(method=method, tolerance=tolerance, step=step, max_steps=max_steps)
     start_time = time.perf_counter()
     extent = _scene_extent(scene, camera)
     tracer = Tracer(scene, options, extent)
@@ -82,34 +118,118 @@ def render(
         else Background(scene.background)
     )
     n = camera.n_pixels
+    with_error = "error" in passes or "error_px" in passes
+    with_error = with_error and tracer.curved
+    image = _Buffers(n, with_error, camera.width)
     kind, count = workers_module.choose(parallel, workers, n, cores)
-    with_error = "error" in passes and tracer.curved
-    image = _Buffers(n, with_error)
-    # at least two chunks per worker (a small image still keeps every core busy), but not
-    # below _MIN_CHUNK rays: per-step work is Python overhead on small batches
-    size = max(_MIN_CHUNK, min(chunk_size, -(-n // (2 * count))))
-    chunks = [(s, min(s + size, n)) for s in range(0, n, size)]
+    sampled = samples > 1 or (tolerance_px is not None and tracer.curved)
+    if sampled:
+        interpolation = interpolation if tracer.curved else 0.0
+        if interpolation > 0:
+            tracer.watch_geometry(_watch_margin(tracer, camera, pixel_angle))
+        sampler = TileSampler(
+            tracer, camera, background, shade, interpolation=interpolation, samples=samples,
+            pixel_filter=pixel_filter, filter_size=filter_size, with_error=with_error,
+            far_field=_far_field_error(tracer), pixel_angle=pixel_angle,
+        )  # fmt: skip
+        chunks = [(k, k + 1) for k in range(len(tiles(camera.width, camera.height)))]
+        work = _tile_work(sampler, tiles(camera.width, camera.height))
+    else:
+        # at least two chunks per worker (a small image still keeps every core busy), but
+        # not below _MIN_CHUNK rays: per-step work is Python overhead on small batches
+        size = max(_MIN_CHUNK, min(chunk_size, -(-n // (2 * count))))
+        chunks = [(s, min(s + size, n)) for s in range(0, n, size)]
+        work = _span_work(tracer, camera, with_error, _far_field_error(tracer))
     cancelled = workers_module.CancelLatch(should_cancel)
-
-    def work(span, cancel):
-        if cancel():
-            return None
-        origins, directions = camera.rays(*span)
-        chunk = _trace_chunk(tracer, origins, directions, with_error, cancel)
-        return None if cancel() else chunk
-
     done = 0
     for span, chunk in workers_module.run_chunks(work, chunks, kind, count, cancelled):
         if chunk is None:
             continue
-        image.store(span, chunk, background)
-        done += span[1] - span[0]
+        done += image.store(span, chunk, background)
+        if on_tile is not None:
+            on_tile(*image.part(span, chunk, passes))
         if progress is not None:
             progress(done, n)
     was_cancelled = done < n or cancelled()
     result = image.result(camera, passes, time.perf_counter() - start_time, was_cancelled, tracer)
     result.summary["parallel"] = f"{count} {kind}" if kind != "inline" else "inline"
+    result.summary["pixel_angle"] = pixel_angle
+    if "error_px" in result.passes:
+        result.passes["error_px"] = result.passes["error_px"] / np.float32(pixel_angle)
+    _summarise_px(result.summary, pixel_angle)
     return result
+
+
+def _span_work(tracer: Tracer, camera, with_error: bool, far_field: float):
+    """A chunk of flat pixel indices: one ray through each pixel centre."""
+
+    def work(span, cancel):
+        if cancel():
+            return None
+        origins, directions = camera.rays(*span)
+        chunk = _trace_chunk(tracer, origins, directions, with_error, cancel, far_field)
+        return None if cancel() else chunk
+
+    return work
+
+
+def _tile_work(sampler: TileSampler, tile_list):
+    """A chunk (k, k + 1): tile k, adaptively sampled."""
+
+    def work(span, cancel):
+        if cancel():
+            return None
+        part = sampler.render_tile(tile_list[span[0]], cancel)
+        return None if cancel() else (tile_list[span[0]], part)
+
+    return work
+
+
+def _check_sampling(tolerance_px, samples, pixel_filter, filter_size) -> None:
+    """ValueError for sampling options out of range."""
+    if tolerance_px is not None:
+        checks.check_positive("tolerance_px", tolerance_px)
+        if not 1e-9 <= tolerance_px <= 100:
+            raise ValueError(f"tolerance_px must lie in [1e-9, 100] pixels, got {tolerance_px}")
+    checks.check_int("samples", samples)
+    if samples > 1024:
+        raise ValueError(f"samples must lie in [1, 1024], got {samples}")
+    if pixel_filter not in FILTERS:
+        raise ValueError(f"pixel_filter must be one of {FILTERS}, got {pixel_filter!r}")
+    checks.check_positive("filter_size", filter_size)
+    if not 0.01 <= filter_size <= 2.0:
+        raise ValueError(f"filter_size must lie in [0.01, 2] pixels, got {filter_size}")
+
+
+def _camera_distance(scene: Scene, camera) -> float:
+    """Distance from the camera to the scene's centre (an orthographic pixel's angle)."""
+    return float(max(np.linalg.norm(camera.frame.position - scene.center), 1e-9))
+
+
+def _watch_margin(tracer: Tracer, camera, pixel_angle: float) -> float:
+    """World margin around geometry within which straight segments stop interpolation: a
+    coarsest block (core.sampling.STRIDE pixels) seen at the geometry's farthest corner."""
+    box = tracer.geometry.local_box(lambda x: x)
+    if box is None:
+        return 0.0
+    corners = np.array(np.meshgrid(*zip(box[0], box[1], strict=True))).reshape(3, -1).T
+    far = float(np.max(np.linalg.norm(corners - camera.frame.position, axis=1)))
+    return CLEARANCE * STRIDE * pixel_angle * far if np.isfinite(far) else np.inf
+
+
+def _far_field_error(tracer: Tracer) -> float:
+    """Error (radians) the first-order far field leaves an escaped ray beyond the region
+    (FAR_FIELD_CONSTANT (M / R)^2; 0 without a mass)."""
+    if not tracer.curved or tracer.region is None or tracer.region.radius is None:
+        return 0.0
+    return FAR_FIELD_CONSTANT * (tracer.mass / tracer.region.radius) ** 2
+
+
+def _summarise_px(summary: dict, pixel_angle: float) -> None:
+    """Add the error summary in pixels (error_px_median, error_px_max)."""
+    for key in ("median", "max"):
+        value = summary.get(f"error_{key}")
+        summary[f"error_px_{key}"] = None if value is None else value / pixel_angle
 
 
 def _check_render_call(passes, chunk_size, workers, cores) -> tuple[str, ...]:
@@ -137,59 +257,86 @@ def check_scene_camera(scene: Scene, position, tolerance: float = 1e-8) -> None:
     check_camera(Tracer(scene, TraceOptions(tolerance=tolerance), max(far, 1e-9)), position)
 
 
-def _trace_chunk(tracer: Tracer, origins, directions, with_error: bool, cancel):
-    """Trace one chunk; with the error pass, again at half the step (step doubling)."""
-    coarse = tracer.trace(origins, directions, cancel=cancel)
+def _trace_chunk(tracer: Tracer, origins, directions, with_error: bool, cancel, far_field=0.0):
+    """Trace one chunk; with the error pass, a companion run at COMPANION_RATIO x the step."""
+    rays = tracer.trace(origins, directions, cancel=cancel)
+    seen = seen_direction(rays, origins)
     if not with_error:
-        return coarse, None
+        return rays, seen, None
     assert tracer.step is not None  # with_error: the scene is curved
-    fine = tracer.trace(origins, directions, step=0.5 * tracer.step, cancel=cancel)
-    return fine, _doubling_error(coarse, fine, origins, tracer.method.order)
-
-
-def _doubling_error(coarse: RayResults, fine: RayResults, origins, order: int) -> np.ndarray:
-    """Richardson estimate of the fine run's final-direction error, radians (N,)."""
-    escaped = fine.ending == ENDING["escaped"]
-    vec_c = np.where(escaped[:, None], coarse.direction, coarse.position - origins)
-    vec_f = np.where(escaped[:, None], fine.direction, fine.position - origins)
-    with np.errstate(all="ignore"):
-        err = _angle(vec_c, vec_f) / (2.0**order - 1.0)
-    err = np.where(coarse.ending == fine.ending, err, np.pi)
-    err = np.where(fine.ending == ENDING["captured"], 0.0, err)
-    bad = (fine.ending == ENDING["failed"]) | (fine.ending == ENDING["max_steps"])
-    return np.where(bad | ~np.isfinite(err), np.inf, err)
-
-
-def _angle(u, v) -> np.ndarray:
-    """Angle between vectors, accurate for tiny angles (atan2 of |u x v| and u.v)."""
-    cross = np.linalg.norm(np.cross(u, v), axis=1)
-    return np.arctan2(cross, np.einsum("ij,ij->i", u, v))
+    coarse = tracer.trace(origins, directions, step=COMPANION_RATIO * tracer.step, cancel=cancel)
+    error = richardson_error(rays, coarse, origins, tracer.method.order)
+    return rays, seen, error + np.where(rays.ending == ENDING["escaped"], far_field, 0.0)
 
 
 class _Buffers:
-    """Flat per-pixel buffers filled chunk by chunk."""
+    """Flat per-pixel buffers filled chunk by chunk (spans of flat indices, or tiles)."""
 
-    def __init__(self, n: int, with_error: bool):
+    def __init__(self, n: int, with_error: bool, width: int):
         self.rgba = np.zeros((n, 4), dtype=np.float32)
         self.error = np.zeros(n, dtype=np.float32)
         self.steps = np.zeros(n, dtype=np.int32)
         self.ending = np.full(n, -1, dtype=np.int8)
         self.energy = np.zeros(n)
         self.redshift = np.full(n, np.nan, dtype=np.float32)
+        self.direction = np.full((n, 3), np.nan, dtype=np.float32)
         self.with_error = with_error
+        self.width = width
+        self.rays = 0
+        self.error_rays = 0
 
-    def store(self, span, chunk, background: Background):
+    def store(self, span, chunk, background: Background) -> int:
+        """Store a finished chunk; -> the number of pixels it filled."""
+        if isinstance(chunk[0], Tile):
+            return self._store_tile(*chunk)
         a, b = span
-        rays, error = chunk
+        rays, seen, error = chunk
         self.rgba[a:b] = shade(rays, background)
+        self.direction[a:b] = seen
         self.steps[a:b] = rays.steps
         self.ending[a:b] = rays.ending
         self.energy[a:b] = rays.energy_error
         self.redshift[a:b] = rays.redshift
+        self.rays += b - a
         if error is not None:
             self.error[a:b] = error
+            self.error_rays += b - a
         failed = rays.ending == ENDING["failed"]
         self.error[a:b][failed] = np.inf
+        return b - a
+
+    def _rows(self, tile: Tile) -> np.ndarray:
+        """Flat indices (h, w) of a tile's pixels."""
+        rows = np.arange(tile.y0, tile.y1)[:, None] * self.width
+        return rows + np.arange(tile.x0, tile.x1)[None, :]
+
+    def _store_tile(self, tile: Tile, part: TileResult) -> int:
+        idx = self._rows(tile)
+        self.rgba[idx] = part.rgba
+        self.steps[idx] = part.steps
+        self.ending[idx] = part.ending
+        self.energy[idx] = part.energy
+        self.error[idx] = part.error
+        self.direction[idx] = part.direction
+        self.redshift[idx] = part.redshift
+        self.rays += part.rays
+        self.error_rays += part.error_rays
+        return idx.size
+
+    def part(self, span, chunk, passes) -> tuple[tuple[int, int, int, int], RenderResult]:
+        """A finished chunk as (x0, y0, x1, y1) and its pixels (for progressive display):
+        a tile, or the rows a span of flat indices covers (whole rows, as stored so far)."""
+        if isinstance(chunk[0], Tile):
+            tile = chunk[0]
+        else:
+            first, last = span[0] // self.width, -(-span[1] // self.width)
+            tile = Tile(0, first, self.width, last)
+        idx = self._rows(tile)
+        out = RenderResult(self.rgba[idx])
+        for name, data in (("error", self.error), ("steps", self.steps), ("ending", self.ending)):
+            if name in passes:
+                out.passes[name] = data[idx]
+        return (tile.x0, tile.y0, tile.x1, tile.y1), out
 
     def result(self, camera, passes, seconds, cancelled, tracer) -> RenderResult:
         h, w = camera.height, camera.width
@@ -202,6 +349,12 @@ class _Buffers:
             out.passes["ending"] = self.ending.reshape(h, w)
         if "redshift" in passes:
             out.passes["redshift"] = self.redshift.reshape(h, w)
+        if "error_px" in passes:
+            out.passes["error_px"] = self.error.reshape(h, w).copy()
+        if "direction" in passes:
+            dead = (self.ending == ENDING["captured"]) | (self.ending == ENDING["failed"])
+            self.direction[dead] = np.nan
+            out.passes["direction"] = self.direction.reshape(h, w, 3)
         out.summary = self.summary(seconds, tracer)
         return out
 
@@ -214,7 +367,9 @@ class _Buffers:
         integrated = self.energy[finite] if tracer.curved else self.energy[:0]
         return {
             "time_s": seconds,
-            "rays": int(np.count_nonzero(traced)),
+            "rays": self.rays,
+            "pixels": int(np.count_nonzero(traced)),
+            "error_rays": self.error_rays,
             "steps": int(self.steps.sum()),
             "failed": counts["failed"],
             "error_median": float(np.median(errs)) if errs.size else None,

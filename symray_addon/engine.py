@@ -1,6 +1,7 @@
 """The SYMRAY render engine: F12, ``bpy.ops.render.render`` and ``blender -b -E SYMRAY``.
 
-Each frame traces the evaluated depsgraph's scene (``render_job``), honouring the render
+Each frame traces the evaluated depsgraph's scene (``render_job``; lit surfaces are baked
+by Cycles first, or reused from the cache: bake.py), honouring the render
 region (border), resolution percentage, Esc (``test_break``) and film transparency, and
 writes the Combined pass plus "SymRay Error", "SymRay Steps", "SymRay Ending" and "SymRay
 Redshift" (one channel 'X' each, when enabled in the SymRay panel). Saving is Blender's
@@ -13,12 +14,12 @@ import time
 from typing import Any
 
 import bpy
+import numpy as np
 
-from ..core.render import ALL_PASSES
-from . import output, render_job
+from . import output, properties, render_job
 
-PASSES = tuple((name, f"SymRay {name.capitalize()}", f"pass_{name}") for name in ALL_PASSES)
-"""(core pass, Blender pass name, scene.symray toggle), in core.render.ALL_PASSES order."""
+PASSES = tuple((name, f"SymRay {label}", toggle) for name, label, toggle in properties.PASSES)
+"""(core pass, Blender pass name, scene.symray toggle), in properties.PASSES order."""
 
 
 def enabled_passes(settings: Any) -> list[tuple[str, str]]:
@@ -66,18 +67,31 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
     def _render(self, depsgraph: bpy.types.Depsgraph) -> None:
         """render() itself; raises on any failure."""
         scene = depsgraph.scene
-        self.update_stats("", "SymRay: reading the scene")
+        baking = "" if scene.symray.lighting == "UNLIT" else " (Cycles bakes the lighting)"
+        self.update_stats("", f"SymRay: reading the scene{baking}")
         job = render_job.prepare(
             scene, depsgraph, use_border=True, camera_object=self.camera_override
         )
+        for warning in job.warnings:
+            self.report({"WARNING"}, warning)
         passes = enabled_passes(scene.symray)
         for _core_name, name in passes:
             self.add_pass(name, 1, "X")
         self.update_stats("", "SymRay: tracing")
-        result = render_job.run(job, self._progress_callback(), self.test_break)
-        if result.cancelled or self.test_break():
-            return
-        self._write_result(depsgraph, job, result, passes)
+        view_layer = depsgraph.view_layer.name if depsgraph.view_layer else ""
+        # Coordinates are relative to the render region (border), which is what we traced.
+        res = self.begin_result(0, 0, job.camera.width, job.camera.height, layer=view_layer)
+        try:
+            shown = _Progressive(self, res, job.camera.width, job.camera.height)
+            result = render_job.run(job, self._progress_callback(), self.test_break, shown.tile)
+            if result.cancelled or self.test_break():
+                self.end_result(res, cancel=True)
+                return
+            self._write_result(res, result, passes)
+        except BaseException:
+            self.end_result(res, cancel=True)  # nothing of a failed frame is committed
+            raise
+        self.end_result(res)
         text = render_job.finished(result.summary)
         self.update_stats("", f"SymRay: {text}")
         if bpy.app.background:
@@ -93,44 +107,49 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
             now = time.monotonic()
             if now - last_report[0] > 0.25:
                 last_report[0] = now
-                self.update_stats("", f"SymRay: traced {done} of {total}")
+                self.update_stats("", f"SymRay: {done} of {total} pixels")
 
         return progress
 
-    def _write_result(
-        self,
-        depsgraph: bpy.types.Depsgraph,
-        job: render_job.RenderJob,
-        result: Any,
-        passes: list[tuple[str, str]],
-    ) -> None:
-        """Copy the image and passes into Blender's render result; nothing on a failure."""
-        view_layer = depsgraph.view_layer.name if depsgraph.view_layer else ""
-        # Coordinates are relative to the render region (border), which is what we traced.
-        res = self.begin_result(0, 0, job.camera.width, job.camera.height, layer=view_layer)
-        try:
-            layer = res.layers[0]
-            layer.passes["Combined"].rect = output.bottom_up(result.rgba, 4)
-            for core_name, name in passes:
-                data = result.passes.get(core_name)
-                render_pass = layer.passes.get(name)
-                if data is not None and render_pass is not None:
-                    render_pass.rect = output.bottom_up(data, 1)
-        except BaseException:
-            self.end_result(res, cancel=True)
-            raise
-        self.end_result(res)
+    def _write_result(self, res: Any, result: Any, passes: list[tuple[str, str]]) -> None:
+        """Copy the image and passes into Blender's render result ``res`` (not committed)."""
+        layer = res.layers[0]
+        layer.passes["Combined"].rect = output.bottom_up(result.rgba, 4)
+        for core_name, name in passes:
+            data = result.passes.get(core_name)
+            render_pass = layer.passes.get(name)
+            if data is not None and render_pass is not None:
+                render_pass.rect = output.bottom_up(data, 1)
+
+
+class _Progressive:
+    """Shows each finished tile in the open render result (``update_result``), as Cycles
+    shows its tiles; the result is committed (or discarded) by the engine at the end."""
+
+    def __init__(self, engine: SymRayRenderEngine, res: Any, width: int, height: int) -> None:
+        self.engine, self.res = engine, res
+        self.rgba = np.zeros((height, width, 4), dtype=np.float32)  # row 0 at the top
+
+    def tile(self, rect: tuple[int, int, int, int], part: Any) -> None:
+        """Copy a finished tile (x0, y0, x1, y1; row 0 at the top) and redraw."""
+        x0, y0, x1, y1 = rect
+        self.rgba[y0:y1, x0:x1] = part.rgba.reshape(y1 - y0, x1 - x0, 4)
+        self.res.layers[0].passes["Combined"].rect = output.bottom_up(self.rgba, 4)
+        self.engine.update_result(self.res)
 
 
 # Built-in panels shown for SYMRAY: every generic panel (those listing BLENDER_RENDER in
 # COMPAT_ENGINES: camera, output, format, colour management, mesh data, ...) except
 # Freestyle, which SymRay does not draw; plus the EEVEE material and world surface panels,
-# which edit the Principled BSDF / Background nodes SymRay reads.
+# which edit the Principled BSDF / Background nodes SymRay reads; and View Layer › Passes,
+# where SymRay lists its own passes. Film (Filter Size, Transparent) is SymRay's own panel:
+# the built-in ones carry engine settings SymRay does not have (EEVEE's overscan).
 EXTRA_PANELS = (
     "EEVEE_MATERIAL_PT_context_material",
     "EEVEE_MATERIAL_PT_surface",
     "EEVEE_WORLD_PT_surface",
     "DATA_PT_lens",
+    "VIEWLAYER_PT_layer_passes",
 )
 EXCLUDED_PREFIXES = ("RENDER_PT_freestyle", "VIEWLAYER_PT_freestyle", "MATERIAL_PT_freestyle")
 _added_to: list[type] = []

@@ -2,23 +2,40 @@
 
 ``build_intersector(depsgraph)`` reads every visible object's evaluated mesh (modifiers,
 geometry nodes and instances applied) on the main thread, in world space, triangulated,
-into one ``mathutils.bvhtree.BVHTree``. The ``BVHIntersector`` it returns holds no bpy
+into one ``mathutils.bvhtree.BVHTree``. An object with a ``BakedSurface`` (bake.py) shows
+its baked radiance texture on the UV map it was baked on; the others show their materials
+as ``materials.material_sampler`` reads them. The ``BVHIntersector`` it returns holds no bpy
 data (only numpy arrays, material samplers and the tree), so the core may call
 ``intersect`` from a worker thread.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import bpy
 import numpy as np
 from mathutils.bvhtree import BVHTree
 
 from ..core.intersect import Hits
-from .materials import MaterialSampler, material_sampler
+from .materials import MaterialSampler, material_sampler, unsupported_nodes
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
+
+
+@dataclass
+class BakedSurface:
+    """An object's baked radiance: an image on a UV map of its evaluated mesh."""
+
+    pixels: np.ndarray
+    """(h, w, 4) float32 linear RGBA, row 0 at the bottom (Blender's order)."""
+    loop_uv: np.ndarray | None = None
+    """(L, 2) UVs per loop of the evaluated mesh it was baked on; None: its active UV map."""
+
+    def sampler(self) -> MaterialSampler:
+        """The texture as a material sampler (bilinear, clamped at the image's edges)."""
+        return MaterialSampler(np.ones(4), self.pixels, extension="EXTEND")
 
 
 class BVHIntersector:
@@ -154,8 +171,9 @@ class BVHIntersector:
         return out
 
 
-def _mesh_arrays(mesh: bpy.types.Mesh) -> tuple[np.ndarray, ...]:
-    """Vertices (V, 3), triangles (T, 3), loop indices (T, 3), material slots (T,), UVs."""
+def _mesh_arrays(mesh: bpy.types.Mesh, loop_uv: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
+    """Vertices (V, 3), triangles (T, 3), material slots (T,) and UVs (T, 3, 2): from
+    ``loop_uv`` (L, 2) if given and it fits the mesh, else from the active UV map."""
     mesh.calc_loop_triangles()
     nv, nt = len(mesh.vertices), len(mesh.loop_triangles)
     co = np.empty(nv * 3, dtype=np.float64)
@@ -167,7 +185,9 @@ def _mesh_arrays(mesh: bpy.types.Mesh) -> tuple[np.ndarray, ...]:
     slots = np.empty(nt, dtype=np.int32)
     mesh.loop_triangles.foreach_get("material_index", slots)
     layer = mesh.uv_layers.active
-    if layer is not None and len(mesh.loops):
+    if loop_uv is not None and len(loop_uv) == len(mesh.loops):
+        uv = np.asarray(loop_uv, dtype=np.float64)[loops].reshape(nt, 3, 2)
+    elif layer is not None and len(mesh.loops):
         loop_uv = np.empty(len(mesh.loops) * 2, dtype=np.float64)
         layer.data.foreach_get("uv", loop_uv)
         uv = loop_uv.reshape(-1, 2)[loops].reshape(nt, 3, 2)
@@ -184,8 +204,16 @@ def _is_rendered(instance: bpy.types.DepsgraphObjectInstance) -> bool:
     return instance.is_instance or not obj.original.hide_render
 
 
-def build_intersector(depsgraph: bpy.types.Depsgraph) -> BVHIntersector | None:
-    """A BVHIntersector over every rendered object of ``depsgraph``, or None if there is none."""
+def build_intersector(
+    depsgraph: bpy.types.Depsgraph,
+    baked: Mapping[str, BakedSurface] | None = None,
+    warnings: list[str] | None = None,
+) -> BVHIntersector | None:
+    """A BVHIntersector over every rendered object of ``depsgraph``, or None if there is none.
+
+    ``baked`` maps object names to their bakes (instances are never baked); what the
+    unbaked materials use and cannot evaluate is appended to ``warnings``, once each.
+    """
     verts, tris, objects, mats, uvs = [], [], [], [], []
     samplers: list[MaterialSampler] = []
     sampler_index: dict[str, int] = {}
@@ -195,6 +223,7 @@ def build_intersector(depsgraph: bpy.types.Depsgraph) -> BVHIntersector | None:
         if not _is_rendered(instance):
             continue
         obj = instance.object
+        surface = None if instance.is_instance or not baked else baked.get(obj.name)
         try:
             mesh = obj.to_mesh()
         except RuntimeError:
@@ -202,7 +231,7 @@ def build_intersector(depsgraph: bpy.types.Depsgraph) -> BVHIntersector | None:
         if mesh is None:
             continue
         try:
-            co, tri, slots, uv = _mesh_arrays(mesh)
+            co, tri, slots, uv = _mesh_arrays(mesh, None if surface is None else surface.loop_uv)
             materials = [slot.material for slot in obj.material_slots] or list(mesh.materials)
         finally:
             obj.to_mesh_clear()
@@ -212,14 +241,15 @@ def build_intersector(depsgraph: bpy.types.Depsgraph) -> BVHIntersector | None:
         co = co @ matrix[:3, :3].T + matrix[:3, 3]
         if np.linalg.det(matrix[:3, :3]) < 0.0:  # mirrored: keep faces pointing outwards
             tri, uv = tri[:, ::-1], uv[:, ::-1]
-        slot_to_sampler = []
-        for material in materials or [None]:
-            key = material.name_full if material is not None else ""
-            if key not in sampler_index:
-                sampler_index[key] = len(samplers)
-                samplers.append(material_sampler(material))
-            slot_to_sampler.append(sampler_index[key])
-        slot_map = np.asarray(slot_to_sampler, dtype=np.int64)
+        if baked and instance.is_instance and warnings is not None:
+            note = "Instanced objects are not baked: they show their materials unlit"
+            if note not in warnings:
+                warnings.append(note)
+        if surface is not None:
+            samplers.append(surface.sampler())
+            slot_map = np.array([len(samplers) - 1], dtype=np.int64)
+        else:
+            slot_map = _material_slots(materials, samplers, sampler_index, warnings)
         object_id = len(names)
         names.append(obj.name)
         verts.append(co)
@@ -239,3 +269,34 @@ def build_intersector(depsgraph: bpy.types.Depsgraph) -> BVHIntersector | None:
         samplers,
         names,
     )
+
+
+def _material_slots(
+    materials: Sequence[bpy.types.Material | None],
+    samplers: list[MaterialSampler],
+    sampler_index: dict[str, int],
+    warnings: list[str] | None,
+) -> np.ndarray:
+    """Sampler index per material slot; new materials are read (and their warnings noted)."""
+    slot_to_sampler = []
+    for material in materials or [None]:
+        key = material.name_full if material is not None else ""
+        if key not in sampler_index:
+            sampler_index[key] = len(samplers)
+            samplers.append(material_sampler(material))
+            if warnings is not None and material is not None:
+                warnings.extend(unsupported_warning(material))
+        slot_to_sampler.append(sampler_index[key])
+    return np.asarray(slot_to_sampler, dtype=np.int64)
+
+
+def unsupported_warning(material: bpy.types.Material) -> list[str]:
+    """The warning for the nodes of ``material`` the unbaked reader ignores ([] if none)."""
+    nodes = unsupported_nodes(material)
+    if not nodes:
+        return []
+    listed = ", ".join(f"'{name}'" for name in nodes)
+    return [
+        f"Material '{material.name}': node(s) {listed} are not evaluated without baking and "
+        "are ignored (Surface Lighting: Bake evaluates every node)"
+    ]

@@ -1,12 +1,17 @@
-"""Material colours for the intersector: a base colour, optionally an image texture.
+"""Material colours for the intersector (unbaked path): a colour, an image texture, emission.
 
 Reading happens on the main thread (``material_sampler``); the returned
 ``MaterialSampler`` is plain numpy and is safe to use from the render worker thread.
 
-Understood: a Principled BSDF's Base Color, either its value or an Image Texture node
-linked straight into it (sampled at the mesh's active UV map; the texture's Mapping/Vector
-input is ignored). Anything else falls back to the material's viewport colour. Images are
-converted to linear RGB as Blender does for sRGB byte images.
+Understood, on the shader feeding the active Material Output: a Principled BSDF's Base
+Color (its value, or an Image Texture node linked straight into it, sampled at the mesh's
+active UV map) plus its Emission Color x Emission Strength; a Diffuse BSDF's Color (same
+rules); an Emission shader's Color x Strength. The surface shows colour + emission (unlit:
+as if under unit white light, so a glowing object glows without lights). Any other node
+on the way (a Checker, a Mapping node, a Mix Shader, ...) cannot be evaluated here:
+``unsupported_nodes`` names it, and the render reports it once as a warning (baking
+evaluates every node: see bake.py). Images are converted to linear RGB as Blender does
+for sRGB byte images.
 """
 
 from __future__ import annotations
@@ -31,14 +36,18 @@ class MaterialSampler:
     """(h, w, 4) float32 linear RGBA, row 0 at the bottom (Blender's order), or None."""
     closest: bool = False
     extension: str = "REPEAT"
+    emission: np.ndarray | None = None
+    """Emitted radiance (3,) added to the colour (linear RGB), or None."""
 
     def sample(self, uv: np.ndarray) -> np.ndarray:
         """RGBA (M, 4) float64 at texture coordinates ``uv`` (M, 2)."""
         m = uv.shape[0]
         out = np.broadcast_to(self.base, (m, 4)).astype(np.float64)
-        if self.image is None or m == 0:
-            return out
-        return out * sample_image(self.image, uv, self.closest, self.extension)
+        if self.image is not None and m:
+            out = out * sample_image(self.image, uv, self.closest, self.extension)
+        if self.emission is not None:
+            out[:, :3] += self.emission
+        return out
 
 
 def _wrap(i: np.ndarray, n: int, extension: str) -> np.ndarray:
@@ -114,31 +123,105 @@ def node_tree_of(datablock: bpy.types.ID) -> bpy.types.NodeTree | None:
     return datablock.node_tree if datablock.use_nodes else None
 
 
-def _principled(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
-    """The Principled BSDF feeding the active material output, else the first one found."""
+SHADERS = ("BSDF_PRINCIPLED", "BSDF_DIFFUSE", "EMISSION")
+"""Shader nodes the unbaked reader understands (feeding the Material Output)."""
+COLOR_INPUT = {"BSDF_PRINCIPLED": "Base Color", "BSDF_DIFFUSE": "Color", "EMISSION": "Color"}
+
+
+def _output_shader(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
+    """The node linked into the active Material Output's Surface, else None."""
     outputs = [n for n in tree.nodes if n.type == "OUTPUT_MATERIAL"]
     active = next((n for n in outputs if n.is_active_output), outputs[0] if outputs else None)
-    if active is not None:
-        surface = active.inputs.get("Surface")
-        if surface is not None and surface.is_linked:
-            node = surface.links[0].from_node
-            if node.type == "BSDF_PRINCIPLED":
-                return node
+    if active is None:
+        return None
+    surface = active.inputs.get("Surface")
+    if surface is None or not surface.is_linked:
+        return None
+    return surface.links[0].from_node
+
+
+def _shader(tree: bpy.types.NodeTree) -> bpy.types.Node | None:
+    """The understood shader feeding the active output, else the first Principled BSDF."""
+    node = _output_shader(tree)
+    if node is not None and node.type in SHADERS:
+        return node
     return next((n for n in tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
 
 
+def _value(node: bpy.types.Node, name: str, default: float) -> float:
+    """A float input's value (``default`` if the node has no such input)."""
+    socket = node.inputs.get(name)
+    return float(socket.default_value) if socket is not None else default
+
+
+def _emission(node: bpy.types.Node) -> np.ndarray | None:
+    """Emitted radiance (3,) of a Principled BSDF's emission, None if it emits none."""
+    if node.type != "BSDF_PRINCIPLED" or "Emission Color" not in node.inputs:
+        return None
+    color, strength = node.inputs["Emission Color"], _value(node, "Emission Strength", 0.0)
+    if color.is_linked:
+        return None  # reported by unsupported_nodes
+    radiance = np.array(color.default_value[:3], dtype=np.float64) * strength
+    return radiance if np.any(radiance != 0.0) else None
+
+
+def unsupported_nodes(material: bpy.types.Material | None) -> list[str]:
+    """Names of the nodes feeding ``material``'s surface that the unbaked reader ignores."""
+    tree = node_tree_of(material) if material is not None else None
+    if tree is None:
+        return []
+    shader = _output_shader(tree)
+    if shader is None:
+        return []
+    if shader.type not in SHADERS:
+        return [shader.name]
+    found: list[str] = []
+    for socket in shader.inputs:
+        for link in socket.links:
+            source = link.from_node
+            if socket.name == COLOR_INPUT[shader.type] and source.type == "TEX_IMAGE":
+                found += _upstream_names(source, skip_self=True)
+            else:
+                found += _upstream_names(source)
+    return sorted(set(found))
+
+
+def _upstream_names(node: bpy.types.Node, skip_self: bool = False) -> list[str]:
+    """``node`` and every node linked into it (an image texture's Vector input included)."""
+    names = [] if skip_self else [node.name]
+    seen = {node.name}
+    stack = [node]
+    while stack:
+        for socket in stack.pop().inputs:
+            for link in socket.links:
+                if link.from_node.name not in seen:
+                    seen.add(link.from_node.name)
+                    names.append(link.from_node.name)
+                    stack.append(link.from_node)
+    return names
+
+
 def material_sampler(material: bpy.types.Material | None) -> MaterialSampler:
-    """Read a material's base colour (and image texture) into a MaterialSampler."""
+    """Read a material's colour (and image texture, emission) into a MaterialSampler."""
     if material is None:
         return MaterialSampler(np.array(DEFAULT_COLOR))
     base = np.array(material.diffuse_color, dtype=np.float64)
     tree = node_tree_of(material)
-    node = _principled(tree) if tree is not None else None
+    node = _shader(tree) if tree is not None else None
     if node is None:
         return MaterialSampler(base)
-    socket = node.inputs["Base Color"]
-    alpha_socket = node.inputs.get("Alpha")
-    alpha = float(alpha_socket.default_value) if alpha_socket is not None else 1.0
+    sampler = _color_sampler(node, base)
+    if node.type == "EMISSION":  # an Emission shader's colour is radiance: Color x Strength
+        sampler.base = sampler.base * [*([_value(node, "Strength", 1.0)] * 3), 1.0]
+    else:
+        sampler.emission = _emission(node)
+    return sampler
+
+
+def _color_sampler(node: bpy.types.Node, base: np.ndarray) -> MaterialSampler:
+    """The colour input of shader ``node``: a constant or an image texture linked into it."""
+    alpha = _value(node, "Alpha", 1.0)
+    socket = node.inputs[COLOR_INPUT[node.type]]
     if not socket.is_linked:
         return MaterialSampler(np.array([*socket.default_value[:3], alpha], dtype=np.float64))
     source = socket.links[0].from_node

@@ -14,7 +14,7 @@ from typing import Any, ClassVar
 
 import bpy
 
-from . import output, render_job
+from . import bake, output, render_job
 
 
 class RenderTask:
@@ -114,6 +114,8 @@ class SYMRAY_OT_render(bpy.types.Operator):
         if exr_path:
             output.check_writable(exr_path)
         job = render_job.prepare(scene, context.evaluated_depsgraph_get())
+        for warning in job.warnings:
+            self.report({"WARNING"}, warning)
         return job, image_name, exr_path
 
     def _failed(self, err: Exception) -> set[str]:
@@ -192,7 +194,31 @@ class SYMRAY_OT_render(bpy.types.Operator):
         self._cleanup(context)
 
 
-CLASSES = (SYMRAY_OT_render,)
+class SYMRAY_OT_bake_lighting(bpy.types.Operator):
+    """Bake the light on every visible object with Cycles now, so that renders (F12
+    included) reuse it until the scene changes"""
+
+    bl_idname = "symray.bake_lighting"
+    bl_label = "Bake Lighting"
+    bl_options = {"REGISTER"}
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        """Needs a scene with SymRay settings."""
+        return context.scene is not None and hasattr(context.scene, "symray")
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        """Bake (or find in the cache) every object's lighting for the current frame."""
+        try:
+            surfaces = bake.bake_surfaces(context.scene, context.evaluated_depsgraph_get())
+        except Exception as err:  # every failure is reported, whatever it is
+            self.report({"ERROR"}, render_job.failure_message(err))
+            return {"CANCELLED"}
+        self.report({"INFO"}, f"SymRay: lighting of {len(surfaces)} objects baked")
+        return {"FINISHED"}
+
+
+CLASSES = (SYMRAY_OT_render, SYMRAY_OT_bake_lighting)
 
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

@@ -1,4 +1,5 @@
-"""The SymRay panels in Render Properties (shown whatever the render engine)."""
+"""The SymRay panels: Render Properties and View Layer › Passes when SymRay is the render
+engine; for any other engine only a small panel with the Render SymRay Image button."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ import textwrap
 import bpy
 
 from . import models, presets, properties, validation
-from .operator import SYMRAY_OT_render
+from .operator import SYMRAY_OT_bake_lighting, SYMRAY_OT_render
 
 WRAP = 60
 """Characters per line of error messages in the panel."""
@@ -47,17 +48,51 @@ def render_problems(scene: bpy.types.Scene) -> list[str]:
     return [problem] if problem else []
 
 
+ENGINE = "SYMRAY"
+LIGHTING_LIMITS = (
+    "Baked light is view-independent (no glossy, no refraction)",
+    "and reaches surfaces on straight paths (Cycles' flat space)",
+)
+"""What baking cannot show, in two panel lines (README: Surfaces lit by Blender)."""
+
+
+def _has_settings(context: bpy.types.Context) -> bool:
+    """Whether the context has a scene with SymRay settings."""
+    return context.scene is not None and hasattr(context.scene, "symray")
+
+
 class SymRayPanelMixin:
-    """Common placement: Render Properties, any engine."""
+    """Common placement: Render Properties, shown when SymRay is the render engine."""
 
     bl_space_type = "PROPERTIES"
     bl_region_type = "WINDOW"
     bl_context = "render"
+    COMPAT_ENGINES = {ENGINE}
 
     @classmethod
     def poll(cls, context: bpy.types.Context) -> bool:
-        """Shown whenever there is a scene with SymRay settings."""
-        return context.scene is not None and hasattr(context.scene, "symray")
+        """Shown when the scene renders with SymRay."""
+        return _has_settings(context) and context.scene.render.engine in cls.COMPAT_ENGINES
+
+
+class RENDER_PT_symray_launch(bpy.types.Panel):
+    """The Render SymRay Image button for scenes that render with another engine"""
+
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "render"
+    bl_label = "SymRay"
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        """Shown when another engine is chosen (SymRay's own panel has the button)."""
+        return _has_settings(context) and context.scene.render.engine != ENGINE
+
+    def draw(self, context: bpy.types.Context) -> None:
+        """The render button and where SymRay's settings are."""
+        layout = self.layout
+        layout.label(text="Settings: choose the SymRay render engine", icon="INFO")
+        layout.operator(SYMRAY_OT_render.bl_idname, icon="RENDER_STILL")
 
 
 class RENDER_PT_symray(SymRayPanelMixin, bpy.types.Panel):
@@ -118,12 +153,17 @@ class RENDER_PT_symray_integration(SymRayPanelMixin, bpy.types.Panel):
     bl_parent_id = "RENDER_PT_symray"
 
     def draw(self, context: bpy.types.Context) -> None:
-        """Draw method, tolerance, step limit and how the cores are shared."""
+        """Draw method, quality (accuracy), step limit and how the cores are shared."""
         settings = context.scene.symray
         layout = self.layout
         layout.use_property_split = True
         layout.prop(settings, "method")
-        layout.prop(settings, "tolerance")
+        layout.prop(settings, "quality")
+        if settings.quality == "CUSTOM":
+            layout.prop(settings, "tolerance_px")
+            layout.prop(settings, "samples")
+        elif settings.quality == "RADIANS":
+            layout.prop(settings, "tolerance")
         layout.prop(settings, "max_steps")
         layout.prop(settings, "parallel")
         layout.prop(settings, "workers")
@@ -166,32 +206,86 @@ class RENDER_PT_symray_disk(SymRayPanelMixin, bpy.types.Panel):
         layout.prop(disk, "opacity")
 
 
+class RENDER_PT_symray_lighting(SymRayPanelMixin, bpy.types.Panel):
+    """How surfaces are lit: baked by Cycles, or unlit"""
+
+    bl_label = "Surface Lighting"
+    bl_parent_id = "RENDER_PT_symray"
+
+    def draw(self, context: bpy.types.Context) -> None:
+        """Draw the lighting mode, the bake settings, their limits and the bake button."""
+        settings = context.scene.symray
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(settings, "lighting")
+        col = layout.column()
+        col.active = settings.lighting != "UNLIT"
+        col.prop(settings, "bake_texel_size")
+        col.prop(settings, "bake_max_resolution")
+        col.prop(settings, "bake_samples")
+        notes = col.column(align=True)
+        for i, line in enumerate(LIGHTING_LIMITS):
+            notes.label(text=line, icon="INFO" if i == 0 else "BLANK1")
+        col.operator(SYMRAY_OT_bake_lighting.bl_idname, icon="LIGHT")
+
+
 class RENDER_PT_symray_output(SymRayPanelMixin, bpy.types.Panel):
-    """Background, passes and where the SymRay Render operator writes"""
+    """Background and where the SymRay Render operator writes"""
 
     bl_label = "Output"
     bl_parent_id = "RENDER_PT_symray"
 
     def draw(self, context: bpy.types.Context) -> None:
-        """Draw background, passes, image and EXR settings."""
+        """Draw background, image and EXR settings (passes: View Layer › Passes)."""
         settings = context.scene.symray
         layout = self.layout
         layout.use_property_split = True
         layout.prop(settings, "background")
-        col = layout.column(heading="Passes", align=True)
-        col.prop(settings, "pass_error")
-        col.prop(settings, "pass_steps")
-        col.prop(settings, "pass_ending")
-        col.prop(settings, "pass_redshift")
         layout.prop(settings, "image_name")
         layout.prop(settings, "exr_path")
+
+
+class VIEWLAYER_PT_symray_passes(SymRayPanelMixin, bpy.types.Panel):
+    """SymRay's render passes, under View Layer › Passes"""
+
+    bl_context = "view_layer"
+    bl_label = "SymRay"
+    bl_parent_id = "VIEWLAYER_PT_layer_passes"
+
+    def draw(self, context: bpy.types.Context) -> None:
+        """The pass toggles (each adds a 'SymRay ...' pass the compositor sees)."""
+        settings = context.scene.symray
+        layout = self.layout
+        layout.use_property_split = True
+        col = layout.column(heading="Include", align=True)
+        for _core_name, _label, toggle in properties.PASSES:
+            col.prop(settings, toggle)
+
+
+class RENDER_PT_symray_film(SymRayPanelMixin, bpy.types.Panel):
+    """Blender's film settings that SymRay honours"""
+
+    bl_label = "Film"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context: bpy.types.Context) -> None:
+        """Filter Size (the anti-aliasing filter's width) and Transparent."""
+        layout = self.layout
+        layout.use_property_split = True
+        col = layout.column()
+        col.prop(context.scene.render, "filter_size")
+        col.prop(context.scene.render, "film_transparent", text="Transparent")
 
 
 CLASSES = (
     RENDER_PT_symray,
     RENDER_PT_symray_integration,
     RENDER_PT_symray_disk,
+    RENDER_PT_symray_lighting,
     RENDER_PT_symray_output,
+    RENDER_PT_symray_launch,
+    RENDER_PT_symray_film,
+    VIEWLAYER_PT_symray_passes,
 )
 
 

@@ -5,8 +5,24 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from ..core.render import ALL_PASSES
 from . import disk_properties, presets, validation
+
+PASSES = (("error_px", "Error", "pass_error"), ("steps", "Steps", "pass_steps"),
+          ("ending", "Ending", "pass_ending"),
+          ("redshift", "Redshift", "pass_redshift"))  # fmt: skip
+"""(core pass, label, toggle) of the passes the add-on writes, in their one order: 'SymRay
+<label>' render passes and the operator's passes EXR channels. 'SymRay Error' is the
+core's ``error_px`` (pixels of the camera)."""
+
+QUALITY_ITEMS = [
+    ("PREVIEW", "Preview", "Every pixel within 1 px, one ray per pixel at most: quick look"),
+    ("FINAL", "Final", "Every pixel within 0.25 px, up to 16 rays per pixel (anti-aliased)"),
+    ("CUSTOM", "Custom", "Accuracy (pixels) and samples per pixel set below"),
+    ("RADIANS", "Radians", "Tolerance in radians, one ray through every pixel's centre "
+     "(as before version 0.5; no adaptive sampling)"),
+]  # fmt: skip
+QUALITY_PRESETS = {"PREVIEW": (1.0, 1), "FINAL": (0.25, 16)}
+"""Quality -> (tolerance in pixels, samples per pixel)."""
 
 MODEL_ITEMS = [
     ("FLAT", "Flat", "No bending: straight rays, an ordinary ray tracer"),
@@ -67,6 +83,26 @@ BACKGROUND_ITEMS = [
     ("AUTO", "Auto", "The world's environment texture if it has one, else the procedural sky"),
     ("WORLD", "World", "The world: its environment texture or its background colour"),
     ("PROCEDURAL", "Procedural Sky", "SymRay's procedural star field and grid"),
+]
+
+LIGHTING_ITEMS = [
+    (
+        "AUTO",
+        "Auto",
+        "Bake with Cycles when the scene has lights, else Unlit",
+    ),
+    (
+        "BAKE",
+        "Bake",
+        "Cycles bakes each object's view-independent light (diffuse direct + indirect, "
+        "emission; no glossy or refraction; light reaches surfaces on straight paths) into "
+        "a temporary texture that curved rays then see",
+    ),
+    (
+        "UNLIT",
+        "Unlit",
+        "Surfaces show their colour plus emission, as under uniform white light",
+    ),
 ]
 
 # Blender 5 warns when a path property holding '//' does not declare it supports that
@@ -246,6 +282,30 @@ class SymRaySettings(bpy.types.PropertyGroup):
         default="AUTO",
         description="Integrator for Hamilton's equations",
     )
+    quality: bpy.props.EnumProperty(  # type: ignore[valid-type]
+        name="Quality",
+        items=QUALITY_ITEMS,
+        default="FINAL",
+        description="How accurate the image is, in pixels of the camera: Preview or Final",
+    )
+    tolerance_px: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Accuracy (px)",
+        default=0.25,
+        min=1e-6,
+        max=100.0,
+        precision=3,
+        step=1,
+        description="Target accuracy of every pixel's final direction or hit point, in "
+        "pixels (Custom quality)",
+    )
+    samples: bpy.props.IntProperty(  # type: ignore[valid-type]
+        name="Samples",
+        default=16,
+        min=1,
+        max=1024,
+        description="Most camera rays per pixel, spent where the contrast asks for them "
+        "(Custom quality; 1 = no anti-aliasing)",
+    )
     tolerance: bpy.props.FloatProperty(  # type: ignore[valid-type]
         name="Tolerance",
         default=1e-6,
@@ -254,7 +314,7 @@ class SymRaySettings(bpy.types.PropertyGroup):
         precision=6,
         step=0.0001,
         description="Target accuracy of the rays' directions (radians), 1e-14 to 0.1; sets "
-        "the integration step",
+        "the integration step (Radians quality)",
     )
     max_steps: bpy.props.IntProperty(  # type: ignore[valid-type]
         name="Max Steps",
@@ -281,7 +341,8 @@ class SymRaySettings(bpy.types.PropertyGroup):
         name="Error",
         default=True,
         update=_update_passes,
-        description="Per-pixel error estimate (radians): 'SymRay Error' pass",
+        description="Per-pixel error estimate in pixels (integration, far field, hit point "
+        "and interpolation): 'SymRay Error' pass",
     )
     pass_steps: bpy.props.BoolProperty(  # type: ignore[valid-type]
         name="Steps",
@@ -312,6 +373,36 @@ class SymRaySettings(bpy.types.PropertyGroup):
         default="AUTO",
         description="What rays that escape to infinity see",
     )
+    lighting: bpy.props.EnumProperty(  # type: ignore[valid-type]
+        name="Surface Lighting",
+        items=LIGHTING_ITEMS,
+        default="AUTO",
+        description="How surfaces are lit: Blender (Cycles) bakes the light on them, or "
+        "they show their colour unlit",
+    )
+    bake_texel_size: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Texel Size",
+        default=0.05,
+        min=1e-5,
+        soft_max=1.0,
+        subtype="DISTANCE",
+        description="Size of one baked texel on a surface, in scene units (smaller = sharper "
+        "shadows, longer bakes)",
+    )
+    bake_max_resolution: bpy.props.IntProperty(  # type: ignore[valid-type]
+        name="Max Resolution",
+        default=1024,
+        min=8,
+        max=8192,
+        description="Largest side of an object's baked texture, in texels",
+    )
+    bake_samples: bpy.props.IntProperty(  # type: ignore[valid-type]
+        name="Bake Samples",
+        default=64,
+        min=1,
+        max=1 << 20,
+        description="Cycles samples per texel of a bake (more = less noise)",
+    )
     image_name: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Image",
         default="SymRay Result",
@@ -326,10 +417,17 @@ class SymRaySettings(bpy.types.PropertyGroup):
         "'//' = next to the .blend, which must be saved)",
     )
 
+    def accuracy(self) -> dict:
+        """core.render's accuracy options for the chosen quality: tolerance_px and samples,
+        or (Radians) tolerance."""
+        if self.quality == "RADIANS":
+            return {"tolerance": float(self.tolerance)}
+        px, samples = QUALITY_PRESETS.get(self.quality, (self.tolerance_px, self.samples))
+        return {"tolerance_px": float(px), "samples": int(samples)}
+
     def passes(self) -> tuple[str, ...]:
-        """Names of the core passes to compute (core.render.ALL_PASSES switched on here:
-        each has a toggle pass_<name> above)."""
-        return tuple(name for name in ALL_PASSES if getattr(self, f"pass_{name}"))
+        """Names of the core passes to compute (PASSES switched on here)."""
+        return tuple(name for name, _label, toggle in PASSES if getattr(self, toggle))
 
 
 @persistent

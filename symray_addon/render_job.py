@@ -19,7 +19,7 @@ import numpy as np
 
 from .. import core
 from ..core.render import summary_text as render_summary_text
-from . import export_camera, export_meshes, models, properties, validation, world
+from . import bake, export_camera, export_meshes, models, properties, validation, world
 
 Progress = Callable[[int, int], None]
 Cancel = Callable[[], bool]
@@ -38,6 +38,8 @@ class RenderJob:
     width: int = 0
     height: int = 0
     transparent: bool = False
+    warnings: list[str] = field(default_factory=list)
+    """What the render cannot do as asked (unevaluated nodes, ...): reported once each."""
 
 
 def _evaluated(obj: bpy.types.Object, depsgraph: bpy.types.Depsgraph) -> bpy.types.Object:
@@ -74,7 +76,9 @@ def prepare(
     model = models.build_model(settings, properties.metric_source(settings))
     models.check_camera(settings, model, where, np.array(kwargs["matrix_world"])[:3, 3])
 
-    intersector = export_meshes.build_intersector(depsgraph)
+    warnings: list[str] = []
+    baked = _baked_surfaces(scene, depsgraph, warnings)
+    intersector = export_meshes.build_intersector(depsgraph, baked, warnings)
     if intersector is None and model is None:
         raise ValueError(
             "Nothing to render: the scene has no visible mesh objects and the "
@@ -95,7 +99,9 @@ def prepare(
         passes += ("ending",)  # needed to cut the background out
     options = {
         "method": None if settings.method == "AUTO" else settings.method,
-        "tolerance": validation.typed_float(settings.tolerance),
+        **settings.accuracy(),
+        # Blender's pixel filter (Film > Filter Size), Cycles' Blackman-Harris
+        "filter_size": min(max(float(scene.render.filter_size), 0.01), 2.0),
         "max_steps": int(settings.max_steps),
         "passes": passes,
         "parallel": settings.parallel.lower(),
@@ -104,15 +110,46 @@ def prepare(
         # bounds the automatic one worker per core
         "cores": int(scene.render.threads),
     }
-    return RenderJob(core_scene, camera, options, camera.width, camera.height, transparent)
+    job = RenderJob(core_scene, camera, options, camera.width, camera.height, transparent)
+    job.warnings = warnings
+    return job
+
+
+UNBAKED_WARNING = (
+    "Surfaces are unlit: Cycles bakes their lighting on Blender's main thread, which F12 "
+    "does not run on. Press Bake Lighting in the SymRay panel (or use Render SymRay Image) "
+    "for lit surfaces"
+)
+
+
+def _baked_surfaces(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, warnings: list):
+    """Baked surfaces when the settings ask for them (bake.py), else None. Automatic
+    lighting that cannot bake here (F12's render thread, nothing cached) renders unlit
+    with UNBAKED_WARNING; Baked lighting then refuses (ValueError)."""
+    settings = scene.symray
+    if not bake.wants_baking(settings, depsgraph):
+        return None
+    if settings.lighting == "AUTO" and not bake.can_bake_now(scene, depsgraph):
+        warnings.append(UNBAKED_WARNING)
+        return None
+    return bake.bake_surfaces(scene, depsgraph)
 
 
 def run(
-    job: RenderJob, progress: Progress | None = None, should_cancel: Cancel | None = None
+    job: RenderJob,
+    progress: Progress | None = None,
+    should_cancel: Cancel | None = None,
+    on_tile: Callable[[tuple[int, int, int, int], Any], None] | None = None,
 ) -> Any:
-    """Trace ``job`` with core.render; no bpy is touched (safe in a worker thread)."""
+    """Trace ``job`` with core.render; no bpy is touched (safe in a worker thread).
+    ``on_tile(rect, part)`` sees each finished tile (core.render's, in the caller's thread)."""
     result = core.render(
-        job.scene, job.camera, progress=progress, should_cancel=should_cancel, **job.options
+        job.scene,
+        job.camera,
+        progress=progress,
+        should_cancel=should_cancel,
+        on_tile=on_tile,
+        **job.options,
     )
     if job.transparent and not getattr(result, "cancelled", False):
         ending = result.passes.get("ending")

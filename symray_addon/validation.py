@@ -223,11 +223,17 @@ def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
     model = settings.model
     found = [
         lambda: checks.check_tolerance(typed_float(settings.tolerance), "Tolerance"),
+        lambda: checks.check_positive("Accuracy (px)", typed_float(settings.tolerance_px)),
+        lambda: checks.check_int("Samples", settings.samples),
         lambda: checks.check_int("Max Steps", settings.max_steps),
         lambda: checks.check_int("Workers", settings.workers, 0),
         lambda: checks.check_render_method(settings.method, model in TIME_SCALED_MODELS),
         lambda: _check_split(settings.method, model),
     ]
+    if settings.lighting != "UNLIT":
+        found.append(lambda: checks.check_positive("Texel Size", settings.bake_texel_size))
+        found.append(lambda: checks.check_int("Max Resolution", settings.bake_max_resolution, 8))
+        found.append(lambda: checks.check_int("Bake Samples", settings.bake_samples))
     if model in TIME_SCALED_MODELS:
         found.append(lambda: checks.check_positive("Schwarzschild Radius", settings.rg))
     if model == "MEDIUM" and settings.use_medium_bounds:

@@ -7,7 +7,7 @@ an intersector has ``bounds`` and ``intersect(a, b) -> Hits``, see hits.py).
 
 from .disk import AccretionDisk
 from .group import Group
-from .hits import Hits, Intersector, segment_overlaps
+from .hits import Hits, Intersector, segment_meets_box, segment_overlaps
 from .mesh import TriangleMesh
 from .primitives import Disk, Plane, Sphere
 from .textures import Texture, checker, colormap
@@ -26,5 +26,6 @@ __all__ = [
     "Volume",
     "checker",
     "colormap",
+    "segment_meets_box",
     "segment_overlaps",
 ]

@@ -94,3 +94,21 @@ def _fill(n: int, rows: np.ndarray, t, p, nrm, uv, color, object_id: int) -> Hit
     h.uv[rows] = uv
     h.color[rows] = color
     return h
+
+
+def slab_entry(a: np.ndarray, inv_d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Entry parameter t of segments a + t d, t in [0, 1], into the box; +inf where missed."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        t1, t2 = (lo - a) * inv_d, (hi - a) * inv_d
+    # fmin/fmax skip the NaN of 0 * inf (a segment parallel to a slab, starting on its face)
+    # (numpy's stubs do not type ufunc.reduce of an array expression)
+    enter = np.maximum(np.fmax.reduce(np.fmin(t1, t2), axis=1), 0.0)  # type: ignore[call-overload]
+    leave = np.minimum(np.fmin.reduce(np.fmax(t1, t2), axis=1), 1.0)  # type: ignore[call-overload]
+    return np.where(enter <= leave, enter, _INF)
+
+
+def segment_meets_box(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    """(N,) bool: the segment a -> b passes through the box [lo, hi] (a slab test)."""
+    with np.errstate(divide="ignore"):
+        inv_d = 1.0 / (b - a)
+    return np.isfinite(slab_entry(a, inv_d, lo, hi))

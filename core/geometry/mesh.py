@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from .hits import _INF
+from .hits import _INF, slab_entry
 from .primitives import _Primitive
 from .textures import _rgba
 
@@ -20,17 +20,6 @@ def _morton(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
         for axis in range(3):
             code |= ((q[:, axis] >> bit) & 1) << (3 * bit + axis)
     return code
-
-
-def _slab(a: np.ndarray, inv_d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """Entry parameter t of segments a + t d, t in [0, 1], into the box; +inf where missed."""
-    with np.errstate(invalid="ignore", over="ignore"):
-        t1, t2 = (lo - a) * inv_d, (hi - a) * inv_d
-    # fmin/fmax skip the NaN of 0 * inf (a segment parallel to a slab, starting on its face)
-    # (numpy's stubs do not type ufunc.reduce of an array expression)
-    enter = np.maximum(np.fmax.reduce(np.fmin(t1, t2), axis=1), 0.0)  # type: ignore[call-overload]
-    leave = np.minimum(np.fmin.reduce(np.fmax(t1, t2), axis=1), 1.0)  # type: ignore[call-overload]
-    return np.where(enter <= leave, enter, _INF)
 
 
 class TriangleMesh(_Primitive):
@@ -119,7 +108,7 @@ class TriangleMesh(_Primitive):
         stack = [(0, np.arange(n))]
         while stack:
             node, rows = stack.pop()
-            enter = _slab(a[rows], inv_d[rows], self._node_lo[node], self._node_hi[node])
+            enter = slab_entry(a[rows], inv_d[rows], self._node_lo[node], self._node_hi[node])
             rows = rows[enter < best[0][rows]]
             if rows.size == 0:
                 continue

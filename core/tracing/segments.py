@@ -28,6 +28,9 @@ class RayResults:
     steps: np.ndarray  # (N,) int32 integration steps
     energy_error: np.ndarray  # (N,) |H - H0| at the end
     redshift: np.ndarray  # (N,) g = nu_obs / nu_emit where the ray ended on a disk, else NaN
+    clearance: np.ndarray  # (N,) radians from the watched box (Tracer.watch_geometry)
+    object_id: np.ndarray  # (N,) int32: the object hit (Hits.object_id); -1 where none
+    tangent: np.ndarray  # (N, 3) where hit: the unit direction of the chord that hit
 
     @classmethod
     def empty(cls, n: int, origins: np.ndarray, directions: np.ndarray) -> RayResults:
@@ -42,6 +45,9 @@ class RayResults:
             steps=np.zeros(n, dtype=np.int32),
             energy_error=np.zeros(n),
             redshift=np.full(n, np.nan),
+            clearance=np.full(n, np.inf),
+            object_id=np.full(n, -1, dtype=np.int32),
+            tangent=np.zeros((n, 3)),
         )
 
     def accumulate(
@@ -77,6 +83,9 @@ class SceneGeometry:
         out.ending[rows[h]] = ENDING["hit"]
         out.position[rows[h]] = hits.position[h]
         out.surface[rows[h]] = hits.color[h]
+        out.object_id[rows[h]] = hits.object_id[h]
+        chord = b[h] - a[h]
+        out.tangent[rows[h]] = chord / np.linalg.norm(chord, axis=1, keepdims=True)
         return h
 
     def cast(self, a: np.ndarray, b: np.ndarray) -> Hits:

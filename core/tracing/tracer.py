@@ -19,6 +19,7 @@ import numpy as np
 
 from .. import checks, integrators
 from ..charts import chart_for
+from ..geometry import segment_meets_box
 from ..observer import medium_momenta, spacetime_momenta
 from . import dense
 from .disklight import DiskLight
@@ -66,6 +67,8 @@ class Tracer:
     step: float | None = None
     region: Region | None = None
     disk: DiskLight | None = None
+    _watch: tuple[np.ndarray, np.ndarray] | None = None  # world box (Tracer.watch_geometry)
+    _watch_local: tuple[np.ndarray, np.ndarray] | None = None
 
     def __init__(self, scene: Scene, options: TraceOptions, extent: float = 1.0):
         self.scene = scene
@@ -118,6 +121,21 @@ class Tracer:
         behind = SceneGeometry(scene.intersector(disk=False), list(scene.volumes))
         return DiskLight(scene.disk, self.model, self.chart, self._to_local, self.geometry, behind)
 
+    def watch_geometry(self, margin: float) -> None:
+        """Record each ray's clearance (``RayResults.clearance``): the smallest angle, seen
+        from the camera, between its path and the bounds of every object and volume
+        (adaptive sampling interpolates a block of pixels only where its rays kept clear by
+        more than the block's width). Straight segments count as 0 where they pass within
+        ``margin`` (world units) of the bounds, else not at all (they leave a black hole's
+        region moving away from it)."""
+        world = self.geometry.local_box(lambda x: x)
+        if world is None:
+            return
+        self._watch = (world[0] - margin, world[1] + margin)
+        local = self.geometry.local_box(self._to_local)
+        assert local is not None
+        self._watch_local = local
+
     @property
     def objects(self) -> Any:
         """The scene's objects as one intersector."""
@@ -155,6 +173,7 @@ class Tracer:
     # --- straight parts --------------------------------------------------------------
     def _straight(self, rows, a, d, out: RayResults, far: float = _FAR):
         """Rays that stay straight from a along d: one cast each, ending hit or escaped."""
+        self._watch_segments(rows, a, a + far * d, out)
         h = self.geometry.record(rows, a, a + far * d, out)
         out.ending[rows[~h]] = ENDING["escaped"]
         out.direction[rows] = d
@@ -165,6 +184,7 @@ class Tracer:
         enters = np.isfinite(X_entry[:, 0])
         a = origins[rows]
         b = np.where(enters[:, None], self._to_world(X_entry), a + _FAR * directions[rows])
+        self._watch_segments(rows, a, b, out)
         h = self.geometry.record(rows, a, b, out)
         miss = ~h & ~enters
         if miss.any():
@@ -214,6 +234,7 @@ class Tracer:
             if not ok.all():
                 out.ending[idx[ended]] = ENDING["failed"]
                 out.position[idx[ended]] = self._to_world(X_prev[:, ended].T)
+            self._watch_steps(idx, X, camera, out)
             if self._near is not None:  # surfaces and volumes along this step's segment
                 step_ends = _StepEnds(self, K, start, (Q, P), h, camera)
                 ended |= self._segments(idx, X_prev, X, ok, out, step_ends, camera)
@@ -317,6 +338,7 @@ class Tracer:
         most, while they deviate more than allowed); ``hits`` takes the refined hits, in
         place. A ray whose finer chords all miss (a grazing edge) keeps its chord's hit."""
         deviation, allowed = limits
+        allowed = allowed * dense.HIT_SHARE
         todo = np.flatnonzero(hits.hit & (deviation > allowed))
         lo = np.full(todo.size, t0)
         m = dense.REFINE_PIECES
@@ -335,6 +357,26 @@ class Tracer:
             deviation = deviation / (m * m)
             keep = deviation[todo[ok]] > allowed[todo[ok]]
             todo, lo = todo[ok][keep], ta[first][keep]
+
+    def _watch_segments(self, rows, a, b, out: RayResults) -> None:
+        """Clearance 0 for the rays whose straight world segment a -> b meets the watched
+        box (with its margin)."""
+        if self._watch is not None:
+            out.clearance[rows[segment_meets_box(a, b, *self._watch)]] = 0.0
+
+    def _watch_steps(self, idx, X, camera, out: RayResults) -> None:
+        """Lower the clearance of the rays at local X (3, M) to their angular distance, from
+        the camera (local, (3, M)), to the watched box (steps are short: their ends stand
+        for them, the block test's factor 2 covers the rest)."""
+        if self._watch_local is None:
+            return
+        lo, hi = self._watch_local
+        outside = np.maximum(np.maximum(lo[:, None] - X, X - hi[:, None]), 0.0)
+        gap = np.sqrt(np.einsum("ij,ij->j", outside, outside))
+        seen = np.sqrt(np.einsum("ij,ij->j", X - camera, X - camera))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            angle = np.where(gap > 0, gap / seen, 0.0)
+        out.clearance[idx] = np.minimum(out.clearance[idx], angle)
 
     def _finish_energy(self, out, rows, Q, P, H0):
         with np.errstate(all="ignore"):

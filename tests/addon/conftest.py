@@ -114,6 +114,7 @@ def scene(addon: Addon):
     sc.render.resolution_percentage = 100
     sc.symray.pass_error = False
     sc.symray.tolerance = 1e-4
+    sc.symray.quality = "RADIANS"  # the tests below were written for radians, one ray a pixel
     return sc
 
 

@@ -45,6 +45,8 @@ class FakeLayout:
 
 def _draw(panel_name: str, scene) -> list:
     panel = getattr(bpy.types, panel_name)
+    if panel_name != "RENDER_PT_symray_launch":
+        scene.render.engine = "SYMRAY"  # SymRay's panels show for its engine only
     log: list = []
     fake = SimpleNamespace(layout=FakeLayout(log))
     context = SimpleNamespace(scene=scene)
@@ -84,9 +86,41 @@ def test_panel_shows_expression_errors(scene):
     assert any("zz" in t for t in labels)
 
 
-@pytest.mark.parametrize("panel", ["RENDER_PT_symray_integration", "RENDER_PT_symray_output"])
+@pytest.mark.parametrize(
+    "panel",
+    [
+        "RENDER_PT_symray_integration",
+        "RENDER_PT_symray_lighting",
+        "RENDER_PT_symray_output",
+        "VIEWLAYER_PT_symray_passes",
+    ],
+)
 def test_sub_panels_draw(scene, panel):
     assert _draw(panel, scene)
+
+
+def test_lighting_panel_states_the_limits(scene):
+    """Issue #15: what baking cannot show is said in the panel, next to the bake button."""
+    log = _draw("RENDER_PT_symray_lighting", scene)
+    text = " ".join(t for kind, t in log if kind == "label")
+    assert "no glossy" in text and "straight paths" in text
+    assert ("operator", "symray.bake_lighting") in log
+    assert ("prop", "lighting") in log and ("prop", "bake_texel_size") in log
+
+
+def test_film_panel_shows_what_symray_honours(scene):
+    log = _draw("RENDER_PT_symray_film", scene)
+    assert ("prop", "filter_size") in log and ("prop", "film_transparent") in log
+
+
+def test_passes_listed_under_view_layer(scene):
+    log = _draw("VIEWLAYER_PT_symray_passes", scene)
+    assert {("prop", f"pass_{name}") for name in ("error", "steps", "ending")} <= set(log)
+
+
+def test_render_button_reachable_for_other_engines(scene):
+    scene.render.engine = "CYCLES"
+    assert ("operator", "symray.render") in _draw("RENDER_PT_symray_launch", scene)
 
 
 def _labels(scene) -> list[str]:
@@ -133,3 +167,24 @@ def test_panel_shows_nothing_for_a_good_setup(scene):
     for model in ("SCHWARZSCHILD", "KERR", "METRIC", "MEDIUM", "CUSTOM", "FLAT"):
         scene.symray.model = model
         assert _labels(scene) == [], model
+
+
+def test_pass_toggles_reach_the_compositor(scene):
+    """The View Layer › Passes toggles re-register the engine's passes: the Render Layers
+    node of the compositor shows exactly the passes switched on."""
+    scene.render.engine = "SYMRAY"
+    scene.symray.pass_error, scene.symray.pass_steps = True, False
+    if bpy.app.version >= (5, 0, 0):
+        tree = bpy.data.node_groups.new("Compositing", "CompositorNodeTree")
+        scene.compositing_node_group = tree
+    else:
+        scene.use_nodes = True
+        tree = scene.node_tree
+    node = tree.nodes.new("CompositorNodeRLayers")
+
+    def shown() -> set[str]:
+        return {o.name for o in node.outputs if o.enabled and o.name.startswith("SymRay")}
+
+    assert shown() == {"SymRay Error"}
+    scene.symray.pass_ending = True
+    assert shown() == {"SymRay Error", "SymRay Ending"}

