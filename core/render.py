@@ -3,8 +3,10 @@
 Passes: ``error`` (estimated final-direction error in radians: the integration's, from a
 companion run of every camera ray at twice the step, |d_h - d_2h| / (2^p - 1); the far
 field's beyond the region; the image interpolation's (core.sampling); +inf where a ray
-failed), ``error_px`` (the same in pixels of this camera), ``steps`` and ``ending``
-(``core.ENDING`` codes). Failed rays are drawn in ``FAILED_COLOR`` and rays
+failed), ``error_px`` (the same in pixels of this camera), ``steps``, ``ending``
+(``core.ENDING`` codes) and ``redshift`` (g = ν_obs / ν_emit of rays that end on the scene's
+accretion disk, or first cross a translucent one; NaN elsewhere; core/tracing/disklight.py;
+the pixel centre's, like the error). Failed rays are drawn in ``FAILED_COLOR`` and rays
 that ran out of steps in ``MAX_STEPS_COLOR``, never as a plausible colour.
 """
 
@@ -40,10 +42,10 @@ from .tracing import ENDING, FAR_FIELD_CONSTANT, RayResults, Scene, TraceOptions
 
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
-ALL_PASSES = ("error", "error_px", "steps", "ending", "direction")
+ALL_PASSES = ("error", "error_px", "steps", "ending", "direction", "redshift")
 """The passes, in their one order. ``direction`` (h, w, 3): what each pixel's centre sees
 (the escape direction, or the unit vector to the hit point; NaN where captured or failed)."""
-DEFAULT_PASSES = ("error", "error_px", "steps", "ending")
+DEFAULT_PASSES = ("error", "error_px", "steps", "ending", "redshift")
 """The passes core.render computes unless asked otherwise."""
 _MIN_CHUNK = 2048
 TRACE_SHARE = 0.5
@@ -276,6 +278,7 @@ class _Buffers:
         self.steps = np.zeros(n, dtype=np.int32)
         self.ending = np.full(n, -1, dtype=np.int8)
         self.energy = np.zeros(n)
+        self.redshift = np.full(n, np.nan, dtype=np.float32)
         self.direction = np.full((n, 3), np.nan, dtype=np.float32)
         self.with_error = with_error
         self.width = width
@@ -293,6 +296,7 @@ class _Buffers:
         self.steps[a:b] = rays.steps
         self.ending[a:b] = rays.ending
         self.energy[a:b] = rays.energy_error
+        self.redshift[a:b] = rays.redshift
         self.rays += b - a
         if error is not None:
             self.error[a:b] = error
@@ -314,6 +318,7 @@ class _Buffers:
         self.energy[idx] = part.energy
         self.error[idx] = part.error
         self.direction[idx] = part.direction
+        self.redshift[idx] = part.redshift
         self.rays += part.rays
         self.error_rays += part.error_rays
         return idx.size
@@ -342,6 +347,8 @@ class _Buffers:
             out.passes["steps"] = self.steps.reshape(h, w)
         if "ending" in passes:
             out.passes["ending"] = self.ending.reshape(h, w)
+        if "redshift" in passes:
+            out.passes["redshift"] = self.redshift.reshape(h, w)
         if "error_px" in passes:
             out.passes["error_px"] = self.error.reshape(h, w).copy()
         if "direction" in passes:
@@ -425,6 +432,9 @@ def _scene_extent(scene: Scene, camera) -> float:
     objects = scene.objects
     bounds = [objects.bounds] if isinstance(objects, Intersector) else [o.bounds for o in objects]
     bounds += [(v.lo, v.hi) for v in scene.volumes]
+    annulus = scene.disk_annulus()
+    if annulus is not None:
+        bounds.append(annulus.bounds)
     for lo, hi in bounds:
         corners = np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T
         if np.all(np.isfinite(corners)):

@@ -12,7 +12,8 @@ are refined as a quadtree: a block's four corners and its centre are traced; the
   the interpolation tolerance (over INTERPOLATION_SAFETY): the block's directions are then
   interpolated (bilinear, normalised) and each point is shaded from the background in its
   interpolated direction, so the sky's own detail is kept; or
-- all five hit the same object and the centre's apparent direction is within the
+- all five hit the same object (never the accretion disk: its colour and g follow each
+  ray's own momentum, so its pixels are traced) and the centre's apparent direction is within the
   tolerance of the corners' interpolation: each point's hit point and chord direction are
   interpolated and cast again against the scene (its texture is kept); a point whose
   segment misses the object (an edge) is traced; or
@@ -45,6 +46,7 @@ import numpy as np
 from .geometry import Hits
 from .sky import Background
 from .tracing import ENDING, RayResults, Tracer
+from .tracing.scene import DISK_ID
 
 TILE = 512
 """Pixels per tile side: a tile's first round traces ~(TILE/STRIDE)^2 x 2 rays at once."""
@@ -129,6 +131,7 @@ class TileResult:
     ending: np.ndarray  # (h, w) int8
     energy: np.ndarray  # (h, w) |H - H0|
     direction: np.ndarray  # (h, w, 3) float32: what each pixel's centre sees (seen_direction)
+    redshift: np.ndarray  # (h, w) float32: the centre's g on the accretion disk, else NaN
     rays: int
     error_rays: int
 
@@ -150,6 +153,7 @@ class _Nodes:
         self.object_id = np.full(shape, -1, dtype=np.int32)
         self.position = np.zeros(shape + (3,))  # hit points (world)
         self.tangent = np.zeros(shape + (3,))  # the hitting chords' directions
+        self.redshift = np.full(shape, np.nan)  # g on the accretion disk
 
 
 class TileSampler:
@@ -225,6 +229,7 @@ class TileSampler:
         nodes.object_id[jj, ii] = rays.object_id
         nodes.position[jj, ii] = rays.position
         nodes.tangent[jj, ii] = rays.tangent
+        nodes.redshift[jj, ii] = rays.redshift
         err = np.zeros(jj.size) if error is None else error
         far = np.where(escaped, self.far_field, 0.0)
         nodes.error[jj, ii] = np.where(rays.ending == ENDING["failed"], np.inf, err + far)
@@ -280,6 +285,7 @@ class TileSampler:
         corners = [(bj, bi), (bj, bi + s), (bj + s, bi), (bj + s, bi + s)]
         alike = nodes.plain[cj, ci].copy()
         ending, object_id = nodes.ending[cj, ci], nodes.object_id[cj, ci]
+        alike &= object_id != DISK_ID  # its colour follows each ray's momentum: traced
         clear = CLEARANCE * s * self.pixel_angle  # sky and shadow: no object in between
         alike &= nodes.clearance[cj, ci] > clear
         for j, i in corners:
@@ -302,12 +308,13 @@ class TileSampler:
         if missed.size:
             self._trace_nodes(nodes, jj[missed], ii[missed], origin, cancel)
             again = self._evaluate(nodes, blocks, jj[missed] * 1.0, ii[missed] * 1.0)
-            for name in ("rgba", "ending", "error", "direction"):
+            for name in ("rgba", "ending", "error", "direction", "redshift"):
                 getattr(centre, name)[missed] = getattr(again, name)
         rgba = centre.rgba.reshape(h + 2, w + 2, 4)
         error = centre.error.reshape(h + 2, w + 2)
         ending = centre.ending.reshape(h + 2, w + 2)
         direction = centre.direction.reshape(h + 2, w + 2, 3)
+        redshift = centre.redshift.reshape(h + 2, w + 2)
         inner = (slice(1, h + 1), slice(1, w + 1))
         steps = nodes.steps[inner]
         energy = nodes.energy[inner]
@@ -318,8 +325,8 @@ class TileSampler:
             colour[busy] = self._supersample(nodes, blocks, busy, differs, origin, cancel)
         return TileResult(
             colour.astype(np.float32), error[inner].astype(np.float32), steps,
-            ending[inner], energy, direction[inner].astype(np.float32), self.rays,
-            self.error_rays,
+            ending[inner], energy, direction[inner].astype(np.float32),
+            redshift[inner].astype(np.float32), self.rays, self.error_rays,
         )  # fmt: skip
 
     def _evaluate(self, nodes: _Nodes, blocks: _Blocks, y, x) -> _Points:
@@ -328,8 +335,9 @@ class TileSampler:
         no accepted block and on no traced node get ending -1 (to be traced)."""
         m = y.shape[0]
         out = _Points(
-            np.zeros((m, 4)), np.full(m, -1, dtype=np.int8), np.zeros(m), np.full((m, 3), np.nan)
-        )
+            np.zeros((m, 4)), np.full(m, -1, dtype=np.int8), np.zeros(m), np.full((m, 3), np.nan),
+            np.full(m, np.nan),
+        )  # fmt: skip
         cell_j = np.clip(np.floor(y).astype(np.int64), 0, blocks.block.shape[0] - 1)
         cell_i = np.clip(np.floor(x).astype(np.int64), 0, blocks.block.shape[1] - 1)
         b = blocks.block[cell_j, cell_i]
@@ -344,6 +352,7 @@ class TileSampler:
         out.ending[t] = nodes.ending[nj[t], ni[t]]
         out.error[t] = nodes.error[nj[t], ni[t]]
         out.direction[t] = nodes.direction[nj[t], ni[t]]
+        out.redshift[t] = nodes.redshift[nj[t], ni[t]]
         return out
 
     def _interpolate(self, nodes: _Nodes, blocks: _Blocks, b, y, x, out: _Points, rows):
@@ -443,6 +452,7 @@ class _Points:
     ending: np.ndarray
     error: np.ndarray
     direction: np.ndarray
+    redshift: np.ndarray
 
 
 class _Blocks:
