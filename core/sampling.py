@@ -321,7 +321,7 @@ class TileSampler:
         colour = rgba[inner].copy()
         if self.samples > 1:
             differs = _contrast(rgba, ending)
-            busy = np.logical_or.reduce(differs)
+            busy = np.any(np.stack(differs), axis=0)
             colour[busy] = self._supersample(nodes, blocks, busy, differs, origin, cancel)
         return TileResult(
             colour.astype(np.float32), error[inner].astype(np.float32), steps,
