@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from . import checks
+from . import sampling as sampling_module
 from . import workers as workers_module
 from .geometry import Intersector
 from .imageio import FAILED_COLOR
@@ -118,7 +119,8 @@ def render(
         else Background(scene.background)
     )
     n = camera.n_pixels
-    with_error = "error" in passes or "error_px" in passes
+    # with tolerance_px the companion run always goes: its estimate picks the rays to redo
+    with_error = "error" in passes or "error_px" in passes or tolerance_px is not None
     with_error = with_error and tracer.curved
     image = _Buffers(n, with_error, camera.width)
     kind, count = workers_module.choose(parallel, workers, n, cores)
@@ -131,9 +133,11 @@ def render(
             tracer, camera, background, shade, interpolation=interpolation, samples=samples,
             pixel_filter=pixel_filter, filter_size=filter_size, with_error=with_error,
             far_field=_far_field_error(tracer), pixel_angle=pixel_angle,
+            budget=_integration_budget(tolerance_px, pixel_angle, tracer),
         )  # fmt: skip
-        chunks = [(k, k + 1) for k in range(len(tiles(camera.width, camera.height)))]
-        work = _tile_work(sampler, tiles(camera.width, camera.height))
+        tile_list = _tiles_for(camera, count)
+        chunks = [(k, k + 1) for k in range(len(tile_list))]
+        work = _tile_work(sampler, tile_list)
     else:
         # at least two chunks per worker (a small image still keeps every core busy), but
         # not below _MIN_CHUNK rays: per-step work is Python overhead on small batches
@@ -185,6 +189,16 @@ def _tile_work(sampler: TileSampler, tile_list):
     return work
 
 
+def _tiles_for(camera, workers: int) -> list[Tile]:
+    """The image's tiles: core.sampling.TILE - 1 square, the TILE halved (down to 64) until
+    every worker has two tiles (a small image keeps every core busy). A side of 2^k - 1
+    pixels plus the lattice's two margin pixels is a whole number of coarsest blocks."""
+    size = sampling_module.TILE
+    while size > 64 and len(tiles(camera.width, camera.height, size - 1)) < 2 * workers:
+        size //= 2
+    return tiles(camera.width, camera.height, size - 1)
+
+
 def _check_sampling(tolerance_px, samples, pixel_filter, filter_size) -> None:
     """ValueError for sampling options out of range."""
     if tolerance_px is not None:
@@ -215,6 +229,15 @@ def _watch_margin(tracer: Tracer, camera, pixel_angle: float) -> float:
     corners = np.array(np.meshgrid(*zip(box[0], box[1], strict=True))).reshape(3, -1).T
     far = float(np.max(np.linalg.norm(corners - camera.frame.position, axis=1)))
     return CLEARANCE * STRIDE * pixel_angle * far if np.isfinite(far) else np.inf
+
+
+def _integration_budget(tolerance_px, pixel_angle: float, tracer: Tracer) -> float:
+    """With tolerance_px, the integration error (radians) a traced pixel may keep: the
+    tolerance less the far field's; without it, no limit (one run at the rule's step)."""
+    if tolerance_px is None:
+        return np.inf
+    floor = 0.1 * tracer.options.tolerance
+    return max(tolerance_px * pixel_angle - _far_field_error(tracer), floor)
 
 
 def _far_field_error(tracer: Tracer) -> float:

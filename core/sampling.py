@@ -1,6 +1,6 @@
 """Adaptive image sampling: rays where the image needs them, anti-aliasing by sub-pixel samples.
 
-An image is rendered in tiles (``TILE`` pixels square, each a unit of work). A tile is
+An image is rendered in tiles (``TILE`` - 1 pixels square, each a unit of work). A tile is
 covered by a lattice of *nodes* at pixel centres, one pixel beyond the tile on every side
 (filter footprints reach up to a pixel past a pixel's centre). Blocks of ``STRIDE`` nodes
 are refined as a quadtree: a block's four corners and its centre are traced; the block is
@@ -49,7 +49,8 @@ from .tracing import ENDING, RayResults, Tracer
 from .tracing.scene import DISK_ID
 
 TILE = 512
-"""Pixels per tile side: a tile's first round traces ~(TILE/STRIDE)^2 x 2 rays at once."""
+"""A tile is TILE - 1 pixels square (with its two margin pixels, a whole number of STRIDE
+blocks); its first round traces ~(TILE/STRIDE)^2 x 2 rays at once."""
 STRIDE = 32
 """Pixels per side of the coarsest interpolation block."""
 FINEST = 4
@@ -77,6 +78,11 @@ REACH = 4.0
 """An interpolated hit point is cast again along its interpolated chord direction, REACH
 block widths (at its distance from the camera) either side: the surface is found even where
 the bilinear point lies off a curved surface."""
+RETRACE = 3
+"""With ``tolerance_px``, a traced ray whose estimated error exceeds its budget is traced
+again at half the step, up to RETRACE times: rays magnified near the photon ring (whose
+forward error the step rule, made for the initial direction's, does not bound) still meet
+the tolerance, at the cost of those rays only."""
 COMPANION_RATIO = 2.0
 """The error pass traces each camera ray again at COMPANION_RATIO x the step: for a method
 of order p the ray's error is |d_h - d_rh| / (r^p - 1) (Richardson); 1 / r of the cost."""
@@ -98,8 +104,9 @@ class Tile:
 
 
 def tiles(width: int, height: int, size: int | None = None) -> list[Tile]:
-    """The tiles covering a width x height image (TILE square), row by row from the top."""
-    size = size or TILE
+    """The tiles covering a width x height image (TILE - 1 square), row by row from the
+    top."""
+    size = size or TILE - 1
     return [
         Tile(x, y, min(x + size, width), min(y + size, height))
         for y in range(0, height, size)
@@ -173,6 +180,7 @@ class TileSampler:
         with_error: bool = False,
         far_field: float = 0.0,
         pixel_angle: float = 1.0,
+        budget: float = np.inf,
     ) -> None:
         self.tracer, self.camera, self.background, self.shade = tracer, camera, background, shade
         self.interpolation = float(interpolation)  # radians; 0: trace every pixel
@@ -181,6 +189,7 @@ class TileSampler:
         self.with_error = with_error and tracer.curved
         self.far_field = far_field  # error of escaped rays beyond the region, radians
         self.pixel_angle = pixel_angle  # radians (core.Camera.pixel_angle)
+        self.budget = budget  # radians: a traced ray's integration error above it is redone
         self._origin = (0, 0)  # image (row, column) of the current tile's node (0, 0)
         self.rays = 0
         self.error_rays = 0
@@ -192,19 +201,30 @@ class TileSampler:
         """Trace camera rays through image points xy (M, 2) -> (rays, seen directions, and
         with the error pass (and ``companion``) their Richardson error in radians from a
         companion run at COMPANION_RATIO x the step; sub-pixel samples need none: the pass
-        reports pixel centres)."""
+        reports pixel centres). Rays whose estimate exceeds ``budget`` are traced again at
+        half the step (their previous run the companion), up to RETRACE times."""
         origins, directions = self.camera.rays_at(xy)
         self.rays += xy.shape[0]
         rays = self.tracer.trace(origins, directions, cancel=cancel)
-        seen = seen_direction(rays, origins)
         if not (self.with_error and companion):
-            return rays, seen, None
-        assert self.tracer.step is not None
-        coarse = self.tracer.trace(
-            origins, directions, step=COMPANION_RATIO * self.tracer.step, cancel=cancel
-        )
+            return rays, seen_direction(rays, origins), None
+        step = self.tracer.step
+        assert step is not None
+        coarse = self.tracer.trace(origins, directions, step=COMPANION_RATIO * step, cancel=cancel)
         self.error_rays += xy.shape[0]
-        return rays, seen, richardson_error(rays, coarse, origins, self.tracer.method.order)
+        order = self.tracer.method.order
+        error = richardson_error(rays, coarse, origins, order)
+        for _ in range(RETRACE):
+            again = np.flatnonzero(np.isfinite(error) & (error > self.budget))
+            if again.size == 0 or (cancel is not None and cancel()):
+                break
+            step /= COMPANION_RATIO
+            finer = self.tracer.trace(origins[again], directions[again], step=step, cancel=cancel)
+            previous = _take(rays, again)
+            error[again] = richardson_error(finer, previous, origins[again], order)
+            rays.put(again, finer)
+            self.error_rays += again.size
+        return rays, seen_direction(rays, origins), error
 
     def _trace_nodes(self, nodes: _Nodes, jj: np.ndarray, ii: np.ndarray, origin, cancel):
         """Trace the untraced nodes among (jj, ii) (flat index arrays) and store them."""
@@ -504,6 +524,11 @@ def _edge_unseen(differs: list[np.ndarray], uniform: np.ndarray) -> np.ndarray:
     for (dy, dx), differ in zip(_NEIGHBOURS, differs, strict=True):
         unseen |= differ & padded[1 + dy : h + 1 + dy, 1 + dx : w + 1 + dx]
     return unseen & uniform
+
+
+def _take(rays: RayResults, rows: np.ndarray) -> RayResults:
+    """The rays ``rows`` of a batch, as a batch of their own."""
+    return RayResults(**{name: getattr(rays, name)[rows] for name in rays.__dataclass_fields__})
 
 
 def seen_direction(rays: RayResults, origins: np.ndarray) -> np.ndarray:
