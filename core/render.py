@@ -190,13 +190,17 @@ def _tile_work(sampler: TileSampler, tile_list):
 
 
 def _tiles_for(camera, workers: int) -> list[Tile]:
-    """The image's tiles: core.sampling.TILE - 1 square, the TILE halved (down to 64) until
-    every worker has two tiles (a small image keeps every core busy). A side of 2^k - 1
-    pixels plus the lattice's two margin pixels is a whole number of coarsest blocks."""
-    size = sampling_module.TILE
-    while size > 64 and len(tiles(camera.width, camera.height, size - 1)) < 2 * workers:
-        size //= 2
-    return tiles(camera.width, camera.height, size - 1)
+    """The image's tiles: bands of whole rows (the width split only past MAX_TILE_PIXELS),
+    STRIDE m - 1 rows each (with the lattice's two margin rows, whole coarsest blocks), at
+    least two per worker where the image is tall enough, and at most MAX_TILE_PIXELS: every
+    round of a tile's quadtree is then one batch as large as the image allows (a batch's
+    per-step overhead is paid per round, whatever its size)."""
+    w, h, stride = camera.width, camera.height, sampling_module.STRIDE
+    most = sampling_module.MAX_TILE_PIXELS
+    cols = w if w * (2 * stride - 1) <= most else stride * max(2, most // (2 * stride**2)) - 1
+    m = max(2, -(-(-(-h // (2 * workers)) + 1) // stride))
+    m = min(m, max(2, (most // cols + 1) // stride))
+    return tiles(w, h, cols, stride * m - 1)
 
 
 def _check_sampling(tolerance_px, samples, pixel_filter, filter_size) -> None:

@@ -53,6 +53,9 @@ TILE = 512
 blocks); its first round traces ~(TILE/STRIDE)^2 x 2 rays at once."""
 STRIDE = 32
 """Pixels per side of the coarsest interpolation block."""
+MAX_TILE_PIXELS = 1 << 19
+"""core.render's tiles are bands of rows of at most this many pixels (memory: ~200 bytes
+of lattice per pixel)."""
 FINEST = 4
 """Pixels per side of the finest block tried: every pixel of a block refused at this size
 is traced (one round instead of two more: each round costs a batch's per-step overhead)."""
@@ -103,13 +106,14 @@ class Tile:
         return self.y1 - self.y0, self.x1 - self.x0
 
 
-def tiles(width: int, height: int, size: int | None = None) -> list[Tile]:
-    """The tiles covering a width x height image (TILE - 1 square), row by row from the
-    top."""
+def tiles(width: int, height: int, size: int | None = None, rows: int | None = None) -> list[Tile]:
+    """The tiles covering a width x height image, ``size`` pixels wide (default TILE - 1)
+    and ``rows`` high (default: as wide), row by row from the top."""
     size = size or TILE - 1
+    rows = rows or size
     return [
-        Tile(x, y, min(x + size, width), min(y + size, height))
-        for y in range(0, height, size)
+        Tile(x, y, min(x + size, width), min(y + rows, height))
+        for y in range(0, height, rows)
         for x in range(0, width, size)
     ]
 
@@ -157,6 +161,7 @@ class _Nodes:
         self.energy = np.zeros(shape)
         self.plain = np.zeros(shape, dtype=bool)  # ended without volume light
         self.clearance = np.zeros(shape)  # radians from geometry (RayResults.clearance)
+        self.integration = np.zeros(shape)  # the integration's error estimate (radians)
         self.object_id = np.full(shape, -1, dtype=np.int32)
         self.position = np.zeros(shape + (3,))  # hit points (world)
         self.tangent = np.zeros(shape + (3,))  # the hitting chords' directions
@@ -196,35 +201,26 @@ class TileSampler:
 
     # --- tracing nodes -----------------------------------------------------------------
     def _trace_points(
-        self, xy: np.ndarray, cancel, companion: bool = True
+        self, xy: np.ndarray, cancel, companion: bool = True, step: float | None = None
     ) -> tuple[RayResults, np.ndarray, np.ndarray | None]:
-        """Trace camera rays through image points xy (M, 2) -> (rays, seen directions, and
-        with the error pass (and ``companion``) their Richardson error in radians from a
-        companion run at COMPANION_RATIO x the step; sub-pixel samples need none: the pass
-        reports pixel centres). Rays whose estimate exceeds ``budget`` are traced again at
-        half the step (their previous run the companion), up to RETRACE times."""
+        """Trace camera rays through image points xy (M, 2) at ``step`` (default: the
+        tracer's) -> (rays, seen directions, and with the error pass (and ``companion``)
+        their Richardson error in radians from a companion run at COMPANION_RATIO x the
+        step; sub-pixel samples need none: the pass reports pixel centres)."""
         origins, directions = self.camera.rays_at(xy)
-        self.rays += xy.shape[0]
-        rays = self.tracer.trace(origins, directions, cancel=cancel)
+        self.rays += xy.shape[0] if step is None else 0
+        rays = self.tracer.trace(origins, directions, step=step, cancel=cancel)
         if not (self.with_error and companion):
             return rays, seen_direction(rays, origins), None
-        step = self.tracer.step
+        step = step or self.tracer.step
         assert step is not None
         coarse = self.tracer.trace(origins, directions, step=COMPANION_RATIO * step, cancel=cancel)
         self.error_rays += xy.shape[0]
-        order = self.tracer.method.order
-        error = richardson_error(rays, coarse, origins, order)
-        for _ in range(RETRACE):
-            again = np.flatnonzero(np.isfinite(error) & (error > self.budget))
-            if again.size == 0 or (cancel is not None and cancel()):
-                break
-            step /= COMPANION_RATIO
-            finer = self.tracer.trace(origins[again], directions[again], step=step, cancel=cancel)
-            previous = _take(rays, again)
-            error[again] = richardson_error(finer, previous, origins[again], order)
-            rays.put(again, finer)
-            self.error_rays += again.size
-        return rays, seen_direction(rays, origins), error
+        return (
+            rays,
+            seen_direction(rays, origins),
+            richardson_error(rays, coarse, origins, self.tracer.method.order),
+        )
 
     def _trace_nodes(self, nodes: _Nodes, jj: np.ndarray, ii: np.ndarray, origin, cancel):
         """Trace the untraced nodes among (jj, ii) (flat index arrays) and store them."""
@@ -235,6 +231,10 @@ class TileSampler:
         if jj.size == 0:
             return
         rays, seen, error = self._trace_points(self._image_xy(jj, ii), cancel)
+        self._store(nodes, jj, ii, rays, seen, error)
+
+    def _store(self, nodes: _Nodes, jj, ii, rays: RayResults, seen, error) -> None:
+        """Record traced rays at the nodes (jj, ii); ``error`` is the integration's."""
         nodes.traced[jj, ii] = True
         nodes.direction[jj, ii] = seen
         nodes.ending[jj, ii] = rays.ending
@@ -251,8 +251,30 @@ class TileSampler:
         nodes.tangent[jj, ii] = rays.tangent
         nodes.redshift[jj, ii] = rays.redshift
         err = np.zeros(jj.size) if error is None else error
+        nodes.integration[jj, ii] = err
         far = np.where(escaped, self.far_field, 0.0)
         nodes.error[jj, ii] = np.where(rays.ending == ENDING["failed"], np.inf, err + far)
+
+    def _retrace(self, nodes: _Nodes, cancel) -> None:
+        """Trace the nodes whose integration error exceeds ``budget`` again at half the
+        step, their previous run the companion, up to RETRACE times (all of a tile's at
+        once: each run costs a batch's per-step overhead)."""
+        step = self.tracer.step
+        for _ in range(RETRACE if self.with_error else 0):
+            err = nodes.integration
+            jj, ii = np.nonzero(nodes.traced & np.isfinite(err) & (err > self.budget))
+            if jj.size == 0 or (cancel is not None and cancel()):
+                return
+            assert step is not None
+            step /= COMPANION_RATIO
+            xy = self._image_xy(jj, ii)
+            rays, seen, _ = self._trace_points(xy, cancel, companion=False, step=step)
+            error = _richardson(
+                seen, rays.ending, nodes.direction[jj, ii], nodes.ending[jj, ii],
+                self.tracer.method.order,
+            )  # fmt: skip
+            self.error_rays += jj.size
+            self._store(nodes, jj, ii, rays, seen, error)
 
     # --- the quadtree ------------------------------------------------------------------
     def render_tile(self, tile: Tile, cancel=None) -> TileResult | None:
@@ -270,6 +292,7 @@ class TileSampler:
             self._trace_nodes(nodes, jj.ravel(), ii.ravel(), origin, cancel)
         else:
             self._refine(nodes, blocks, s, origin, cancel)
+        self._retrace(nodes, cancel)
         if cancel is not None and cancel():
             return None
         return self._pixels(tile, nodes, blocks, origin, cancel)
@@ -526,11 +549,6 @@ def _edge_unseen(differs: list[np.ndarray], uniform: np.ndarray) -> np.ndarray:
     return unseen & uniform
 
 
-def _take(rays: RayResults, rows: np.ndarray) -> RayResults:
-    """The rays ``rows`` of a batch, as a batch of their own."""
-    return RayResults(**{name: getattr(rays, name)[rows] for name in rays.__dataclass_fields__})
-
-
 def seen_direction(rays: RayResults, origins: np.ndarray) -> np.ndarray:
     """(N, 3) what a pixel's ray points at: the escape direction of an escaped ray, else
     the unit vector from the ray's origin to where it ended (a hit point)."""
@@ -545,12 +563,19 @@ def richardson_error(fine: RayResults, coarse: RayResults, origins, order: int) 
     """Richardson estimate of the fine run's final-direction error (radians, (N,)) from a
     run at COMPANION_RATIO x its step: the escape direction's, or for a hit the direction
     from the camera to the hit point; pi where the endings differ, +inf where failed."""
+    return _richardson(
+        seen_direction(fine, origins), fine.ending, seen_direction(coarse, origins),
+        coarse.ending, order,
+    )  # fmt: skip
+
+
+def _richardson(seen_fine, ending_fine, seen_coarse, ending_coarse, order: int) -> np.ndarray:
+    """richardson_error from what the two runs see and how they end."""
     with np.errstate(all="ignore"):
-        err = _angle(seen_direction(coarse, origins), seen_direction(fine, origins))
-        err /= COMPANION_RATIO**order - 1.0
-    err = np.where(coarse.ending == fine.ending, err, np.pi)
-    err = np.where(fine.ending == ENDING["captured"], 0.0, err)
-    bad = (fine.ending == ENDING["failed"]) | (fine.ending == ENDING["max_steps"])
+        err = _angle(seen_coarse, seen_fine) / (COMPANION_RATIO**order - 1.0)
+    err = np.where(ending_coarse == ending_fine, err, np.pi)
+    err = np.where(ending_fine == ENDING["captured"], 0.0, err)
+    bad = (ending_fine == ENDING["failed"]) | (ending_fine == ENDING["max_steps"])
     return np.where(bad | ~np.isfinite(err), np.inf, err)
 
 

@@ -50,11 +50,6 @@ class RayResults:
             tangent=np.zeros((n, 3)),
         )
 
-    def put(self, rows: np.ndarray, other: RayResults) -> None:
-        """Replace the rays ``rows`` by ``other``'s (one per row, in order)."""
-        for name in self.__dataclass_fields__:
-            getattr(self, name)[rows] = getattr(other, name)
-
     def accumulate(
         self, rows: np.ndarray, radiance: np.ndarray | None, trans: np.ndarray | None
     ) -> None:
