@@ -21,11 +21,29 @@ import core
 from core import hamiltonians as hm
 
 
+class _Textured:
+    """A constant-colour primitive recoloured by a texture where it is hit (af19e2b asked
+    textures about empty batches and failed there, fixed in issue 11; its figures wrapped
+    textured primitives like this)."""
+
+    def __init__(self, obj, texture) -> None:
+        self.obj, self.texture, self.bounds = obj, texture, obj.bounds
+
+    def intersect(self, a, b):
+        """Nearest hits of segments a -> b, recoloured where they hit."""
+        hits = self.obj.intersect(a, b)
+        if hits.hit.any():
+            h = hits.hit
+            hits.color[h] = self.texture(hits.uv[h], hits.position[h], hits.normal[h])
+        return hits
+
+
 def kerr_board_scene():
     """Kerr a/M = 0.9 (rg = 1, Kerr-Schild), a 16 rg checker board 12 rg behind the hole
     (the scene of benchmarks/image_quality.py; repeated here for old checkouts)."""
-    board = core.Plane(point=(0, 12, 0), normal=(0, -1, 0), u_axis=(1, 0, 0),
-                       extent=(16, 16), color=core.checker(8, 8))  # fmt: skip
+    plane = core.Plane(point=(0, 12, 0), normal=(0, -1, 0), u_axis=(1, 0, 0),
+                       extent=(16, 16))  # fmt: skip
+    board = _Textured(plane, core.checker(8, 8))
     return core.Scene(model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"), objects=[board],
                       background="procedural")  # fmt: skip
 

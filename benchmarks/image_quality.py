@@ -194,6 +194,7 @@ def _frame(checkout: str, out: str, size, *flags: str) -> dict:
     """benchmarks/frame.py under ``checkout`` (its own core) -> its saved figures."""
     here = os.path.dirname(os.path.abspath(__file__))
     env = dict(os.environ, PYTHONPATH=os.path.abspath(checkout))
+    out = os.path.abspath(out)
     command = [sys.executable, os.path.join(here, "frame.py"), out, "--width", str(size[0]),
                "--height", str(size[1]), *flags]  # fmt: skip
     subprocess.run(command, check=True, env=env, cwd=os.path.abspath(checkout))

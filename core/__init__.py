@@ -5,6 +5,7 @@ The contract (docs/design.md): ``core.integrate``, ``core.hamiltonians``, ``core
 """
 
 from . import (
+    blackbody,
     camera,
     checks,
     dual,
@@ -21,7 +22,18 @@ from .camera import Camera, Frame
 from .expressions import ExpressionError
 from .imageio import FAILED_COLOR, ImageWriteError, read_png, write_exr, write_png
 from .integrators import METHODS, IntegrationResult, PoincareTransformed, get_method, integrate
-from .intersect import Disk, Group, Hits, Plane, Sphere, TriangleMesh, Volume, checker, colormap
+from .intersect import (
+    AccretionDisk,
+    Disk,
+    Group,
+    Hits,
+    Plane,
+    Sphere,
+    TriangleMesh,
+    Volume,
+    checker,
+    colormap,
+)
 from .observer import (
     CoordinateAxisError,
     InsideHorizonError,
@@ -34,6 +46,7 @@ from .sky import Background, equirect_lookup, procedural_sky
 from .trace import ENDING, Scene
 
 __all__ = [
+    "blackbody",
     "camera",
     "checks",
     "dual",
@@ -59,6 +72,7 @@ __all__ = [
     "PoincareTransformed",
     "get_method",
     "integrate",
+    "AccretionDisk",
     "Disk",
     "Group",
     "Hits",

@@ -5,6 +5,7 @@ volumes; one subject per module there); see core/geometry/hits.py for the contra
 """
 
 from .geometry import (
+    AccretionDisk,
     Disk,
     Group,
     Hits,
@@ -20,6 +21,7 @@ from .geometry import (
 )
 
 __all__ = [
+    "AccretionDisk",
     "Disk",
     "Group",
     "Hits",

@@ -66,9 +66,7 @@ def spacetime_momenta(model, chart, S: np.ndarray, D: np.ndarray):
     xi_t[:, 0] = 1.0
     xi_phi = np.zeros((n_rays, 4))
     xi_phi[:, 1:] = chart.axial_killing(S).T
-    g_tphi = _dot(g, xi_t, xi_phi)
-    g_phiphi = _dot(g, xi_phi, xi_phi)
-    omega = np.where(g_phiphi > 1e-300, -g_tphi / np.where(g_phiphi > 1e-300, g_phiphi, 1.0), 0.0)
+    omega = zamo_omega(_dot(g, xi_t, xi_phi), _dot(g, xi_phi, xi_phi))
     u = xi_t + omega[:, None] * xi_phi
     norm2 = _dot(g, u, u)
     if not np.all(norm2 < 0):
@@ -87,6 +85,44 @@ def spacetime_momenta(model, chart, S: np.ndarray, D: np.ndarray):
     k = -u + np.einsum("nia,an->ni", E, D)
     P = np.ascontiguousarray(np.einsum("nij,nj->in", g, k))
     return Q, P
+
+
+def zamo_omega(g_tphi: np.ndarray, g_phiphi: np.ndarray) -> np.ndarray:
+    """Angular velocity ω = −g(ξ_t, ξ_φ) / g(ξ_φ, ξ_φ) of the zero-angular-momentum observer
+    (0 on the axis, where g(ξ_φ, ξ_φ) = 0)."""
+    on_axis = ~(g_phiphi > 1e-300)
+    return np.where(on_axis, 0.0, -g_tphi / np.where(on_axis, 1.0, g_phiphi))
+
+
+def killing_block(model, chart, S: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(g_tt, g_tφ, g_φφ), each (N,): the metric on the Killing vectors ξ_t, ξ_φ (rotation
+    about z) at spatial coordinates S (3, N) of a spacetime's chart, or of a static optical
+    medium that knows its time metric (``killing_block_soa``: Schwarzschild's isotropic
+    form). NaN where the metric is singular."""
+    if chart.time_index is None:
+        return model.killing_block_soa(S)
+    n_rays = S.shape[1]
+    Q = np.vstack([np.zeros((1, n_rays)), S])
+    with np.errstate(all="ignore"):
+        ginv = inverse_metric_soa(model, Q)
+        try:
+            g = np.linalg.inv(ginv)
+        except np.linalg.LinAlgError:
+            nan = np.full(n_rays, np.nan)
+            return nan, nan, nan
+    xi_phi = np.zeros((n_rays, 4))
+    xi_phi[:, 1:] = chart.axial_killing(S).T
+    return g[:, 0, 0], np.einsum("ni,ni->n", g[:, 0, :], xi_phi), _dot(g, xi_phi, xi_phi)
+
+
+def killing_energy(block, p_t, p_phi, omega) -> np.ndarray:
+    """p·u (N,) of covariant momenta with components p_t = p·ξ_t, p_φ = p·ξ_φ, for the unit
+    observers u = u^t (ξ_t + Ω ξ_φ), u^t > 0, of angular velocities ``omega`` at the points
+    of ``block`` (killing_block); NaN where such an observer is not timelike."""
+    g_tt, g_tphi, g_phiphi = block
+    norm2 = g_tt + 2.0 * omega * g_tphi + omega * omega * g_phiphi
+    with np.errstate(all="ignore"):
+        return (p_t + omega * p_phi) / np.sqrt(-norm2)
 
 
 def _dot(g, a, b):

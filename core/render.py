@@ -3,8 +3,10 @@
 Passes: ``error`` (estimated final-direction error in radians: the integration's, from a
 companion run of every camera ray at twice the step, |d_h - d_2h| / (2^p - 1); the far
 field's beyond the region; the image interpolation's (core.sampling); +inf where a ray
-failed), ``error_px`` (the same in pixels of this camera), ``steps`` and ``ending``
-(``core.ENDING`` codes). Failed rays are drawn in ``FAILED_COLOR`` and rays
+failed), ``error_px`` (the same in pixels of this camera), ``steps``, ``ending``
+(``core.ENDING`` codes) and ``redshift`` (g = ν_obs / ν_emit of rays that end on the scene's
+accretion disk, or first cross a translucent one; NaN elsewhere; core/tracing/disklight.py;
+the pixel centre's, like the error). Failed rays are drawn in ``FAILED_COLOR`` and rays
 that ran out of steps in ``MAX_STEPS_COLOR``, never as a plausible colour.
 """
 
@@ -19,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from . import checks
+from . import sampling as sampling_module
 from . import workers as workers_module
 from .geometry import Intersector
 from .imageio import FAILED_COLOR
@@ -42,10 +45,10 @@ from .tracing.steps import DEFAULT_METHOD
 
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
-ALL_PASSES = ("error", "error_px", "steps", "ending", "direction")
+ALL_PASSES = ("error", "error_px", "steps", "ending", "direction", "redshift")
 """The passes, in their one order. ``direction`` (h, w, 3): what each pixel's centre sees
 (the escape direction, or the unit vector to the hit point; NaN where captured or failed)."""
-DEFAULT_PASSES = ("error", "error_px", "steps", "ending")
+DEFAULT_PASSES = ("error", "error_px", "steps", "ending", "redshift")
 """The passes core.render computes unless asked otherwise."""
 _MIN_CHUNK = 2048
 TRACE_SHARE = 0.5
@@ -118,7 +121,8 @@ def render(
         else Background(scene.background)
     )
     n = camera.n_pixels
-    with_error = "error" in passes or "error_px" in passes
+    # with tolerance_px the companion run always goes: its estimate picks the rays to redo
+    with_error = "error" in passes or "error_px" in passes or tolerance_px is not None
     with_error = with_error and tracer.curved
     image = _Buffers(n, with_error, camera.width)
     kind, count = workers_module.choose(parallel, workers, n, cores)
@@ -131,9 +135,11 @@ def render(
             tracer, camera, background, shade, interpolation=interpolation, samples=samples,
             pixel_filter=pixel_filter, filter_size=filter_size, with_error=with_error,
             far_field=_far_field_error(tracer), pixel_angle=pixel_angle,
+            budget=_integration_budget(tolerance_px, pixel_angle, tracer),
         )  # fmt: skip
-        chunks = [(k, k + 1) for k in range(len(tiles(camera.width, camera.height)))]
-        work = _tile_work(sampler, tiles(camera.width, camera.height))
+        tile_list = _tiles_for(camera, count)
+        chunks = [(k, k + 1) for k in range(len(tile_list))]
+        work = _tile_work(sampler, tile_list)
     else:
         # at least two chunks per worker (a small image still keeps every core busy), but
         # not below _MIN_CHUNK rays: per-step work is Python overhead on small batches
@@ -185,6 +191,20 @@ def _tile_work(sampler: TileSampler, tile_list):
     return work
 
 
+def _tiles_for(camera, workers: int) -> list[Tile]:
+    """The image's tiles: bands of whole rows (the width split only past MAX_TILE_PIXELS),
+    STRIDE m - 1 rows each (with the lattice's two margin rows, whole coarsest blocks), at
+    least two per worker where the image is tall enough, and at most MAX_TILE_PIXELS: every
+    round of a tile's quadtree is then one batch as large as the image allows (a batch's
+    per-step overhead is paid per round, whatever its size)."""
+    w, h, stride = camera.width, camera.height, sampling_module.STRIDE
+    most = sampling_module.MAX_TILE_PIXELS
+    cols = w if w * (2 * stride - 1) <= most else stride * max(2, most // (2 * stride**2)) - 1
+    m = max(2, -(-(-(-h // (2 * workers)) + 1) // stride))
+    m = min(m, max(2, (most // cols + 1) // stride))
+    return tiles(w, h, cols, stride * m - 1)
+
+
 def _check_sampling(tolerance_px, samples, pixel_filter, filter_size) -> None:
     """ValueError for sampling options out of range."""
     if tolerance_px is not None:
@@ -215,6 +235,15 @@ def _watch_margin(tracer: Tracer, camera, pixel_angle: float) -> float:
     corners = np.array(np.meshgrid(*zip(box[0], box[1], strict=True))).reshape(3, -1).T
     far = float(np.max(np.linalg.norm(corners - camera.frame.position, axis=1)))
     return CLEARANCE * STRIDE * pixel_angle * far if np.isfinite(far) else np.inf
+
+
+def _integration_budget(tolerance_px, pixel_angle: float, tracer: Tracer) -> float:
+    """With tolerance_px, the integration error (radians) a traced pixel may keep: the
+    tolerance less the far field's; without it, no limit (one run at the rule's step)."""
+    if tolerance_px is None:
+        return np.inf
+    floor = 0.1 * tracer.options.tolerance
+    return max(tolerance_px * pixel_angle - _far_field_error(tracer), floor)
 
 
 def _far_field_error(tracer: Tracer) -> float:
@@ -297,6 +326,7 @@ class _Buffers:
         self.steps = np.zeros(n, dtype=np.int32)
         self.ending = np.full(n, -1, dtype=np.int8)
         self.energy = np.zeros(n)
+        self.redshift = np.full(n, np.nan, dtype=np.float32)
         self.direction = np.full((n, 3), np.nan, dtype=np.float32)
         self.with_error = with_error
         self.width = width
@@ -314,6 +344,7 @@ class _Buffers:
         self.steps[a:b] = rays.steps
         self.ending[a:b] = rays.ending
         self.energy[a:b] = rays.energy_error
+        self.redshift[a:b] = rays.redshift
         self.rays += b - a
         if error is not None:
             self.error[a:b] = error
@@ -335,6 +366,7 @@ class _Buffers:
         self.energy[idx] = part.energy
         self.error[idx] = part.error
         self.direction[idx] = part.direction
+        self.redshift[idx] = part.redshift
         self.rays += part.rays
         self.error_rays += part.error_rays
         return idx.size
@@ -363,6 +395,8 @@ class _Buffers:
             out.passes["steps"] = self.steps.reshape(h, w)
         if "ending" in passes:
             out.passes["ending"] = self.ending.reshape(h, w)
+        if "redshift" in passes:
+            out.passes["redshift"] = self.redshift.reshape(h, w)
         if "error_px" in passes:
             out.passes["error_px"] = self.error.reshape(h, w).copy()
         if "direction" in passes:
@@ -446,6 +480,9 @@ def _scene_extent(scene: Scene, camera) -> float:
     objects = scene.objects
     bounds = [objects.bounds] if isinstance(objects, Intersector) else [o.bounds for o in objects]
     bounds += [(v.lo, v.hi) for v in scene.volumes]
+    annulus = scene.disk_annulus()
+    if annulus is not None:
+        bounds.append(annulus.bounds)
     for lo, hi in bounds:
         corners = np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T
         if np.all(np.isfinite(corners)):

@@ -1,6 +1,6 @@
 """Adaptive image sampling: rays where the image needs them, anti-aliasing by sub-pixel samples.
 
-An image is rendered in tiles (``TILE`` pixels square, each a unit of work). A tile is
+An image is rendered in tiles (``TILE`` - 1 pixels square, each a unit of work). A tile is
 covered by a lattice of *nodes* at pixel centres, one pixel beyond the tile on every side
 (filter footprints reach up to a pixel past a pixel's centre). Blocks of ``STRIDE`` nodes
 are refined as a quadtree: a block's four corners and its centre are traced; the block is
@@ -12,7 +12,8 @@ are refined as a quadtree: a block's four corners and its centre are traced; the
   the interpolation tolerance (over INTERPOLATION_SAFETY): the block's directions are then
   interpolated (bilinear, normalised) and each point is shaded from the background in its
   interpolated direction, so the sky's own detail is kept; or
-- all five hit the same object and the centre's apparent direction is within the
+- all five hit the same object (never the accretion disk: its colour and g follow each
+  ray's own momentum, so its pixels are traced) and the centre's apparent direction is within the
   tolerance of the corners' interpolation: each point's hit point and chord direction are
   interpolated and cast again against the scene (its texture is kept); a point whose
   segment misses the object (an edge) is traced; or
@@ -45,11 +46,16 @@ import numpy as np
 from .geometry import Hits
 from .sky import Background
 from .tracing import ENDING, RayResults, Tracer
+from .tracing.scene import DISK_ID
 
 TILE = 512
-"""Pixels per tile side: a tile's first round traces ~(TILE/STRIDE)^2 x 2 rays at once."""
+"""A tile is TILE - 1 pixels square (with its two margin pixels, a whole number of STRIDE
+blocks); its first round traces ~(TILE/STRIDE)^2 x 2 rays at once."""
 STRIDE = 32
 """Pixels per side of the coarsest interpolation block."""
+MAX_TILE_PIXELS = 1 << 19
+"""core.render's tiles are bands of rows of at most this many pixels (memory: ~200 bytes
+of lattice per pixel)."""
 FINEST = 4
 """Pixels per side of the finest block tried: every pixel of a block refused at this size
 is traced (one round instead of two more: each round costs a batch's per-step overhead)."""
@@ -75,6 +81,11 @@ REACH = 4.0
 """An interpolated hit point is cast again along its interpolated chord direction, REACH
 block widths (at its distance from the camera) either side: the surface is found even where
 the bilinear point lies off a curved surface."""
+RETRACE = 3
+"""With ``tolerance_px``, a traced ray whose estimated error exceeds its budget is traced
+again at half the step, up to RETRACE times: rays magnified near the photon ring (whose
+forward error the step rule, made for the initial direction's, does not bound) still meet
+the tolerance, at the cost of those rays only."""
 COMPANION_RATIO = 2.0
 """The error pass traces each camera ray again at COMPANION_RATIO x the step: for a method
 of order p the ray's error is |d_h - d_rh| / (r^p - 1) (Richardson); 1 / r of the cost."""
@@ -95,12 +106,14 @@ class Tile:
         return self.y1 - self.y0, self.x1 - self.x0
 
 
-def tiles(width: int, height: int, size: int | None = None) -> list[Tile]:
-    """The tiles covering a width x height image (TILE square), row by row from the top."""
-    size = size or TILE
+def tiles(width: int, height: int, size: int | None = None, rows: int | None = None) -> list[Tile]:
+    """The tiles covering a width x height image, ``size`` pixels wide (default TILE - 1)
+    and ``rows`` high (default: as wide), row by row from the top."""
+    size = size or TILE - 1
+    rows = rows or size
     return [
-        Tile(x, y, min(x + size, width), min(y + size, height))
-        for y in range(0, height, size)
+        Tile(x, y, min(x + size, width), min(y + rows, height))
+        for y in range(0, height, rows)
         for x in range(0, width, size)
     ]
 
@@ -129,6 +142,7 @@ class TileResult:
     ending: np.ndarray  # (h, w) int8
     energy: np.ndarray  # (h, w) |H - H0|
     direction: np.ndarray  # (h, w, 3) float32: what each pixel's centre sees (seen_direction)
+    redshift: np.ndarray  # (h, w) float32: the centre's g on the accretion disk, else NaN
     rays: int
     error_rays: int
 
@@ -147,9 +161,11 @@ class _Nodes:
         self.energy = np.zeros(shape)
         self.plain = np.zeros(shape, dtype=bool)  # ended without volume light
         self.clearance = np.zeros(shape)  # radians from geometry (RayResults.clearance)
+        self.integration = np.zeros(shape)  # the integration's error estimate (radians)
         self.object_id = np.full(shape, -1, dtype=np.int32)
         self.position = np.zeros(shape + (3,))  # hit points (world)
         self.tangent = np.zeros(shape + (3,))  # the hitting chords' directions
+        self.redshift = np.full(shape, np.nan)  # g on the accretion disk
 
 
 class TileSampler:
@@ -169,6 +185,7 @@ class TileSampler:
         with_error: bool = False,
         far_field: float = 0.0,
         pixel_angle: float = 1.0,
+        budget: float = np.inf,
     ) -> None:
         self.tracer, self.camera, self.background, self.shade = tracer, camera, background, shade
         self.interpolation = float(interpolation)  # radians; 0: trace every pixel
@@ -177,30 +194,33 @@ class TileSampler:
         self.with_error = with_error and tracer.curved
         self.far_field = far_field  # error of escaped rays beyond the region, radians
         self.pixel_angle = pixel_angle  # radians (core.Camera.pixel_angle)
+        self.budget = budget  # radians: a traced ray's integration error above it is redone
         self._origin = (0, 0)  # image (row, column) of the current tile's node (0, 0)
         self.rays = 0
         self.error_rays = 0
 
     # --- tracing nodes -----------------------------------------------------------------
     def _trace_points(
-        self, xy: np.ndarray, cancel, companion: bool = True
+        self, xy: np.ndarray, cancel, companion: bool = True, step: float | None = None
     ) -> tuple[RayResults, np.ndarray, np.ndarray | None]:
-        """Trace camera rays through image points xy (M, 2) -> (rays, seen directions, and
-        with the error pass (and ``companion``) their Richardson error in radians from a
-        companion run at COMPANION_RATIO x the step; sub-pixel samples need none: the pass
-        reports pixel centres)."""
+        """Trace camera rays through image points xy (M, 2) at ``step`` (default: the
+        tracer's) -> (rays, seen directions, and with the error pass (and ``companion``)
+        their Richardson error in radians from a companion run at COMPANION_RATIO x the
+        step; sub-pixel samples need none: the pass reports pixel centres)."""
         origins, directions = self.camera.rays_at(xy)
-        self.rays += xy.shape[0]
-        rays = self.tracer.trace(origins, directions, cancel=cancel)
-        seen = seen_direction(rays, origins)
+        self.rays += xy.shape[0] if step is None else 0
+        rays = self.tracer.trace(origins, directions, step=step, cancel=cancel)
         if not (self.with_error and companion):
-            return rays, seen, None
-        assert self.tracer.step is not None
-        coarse = self.tracer.trace(
-            origins, directions, step=COMPANION_RATIO * self.tracer.step, cancel=cancel
-        )
+            return rays, seen_direction(rays, origins), None
+        step = step or self.tracer.step
+        assert step is not None
+        coarse = self.tracer.trace(origins, directions, step=COMPANION_RATIO * step, cancel=cancel)
         self.error_rays += xy.shape[0]
-        return rays, seen, richardson_error(rays, coarse, origins, self.tracer.method.order)
+        return (
+            rays,
+            seen_direction(rays, origins),
+            richardson_error(rays, coarse, origins, self.tracer.method.order),
+        )
 
     def _trace_nodes(self, nodes: _Nodes, jj: np.ndarray, ii: np.ndarray, origin, cancel):
         """Trace the untraced nodes among (jj, ii) (flat index arrays) and store them."""
@@ -211,6 +231,10 @@ class TileSampler:
         if jj.size == 0:
             return
         rays, seen, error = self._trace_points(self._image_xy(jj, ii), cancel)
+        self._store(nodes, jj, ii, rays, seen, error)
+
+    def _store(self, nodes: _Nodes, jj, ii, rays: RayResults, seen, error) -> None:
+        """Record traced rays at the nodes (jj, ii); ``error`` is the integration's."""
         nodes.traced[jj, ii] = True
         nodes.direction[jj, ii] = seen
         nodes.ending[jj, ii] = rays.ending
@@ -225,9 +249,32 @@ class TileSampler:
         nodes.object_id[jj, ii] = rays.object_id
         nodes.position[jj, ii] = rays.position
         nodes.tangent[jj, ii] = rays.tangent
+        nodes.redshift[jj, ii] = rays.redshift
         err = np.zeros(jj.size) if error is None else error
+        nodes.integration[jj, ii] = err
         far = np.where(escaped, self.far_field, 0.0)
         nodes.error[jj, ii] = np.where(rays.ending == ENDING["failed"], np.inf, err + far)
+
+    def _retrace(self, nodes: _Nodes, cancel) -> None:
+        """Trace the nodes whose integration error exceeds ``budget`` again at half the
+        step, their previous run the companion, up to RETRACE times (all of a tile's at
+        once: each run costs a batch's per-step overhead)."""
+        step = self.tracer.step
+        for _ in range(RETRACE if self.with_error else 0):
+            err = nodes.integration
+            jj, ii = np.nonzero(nodes.traced & np.isfinite(err) & (err > self.budget))
+            if jj.size == 0 or (cancel is not None and cancel()):
+                return
+            assert step is not None
+            step /= COMPANION_RATIO
+            xy = self._image_xy(jj, ii)
+            rays, seen, _ = self._trace_points(xy, cancel, companion=False, step=step)
+            error = _richardson(
+                seen, rays.ending, nodes.direction[jj, ii], nodes.ending[jj, ii],
+                self.tracer.method.order,
+            )  # fmt: skip
+            self.error_rays += jj.size
+            self._store(nodes, jj, ii, rays, seen, error)
 
     # --- the quadtree ------------------------------------------------------------------
     def render_tile(self, tile: Tile, cancel=None) -> TileResult | None:
@@ -245,6 +292,7 @@ class TileSampler:
             self._trace_nodes(nodes, jj.ravel(), ii.ravel(), origin, cancel)
         else:
             self._refine(nodes, blocks, s, origin, cancel)
+        self._retrace(nodes, cancel)
         if cancel is not None and cancel():
             return None
         return self._pixels(tile, nodes, blocks, origin, cancel)
@@ -280,6 +328,7 @@ class TileSampler:
         corners = [(bj, bi), (bj, bi + s), (bj + s, bi), (bj + s, bi + s)]
         alike = nodes.plain[cj, ci].copy()
         ending, object_id = nodes.ending[cj, ci], nodes.object_id[cj, ci]
+        alike &= object_id != DISK_ID  # its colour follows each ray's momentum: traced
         clear = CLEARANCE * s * self.pixel_angle  # sky and shadow: no object in between
         alike &= nodes.clearance[cj, ci] > clear
         for j, i in corners:
@@ -302,24 +351,25 @@ class TileSampler:
         if missed.size:
             self._trace_nodes(nodes, jj[missed], ii[missed], origin, cancel)
             again = self._evaluate(nodes, blocks, jj[missed] * 1.0, ii[missed] * 1.0)
-            for name in ("rgba", "ending", "error", "direction"):
+            for name in ("rgba", "ending", "error", "direction", "redshift"):
                 getattr(centre, name)[missed] = getattr(again, name)
         rgba = centre.rgba.reshape(h + 2, w + 2, 4)
         error = centre.error.reshape(h + 2, w + 2)
         ending = centre.ending.reshape(h + 2, w + 2)
         direction = centre.direction.reshape(h + 2, w + 2, 3)
+        redshift = centre.redshift.reshape(h + 2, w + 2)
         inner = (slice(1, h + 1), slice(1, w + 1))
         steps = nodes.steps[inner]
         energy = nodes.energy[inner]
         colour = rgba[inner].copy()
         if self.samples > 1:
             differs = _contrast(rgba, ending)
-            busy = np.logical_or.reduce(differs)
+            busy = np.any(np.stack(differs), axis=0)
             colour[busy] = self._supersample(nodes, blocks, busy, differs, origin, cancel)
         return TileResult(
             colour.astype(np.float32), error[inner].astype(np.float32), steps,
-            ending[inner], energy, direction[inner].astype(np.float32), self.rays,
-            self.error_rays,
+            ending[inner], energy, direction[inner].astype(np.float32),
+            redshift[inner].astype(np.float32), self.rays, self.error_rays,
         )  # fmt: skip
 
     def _evaluate(self, nodes: _Nodes, blocks: _Blocks, y, x) -> _Points:
@@ -328,8 +378,9 @@ class TileSampler:
         no accepted block and on no traced node get ending -1 (to be traced)."""
         m = y.shape[0]
         out = _Points(
-            np.zeros((m, 4)), np.full(m, -1, dtype=np.int8), np.zeros(m), np.full((m, 3), np.nan)
-        )
+            np.zeros((m, 4)), np.full(m, -1, dtype=np.int8), np.zeros(m), np.full((m, 3), np.nan),
+            np.full(m, np.nan),
+        )  # fmt: skip
         cell_j = np.clip(np.floor(y).astype(np.int64), 0, blocks.block.shape[0] - 1)
         cell_i = np.clip(np.floor(x).astype(np.int64), 0, blocks.block.shape[1] - 1)
         b = blocks.block[cell_j, cell_i]
@@ -344,6 +395,7 @@ class TileSampler:
         out.ending[t] = nodes.ending[nj[t], ni[t]]
         out.error[t] = nodes.error[nj[t], ni[t]]
         out.direction[t] = nodes.direction[nj[t], ni[t]]
+        out.redshift[t] = nodes.redshift[nj[t], ni[t]]
         return out
 
     def _interpolate(self, nodes: _Nodes, blocks: _Blocks, b, y, x, out: _Points, rows):
@@ -443,6 +495,7 @@ class _Points:
     ending: np.ndarray
     error: np.ndarray
     direction: np.ndarray
+    redshift: np.ndarray
 
 
 class _Blocks:
@@ -514,16 +567,22 @@ def richardson_error(fine: RayResults, coarse: RayResults, origins, order: int) 
     """Richardson estimate of the fine run's final-direction error (radians, (N,)) from a
     run at COMPANION_RATIO x its step: the escape direction's, or for a hit the direction
     from the camera to the hit point; pi where the endings differ, +inf where failed."""
-    hit = fine.ending == ENDING["hit"]
-    # a hit point lies on the cubic through its step's ends (core/tracing/dense.py): its
-    # error falls at most at that cubic's order, 4, whatever the method's
-    orders = np.where(hit, min(order, HIT_ORDER), order)
+    return _richardson(
+        seen_direction(fine, origins), fine.ending, seen_direction(coarse, origins),
+        coarse.ending, order,
+    )  # fmt: skip
+
+
+def _richardson(seen_fine, ending_fine, seen_coarse, ending_coarse, order: int) -> np.ndarray:
+    """richardson_error from what the two runs see and how they end. A hit point lies on the
+    cubic through its step's ends (core/tracing/dense.py): its error falls at most at that
+    cubic's order (HIT_ORDER), whatever the method's."""
+    orders = np.where(ending_fine == ENDING["hit"], min(order, HIT_ORDER), order)
     with np.errstate(all="ignore"):
-        err = _angle(seen_direction(coarse, origins), seen_direction(fine, origins))
-        err /= COMPANION_RATIO**orders - 1.0
-    err = np.where(coarse.ending == fine.ending, err, np.pi)
-    err = np.where(fine.ending == ENDING["captured"], 0.0, err)
-    bad = (fine.ending == ENDING["failed"]) | (fine.ending == ENDING["max_steps"])
+        err = _angle(seen_coarse, seen_fine) / (COMPANION_RATIO**orders - 1.0)
+    err = np.where(ending_coarse == ending_fine, err, np.pi)
+    err = np.where(ending_fine == ENDING["captured"], 0.0, err)
+    bad = (ending_fine == ENDING["failed"]) | (ending_fine == ENDING["max_steps"])
     return np.where(bad | ~np.isfinite(err), np.inf, err)
 
 

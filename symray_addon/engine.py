@@ -3,9 +3,9 @@
 Each frame traces the evaluated depsgraph's scene (``render_job``; lit surfaces are baked
 by Cycles first, or reused from the cache: bake.py), honouring the render
 region (border), resolution percentage, Esc (``test_break``) and film transparency, and
-writes the Combined pass plus "SymRay Error", "SymRay Steps" and "SymRay Ending" (one
-channel 'X' each, when enabled in the SymRay panel). Saving is Blender's business: choose
-OpenEXR MultiLayer in Output Properties to keep every pass.
+writes the Combined pass plus "SymRay Error", "SymRay Steps", "SymRay Ending" and "SymRay
+Redshift" (one channel 'X' each, when enabled in the SymRay panel). Saving is Blender's
+business: choose OpenEXR MultiLayer in Output Properties to keep every pass.
 """
 
 from __future__ import annotations

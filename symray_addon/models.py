@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..core import Scene, expressions
+from ..core import AccretionDisk, Scene, expressions
 from ..core import hamiltonians as hm
 from ..core.render import check_scene_camera
 from . import validation
@@ -170,3 +170,19 @@ def _camera_problem(
     except (ValueError, ArithmeticError) as err:
         return str(err)
     return ""
+
+
+def build_disk(settings: Any) -> AccretionDisk | None:
+    """The core disk of the settings (None when off); the Scene binds it to the model."""
+    disk = settings.disk
+    if not disk.enabled:
+        return None
+    return AccretionDisk(
+        r_out=float(disk.outer_radius),
+        r_in=None if disk.use_isco else float(disk.inner_radius),
+        temperature=float(disk.temperature),
+        profile=disk.profile.lower(),
+        doppler=bool(disk.doppler),
+        brightness=float(disk.brightness),
+        opacity=float(disk.opacity),
+    )

@@ -7,7 +7,8 @@ then moved over the target with ``os.replace``, so a failed or cancelled write n
 leaves a half-written file behind.
 
 The operator writes two files: ``<path>`` holds RGBA; when passes were computed,
-``<stem>.passes.exr`` next to it holds R = error (pixels), G = steps, B = ending code.
+``<stem>.passes.exr`` next to it holds R = error (pixels), G = steps, B = ending code,
+A = redshift (NaN off the accretion disk; 1 when the pass was not computed).
 Renders through the SYMRAY engine (F12, ``blender -b``) use Blender's output settings
 instead: choose OpenEXR MultiLayer there to get every pass ("SymRay Error", ...) in one file.
 """
@@ -25,7 +26,7 @@ import numpy as np
 from .properties import PASSES
 
 PASS_CHANNELS = tuple(name for name, _label, _toggle in PASSES)
-"""Order of the passes in the R, G, B channels of the operator's passes EXR."""
+"""Order of the passes in the R, G, B, A channels of the operator's passes EXR."""
 
 
 def resolve_path(path: str) -> str:

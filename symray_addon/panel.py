@@ -169,6 +169,43 @@ class RENDER_PT_symray_integration(SymRayPanelMixin, bpy.types.Panel):
         layout.prop(settings, "workers")
 
 
+class RENDER_PT_symray_disk(SymRayPanelMixin, bpy.types.Panel):
+    """The accretion disk around a Schwarzschild or Kerr hole"""
+
+    bl_label = "Accretion Disk"
+    bl_parent_id = "RENDER_PT_symray"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        """Shown for the black-hole models."""
+        return super().poll(context) and context.scene.symray.model in validation.DISK_MODELS
+
+    def draw_header(self, context: bpy.types.Context) -> None:
+        """The on/off switch in the header."""
+        self.layout.prop(context.scene.symray.disk, "enabled", text="")
+
+    def draw(self, context: bpy.types.Context) -> None:
+        """Draw the disk's radii, temperature and light."""
+        settings = context.scene.symray
+        disk = settings.disk
+        layout = self.layout
+        layout.use_property_split = True
+        layout.active = disk.enabled
+        layout.prop(disk, "use_isco")
+        row = layout.row()
+        row.active = not disk.use_isco
+        row.prop(disk, "inner_radius")
+        if settings.rg > 0:
+            layout.label(text=f"ISCO: r = {validation.inner_edge(settings):.4g}", icon="INFO")
+        layout.prop(disk, "outer_radius")
+        layout.prop(disk, "profile")
+        layout.prop(disk, "temperature")
+        layout.prop(disk, "doppler")
+        layout.prop(disk, "brightness")
+        layout.prop(disk, "opacity")
+
+
 class RENDER_PT_symray_lighting(SymRayPanelMixin, bpy.types.Panel):
     """How surfaces are lit: baked by Cycles, or unlit"""
 
@@ -243,6 +280,7 @@ class RENDER_PT_symray_film(SymRayPanelMixin, bpy.types.Panel):
 CLASSES = (
     RENDER_PT_symray,
     RENDER_PT_symray_integration,
+    RENDER_PT_symray_disk,
     RENDER_PT_symray_lighting,
     RENDER_PT_symray_output,
     RENDER_PT_symray_launch,

@@ -5,10 +5,11 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
-from . import presets, validation
+from . import disk_properties, presets, validation
 
 PASSES = (("error_px", "Error", "pass_error"), ("steps", "Steps", "pass_steps"),
-          ("ending", "Ending", "pass_ending"))  # fmt: skip
+          ("ending", "Ending", "pass_ending"),
+          ("redshift", "Redshift", "pass_redshift"))  # fmt: skip
 """(core pass, label, toggle) of the passes the add-on writes, in their one order: 'SymRay
 <label>' render passes and the operator's passes EXR channels. 'SymRay Error' is the
 core's ``error_px`` (pixels of the camera)."""
@@ -365,6 +366,17 @@ class SymRaySettings(bpy.types.PropertyGroup):
         update=_update_passes,
         description="How each ray ended (core.ENDING code): 'SymRay Ending' pass",
     )
+    pass_redshift: bpy.props.BoolProperty(  # type: ignore[valid-type]
+        name="Redshift",
+        default=False,
+        update=_update_passes,
+        description="g = observed / emitted frequency where a ray ends on the accretion "
+        "disk, NaN elsewhere: 'SymRay Redshift' pass",
+    )
+    disk: bpy.props.PointerProperty(  # type: ignore[valid-type]
+        type=disk_properties.SymRayDiskSettings,
+        description="The accretion disk around the black hole",
+    )
     background: bpy.props.EnumProperty(  # type: ignore[valid-type]
         name="Background",
         items=BACKGROUND_ITEMS,
@@ -439,6 +451,7 @@ def _revalidate_on_load(_dummy: object = None) -> None:
 
 def register() -> None:
     """Register SymRaySettings as ``bpy.types.Scene.symray``."""
+    bpy.utils.register_class(disk_properties.SymRayDiskSettings)
     bpy.utils.register_class(SymRaySettings)
     bpy.types.Scene.symray = bpy.props.PointerProperty(type=SymRaySettings)
     if _revalidate_on_load not in bpy.app.handlers.load_post:
@@ -451,3 +464,4 @@ def unregister() -> None:
         bpy.app.handlers.load_post.remove(_revalidate_on_load)
     del bpy.types.Scene.symray
     bpy.utils.unregister_class(SymRaySettings)
+    bpy.utils.unregister_class(disk_properties.SymRayDiskSettings)

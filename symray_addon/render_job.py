@@ -91,6 +91,7 @@ def prepare(
         rotation=where.rotation,
         objects=[] if intersector is None else [intersector],
         background=world.world_background(scene, settings.background),
+        disk=models.build_disk(settings),
     )
     transparent = bool(scene.render.film_transparent)
     passes = settings.passes()

@@ -16,11 +16,13 @@ and ``#`` starts a comment. Example (Minkowski)::
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from ..core import checks, expressions
+from ..core.geometry.disk import isco
 from ..core.integrators import METHODS, Splitting
 
 INDEX_NAMES: tuple[str, ...] = ("x", "y", "z")
@@ -256,4 +258,62 @@ def settings_problems(settings: Any) -> list[str]:
             problems.append(str(err))
     if settings.model == "KERR" and spin_problem(settings.spin):
         problems.append(spin_problem(settings.spin))
+    return problems + disk_problems(settings)
+
+
+DISK_MODELS = frozenset({"SCHWARZSCHILD", "KERR"})
+"""Models an accretion disk can orbit."""
+
+
+def disk_problems(settings: Any) -> list[str]:
+    """Messages for disk settings a render would refuse (names as in the panel)."""
+    disk = settings.disk
+    if not disk.enabled:
+        return []
+    if settings.model not in DISK_MODELS:
+        return ["Accretion Disk needs a Schwarzschild or Kerr model"]
+    problems = []
+    for check in _disk_checks(settings):
+        try:
+            check()
+        except ValueError as err:
+            problems.append(str(err))
     return problems
+
+
+def _disk_checks(settings: Any) -> list[Callable[[], Any]]:
+    """The checks of the disk's numbers (ValueError naming the setting and its range)."""
+    disk = settings.disk
+    found = [
+        lambda: checks.check_positive("Disk Outer Radius", disk.outer_radius),
+        lambda: checks.check_range("Disk Temperature", disk.temperature, 100.0, 1e9),
+        lambda: checks.check_range("Disk Brightness", disk.brightness, 0.0),
+        lambda: checks.check_range("Disk Opacity", disk.opacity, 0.0, 1.0, lo_open=True),
+    ]
+    if not disk.use_isco:
+        found.append(
+            lambda: checks.check_range(
+                "Disk Inner Radius",
+                disk.inner_radius,
+                inner_edge(settings),
+                disk.outer_radius,
+                hi_open=True,
+            )  # fmt: skip
+        )
+    elif math.isfinite(float(settings.rg)) and float(settings.rg) > 0:
+        found.append(
+            lambda: checks.check_range(
+                "Disk Outer Radius (beyond the ISCO)",
+                disk.outer_radius,
+                inner_edge(settings),
+                lo_open=True,
+            )  # fmt: skip
+        )
+    return found
+
+
+def inner_edge(settings: Any) -> float:
+    """The prograde ISCO of the settings' hole, in scene units (Boyer–Lindquist r)."""
+    mass = 0.5 * float(settings.rg)
+    spin = float(settings.spin) if settings.model == "KERR" else 0.0
+    return isco(mass, spin * mass)

@@ -1,9 +1,11 @@
-"""What rays can hit and pass through: hits, primitives, meshes, groups, textures, volumes.
+"""What rays can hit and pass through: hits, primitives, meshes, groups, textures, volumes,
+and the accretion disk.
 
 ``core.intersect`` is the public name of this package's contents (the core/Blender seam:
 an intersector has ``bounds`` and ``intersect(a, b) -> Hits``, see hits.py).
 """
 
+from .disk import AccretionDisk
 from .group import Group
 from .hits import Hits, Intersector, segment_meets_box, segment_overlaps
 from .mesh import TriangleMesh
@@ -12,6 +14,7 @@ from .textures import Texture, checker, colormap
 from .volumes import Volume
 
 __all__ = [
+    "AccretionDisk",
     "Disk",
     "Group",
     "Hits",

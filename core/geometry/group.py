@@ -13,13 +13,18 @@ from .hits import _INF, Hits, _segments, segment_overlaps
 class Group:
     """The nearest hit over member intersectors, each sent only the segments near its bounds.
 
-    Object ids: member k reports ``ids[k]`` (default: k, its position in the list).
+    Object ids: member k reports ``ids[k]`` (default: k, its position in the list; an id
+    None keeps the ids the member reports itself).
     """
 
-    def __init__(self, objects: Sequence[Any], ids: Sequence[int] | None = None) -> None:
+    def __init__(self, objects: Sequence[Any], ids: Sequence[int | None] | None = None) -> None:
         """Group of intersectors (anything with ``bounds`` and ``intersect``)."""
         self.objects = list(objects)
-        self.ids = list(range(len(self.objects))) if ids is None else [int(i) for i in ids]
+        self.ids: list[int | None] = (
+            list(range(len(self.objects)))
+            if ids is None
+            else [None if i is None else int(i) for i in ids]
+        )
         if len(self.ids) != len(self.objects):
             raise ValueError("ids must have one entry per object")
         if self.objects:

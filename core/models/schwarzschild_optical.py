@@ -64,6 +64,18 @@ class SchwarzschildOptical(Medium):
             n = np.where(bad, np.nan, n)
         return n, grad
 
+    def killing_block_soa(self, S: np.ndarray):
+        """(g_tt, g_tφ, g_φφ) (N,) of the isotropic Schwarzschild metric
+        −A² dt² + B² |dx|² (A = (1 − u)/(1 + u), B = (1 + u)², u = M/2ρ) at isotropic
+        positions S (3, N), on ξ_t and the rotation about z: (−A², 0, B² (x² + y²)). The
+        rays' optical momentum p is the spatial part of −k/E (k the photon's covariant
+        4-momentum), so p_t = 1 and p_φ = x p_y − y p_x (core/tracing/disklight.py)."""
+        rho = np.sqrt(np.einsum("ij,ij->j", S, S))
+        with np.errstate(all="ignore"):
+            u = 0.5 * self.mass / rho
+            A, B = (1.0 - u) / (1.0 + u), (1.0 + u) ** 2
+        return -A * A, np.zeros_like(rho), B * B * (S[0] * S[0] + S[1] * S[1])
+
     @property
     def scales_time(self) -> bool:
         """The logarithmic split's steps scale with the distance from the mass."""

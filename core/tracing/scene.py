@@ -8,7 +8,11 @@ from typing import Any
 import numpy as np
 
 from .. import checks
-from ..geometry import Group, Intersector
+from ..geometry import Disk, Group, Intersector
+from ..geometry.disk import AccretionDisk
+
+DISK_ID = -2
+"""Object id of the accretion disk's hits (-1 means no hit; other objects use ids >= 0)."""
 
 ENDING = {"escaped": 0, "captured": 1, "hit": 2, "failed": 3, "max_steps": 4}
 """Ending codes of the ``ending`` pass (int8)."""
@@ -31,6 +35,9 @@ class Scene:
     """Optional 3x3 matrix: columns = the model's local x, y, z axes in the world (its z
     must be ``axis``); default: z = axis with x, y chosen. Needed to turn a medium or a
     user metric about the axis."""
+    disk: AccretionDisk | None = None
+    """A thin accretion disk in the model's equatorial plane (core.AccretionDisk); bound to
+    the model here (its r_in defaults to the ISCO)."""
 
     def __post_init__(self) -> None:
         self.center = checks.check_vector("scene center", self.center)
@@ -46,17 +53,38 @@ class Scene:
                 raise ValueError("scene rotation must be a proper rotation matrix")
             self.rotation = R
             self.axis = R[:, 2].copy()
+        if self.disk is not None:
+            if not isinstance(self.disk, AccretionDisk):
+                raise ValueError(f"disk must be a core.AccretionDisk, got {self.disk!r}")
+            self.disk = self.disk.bind(self.model)
 
     @property
     def curved(self) -> bool:
         """False when nothing bends light: rays are traced straight, no integration."""
         return self.model is not None and not self.model.flat
 
-    def intersector(self) -> Intersector:
-        """The objects as one intersector (a list of them becomes a Group)."""
+    def intersector(self, disk: bool = True) -> Intersector:
+        """The objects as one intersector (a list of them becomes a Group), with the disk's
+        annulus (object id DISK_ID) when there is one (and ``disk``)."""
+        annulus = self.disk_annulus() if disk else None
         if isinstance(self.objects, Intersector):
-            return self.objects
-        return Group(list(self.objects))
+            if annulus is None:
+                return self.objects
+            return Group([self.objects, annulus], ids=[None, DISK_ID])
+        objects = list(self.objects)
+        ids: list[int | None] = list(range(len(objects)))
+        if annulus is not None:
+            objects.append(annulus)
+            ids.append(DISK_ID)
+        return Group(objects, ids=ids)
+
+    def disk_annulus(self) -> Disk | None:
+        """The disk as a flat annulus in the world (None without a disk)."""
+        if self.disk is None:
+            return None
+        r_in, r_out = self.disk.cartesian_radii()
+        frame = self.frame()
+        return Disk(self.center, frame[:, 2], r_in, r_out, u_axis=frame[:, 0], object_id=DISK_ID)
 
     def frame(self) -> np.ndarray:
         """3x3 matrix whose columns are the model's local x, y, z axes in the world."""

@@ -27,6 +27,7 @@ class RayResults:
     transmittance: np.ndarray  # (N,) volume transmittance
     steps: np.ndarray  # (N,) int32 integration steps
     energy_error: np.ndarray  # (N,) |H - H0| at the end
+    redshift: np.ndarray  # (N,) g = nu_obs / nu_emit where the ray ended on a disk, else NaN
     clearance: np.ndarray  # (N,) radians from the watched box (Tracer.watch_geometry)
     object_id: np.ndarray  # (N,) int32: the object hit (Hits.object_id); -1 where none
     tangent: np.ndarray  # (N, 3) where hit: the unit direction of the chord that hit
@@ -43,6 +44,7 @@ class RayResults:
             transmittance=np.ones(n),
             steps=np.zeros(n, dtype=np.int32),
             energy_error=np.zeros(n),
+            redshift=np.full(n, np.nan),
             clearance=np.full(n, np.inf),
             object_id=np.full(n, -1, dtype=np.int32),
             tangent=np.zeros((n, 3)),

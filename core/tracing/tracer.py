@@ -22,6 +22,7 @@ from ..charts import chart_for
 from ..geometry import segment_meets_box
 from ..observer import medium_momenta, spacetime_momenta
 from . import dense
+from .disklight import DiskLight
 from .regions import Region, region_for
 from .scene import ENDING, Scene
 from .segments import RayResults, SceneGeometry
@@ -65,6 +66,7 @@ class Tracer:
 
     step: float | None = None
     region: Region | None = None
+    disk: DiskLight | None = None
     _watch: tuple[np.ndarray, np.ndarray] | None = None  # world box (Tracer.watch_geometry)
     _watch_local: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -87,7 +89,11 @@ class Tracer:
         if not isinstance(options.method, integrators.Method) and self.method.accepts("tol"):
             self.method = self.method.with_options(tol=solver_tolerance(options.tolerance))
         radius = scene.region_radius or options.region_radius
+        if scene.disk is not None:  # the disk's hits need the rays' momenta: inside
+            extent = max(extent, scene.disk.cartesian_radii()[1])
         self.region = region_for(model, options.tolerance, extent, radius)
+        if scene.disk is not None:
+            self.disk = self._disk_light(scene)
         self.captured = model.capture_test()
         self.stepper = Stepper(self.method, model, self.captured)
         self._near = self.geometry.local_box(self._to_local)
@@ -103,6 +109,19 @@ class Tracer:
                 largest=model.max_split_step,
             )
         )
+
+    def _disk_light(self, scene: Scene) -> DiskLight:
+        """The disk's light; ValueError if the disk reaches past the model's region (an
+        explicit region_radius: its hits there would have no momentum to take g from)."""
+        assert scene.disk is not None and self.region is not None
+        outer = scene.disk.cartesian_radii()[1]
+        if self.region.radius is None or not self.region.radius > outer:
+            raise ValueError(
+                f"region_radius must exceed the accretion disk's outer radius {outer:g} "
+                f"(Cartesian), got {self.region.radius}"
+            )
+        behind = SceneGeometry(scene.intersector(disk=False), list(scene.volumes))
+        return DiskLight(scene.disk, self.model, self.chart, self._to_local, self.geometry, behind)
 
     def watch_geometry(self, margin: float) -> None:
         """Record each ray's clearance (``RayResults.clearance``): the smallest angle, seen
@@ -219,7 +238,7 @@ class Tracer:
                 out.position[idx[ended]] = self._to_world(X_prev[:, ended].T)
             self._watch_steps(idx, X, camera, out)
             if self._near is not None:  # surfaces and volumes along this step's segment
-                step_ends = _StepEnds(self, K, start, (Q, P), h)
+                step_ends = _StepEnds(self, K, start, (Q, P), h, camera)
                 ended |= self._segments(idx, X_prev, X, ok, out, step_ends, camera)
             if self.captured is not None:
                 captured = ~ended & self.captured(Q)
@@ -286,12 +305,14 @@ class Tracer:
             hg = h if np.ndim(h) == 0 else h[g]
             path = dense.CubicPath(X0[:, g], V0[:, g], X1[:, g], V1[:, g], hg)
             limits = (deviation[g] / (n * n), allowed[g])
-            hit_rows[c[g]] = self._path_hits(idx[c[g]], path, int(n), limits, out)
+            state = step_ends.state(c[g]) if self.disk is not None else None
+            hit_rows[c[g]] = self._path_hits(idx[c[g]], path, int(n), limits, out, state)
         return hit_rows
 
-    def _path_hits(self, rows, path: dense.CubicPath, n: int, limits, out: RayResults):
+    def _path_hits(self, rows, path: dense.CubicPath, n: int, limits, out: RayResults, state):
         """Cast the n chords of each ray's cubic path in order (rays ``rows``), refine the
-        chords that hit on the cubic, record hits and volume light. -> (M,) bool: hit."""
+        chords that hit on the cubic, record hits and volume light (and the disk's light,
+        from ``state`` = (Q, P, camera) of the rays). -> (M,) bool: hit."""
         hit = np.zeros(path.size, dtype=bool)
         alive = np.ones(path.size, dtype=bool)
         for j in range(n):
@@ -301,7 +322,12 @@ class Tracer:
             hits = self.geometry.cast(a, b)
             if hits.hit.any():
                 self._refine(path, live, hits, j / n, 1.0 / n, [x[live] for x in limits])
-            got = self.geometry.record_hits(rows[live], a, b, hits, out)
+            if self.disk is None:
+                got = self.geometry.record_hits(rows[live], a, b, hits, out)
+            else:
+                got = self.disk.record_hits(
+                    rows[live], a, b, hits, [x[:, live] for x in state], out
+                )
             hit[live[got]] = True
             alive[live[got]] = False
             if not alive.any():
@@ -398,8 +424,16 @@ class _StepEnds:
     """A step's two ends (Q, P) and size, with the local Cartesian velocities dX/dσ there
     for the rays that need them (surfaces near their path)."""
 
-    def __init__(self, tracer: Tracer, K: Any, start: tuple, end: tuple, h: Any) -> None:
+    def __init__(
+        self, tracer: Tracer, K: Any, start: tuple, end: tuple, h: Any, camera: np.ndarray
+    ) -> None:
         self.tracer, self.K, self.start, self.end, self.h = tracer, K, start, end, h
+        self.camera = camera
+
+    def state(self, rows: np.ndarray) -> list[np.ndarray]:
+        """(Q, P, camera) at the step's end of the rays ``rows`` (the disk's light)."""
+        Q, P = self.end
+        return [Q[:, rows], P[:, rows], self.camera[:, rows]]
 
     def velocities(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, Any]:
         """(V at the start, V at the end, h) of the rays ``rows``, each V (3, M)."""

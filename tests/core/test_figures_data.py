@@ -126,3 +126,20 @@ def test_kerr_shadow_edges_match_bardeen(a):
         assert abs(centre) < px
     else:
         assert 0.5 * (x.min() + x.max()) > 1.0 and centre > 1.0 - px
+
+
+def test_disk_beamed_and_bent_over_the_shadow():
+    """Fig. 13 (a/M = 0.9, inclination 80 deg): the approaching side (left half) has g > 1
+    and is brighter than the receding one; the middle column reads disk (its far side, lensed
+    up over the shadow), shadow, disk (the near side, in front) from the top."""
+    out = figures.disk_view(0.45, 48, 27, tolerance=1e-4)
+    g, ending = out.passes["redshift"], out.passes["ending"]
+    on = np.isfinite(g)
+    left, right = on & (np.arange(48) < 24), on & (np.arange(48) >= 24)
+    assert np.median(g[left]) > 1.0 > np.median(g[right])
+    luminance = out.rgba[..., :3] @ core.blackbody.XYZ_FROM_RGB[1]
+    assert luminance[left].mean() > 2 * luminance[right].mean()
+    codes = core.ENDING
+    column = ending[:, 24]
+    runs = [int(c) for i, c in enumerate(column) if i == 0 or c != column[i - 1]]
+    assert runs[:3] == [codes["hit"], codes["captured"], codes["hit"]]

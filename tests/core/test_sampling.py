@@ -132,17 +132,20 @@ def test_tiles_shown_progressively_are_the_image():
     seen = np.zeros((30, 40), dtype=int)
     canvas = np.zeros((30, 40, 4), dtype=np.float32)
 
+    calls = [0]
+
     def on_tile(rect, part):
+        calls[0] += 1
         x0, y0, x1, y1 = rect
         seen[y0:y1, x0:x1] += 1
         canvas[y0:y1, x0:x1] = part.rgba
 
-    old = sampling.TILE
-    sampling.TILE = 16  # several tiles on a small frame (a module setting read per render)
+    old = sampling.STRIDE
+    sampling.STRIDE = 4  # bands of 7 rows: several on a small frame (read per render)
     try:
         result = core.render(scene, cam, tolerance_px=1.0, on_tile=on_tile, passes=())
     finally:
-        sampling.TILE = old
-    assert np.all(seen == 1)
+        sampling.STRIDE = old
+    assert np.all(seen == 1) and calls[0] >= 2
     np.testing.assert_array_equal(canvas, result.rgba)
     assert result.summary["pixels"] == 1200 and 0 < result.summary["rays"]

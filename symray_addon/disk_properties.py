@@ -1,0 +1,81 @@
+"""The accretion disk's settings (``scene.symray.disk``); checked in validation.py, made a
+core.AccretionDisk in models.py.
+
+Radii are Boyer–Lindquist radii in scene units (the same units as the Schwarzschild
+radius rg); the disk lies in the centre object's local XY plane (core.AccretionDisk).
+"""
+
+from __future__ import annotations
+
+import bpy
+
+PROFILE_ITEMS = [
+    ("NOVIKOV_THORNE", "Novikov–Thorne", "Relativistic thin-disk profile (zero torque at "
+     "the inner edge); Temperature is its hottest point"),
+    ("POWER_LAW", "Power Law", "T = Temperature x (r / inner radius)^(-3/4)"),
+]  # fmt: skip
+
+
+class SymRayDiskSettings(bpy.types.PropertyGroup):
+    """A relativistic thin accretion disk around the black hole"""
+
+    enabled: bpy.props.BoolProperty(  # type: ignore[valid-type]
+        name="Accretion Disk",
+        default=False,
+        description="A thin black-body disk in the centre's XY plane, on "
+        "Keplerian orbits, with gravitational and Doppler shifts",
+    )
+    use_isco: bpy.props.BoolProperty(  # type: ignore[valid-type]
+        name="Inner Edge at ISCO",
+        default=True,
+        description="Start the disk at the innermost stable circular orbit of the spin",
+    )
+    inner_radius: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Inner Radius",
+        default=3.0,
+        min=0.0,
+        soft_max=100.0,
+        subtype="DISTANCE",
+        description="Boyer–Lindquist radius of the inner edge (scene units), at least the ISCO",
+    )
+    outer_radius: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Outer Radius",
+        default=10.0,
+        min=0.0,
+        soft_max=1000.0,
+        subtype="DISTANCE",
+        description="Boyer–Lindquist radius of the outer edge (scene units)",
+    )
+    profile: bpy.props.EnumProperty(  # type: ignore[valid-type]
+        name="Temperature Profile", items=PROFILE_ITEMS, default="NOVIKOV_THORNE"
+    )
+    temperature: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Temperature",
+        default=10_000.0,
+        min=100.0,
+        max=1e9,
+        soft_max=100_000.0,
+        description="Hottest temperature of the disk in kelvin (the inner edge for the "
+        "power law), before any shift",
+    )
+    doppler: bpy.props.BoolProperty(  # type: ignore[valid-type]
+        name="Doppler",
+        default=True,
+        description="The gas orbits (beaming: the approaching side bluer and brighter); "
+        "off: it is at rest in the local non-rotating frame (gravitational shift only)",
+    )
+    brightness: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Brightness",
+        default=1.0,
+        min=0.0,
+        soft_max=100.0,
+        description="Luminance of a disk point at Temperature seen without shift",
+    )
+    opacity: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Opacity",
+        default=1.0,
+        min=0.001,
+        max=1.0,
+        description="1: opaque; below 1 the disk adds Opacity x its light to (1 - Opacity) "
+        "x what lies behind it (seen through it, the sky and its other images)",
+    )

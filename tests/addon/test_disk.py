@@ -1,0 +1,118 @@
+"""The accretion disk in Blender: its settings, checks, preset, and the "SymRay Redshift"
+pass reaching the compositor and the EXR written by F12."""
+
+from __future__ import annotations
+
+import math
+
+import bpy
+import numpy as np
+import pytest
+
+OpenEXR = pytest.importorskip("OpenEXR")
+
+
+def _disk_scene(scene, helpers):
+    """The preset's Kerr a/M = 0.9 hole (rg 0.5) with its disk (to 3 units), seen at
+    inclination 80 deg from 12 units."""
+    assert bpy.ops.symray.apply_preset(preset="KERR_DISK") == {"FINISHED"}
+    inc = math.radians(80.0)
+    cam = helpers.add_camera(scene, location=(0.0, -12 * math.sin(inc), 12 * math.cos(inc)),
+                             rotation=(inc, 0.0, 0.0))  # fmt: skip
+    scene.render.resolution_x, scene.render.resolution_y = 32, 16
+    scene.symray.tolerance = 1e-4
+    helpers.set_world_color(scene, (0.0, 0.0, 0.0, 1.0))
+    return cam
+
+
+def test_preset_sets_the_scene(scene):
+    assert bpy.ops.symray.apply_preset(preset="KERR_DISK") == {"FINISHED"}
+    settings = scene.symray
+    assert settings.model == "KERR" and settings.spin == pytest.approx(0.9)
+    assert settings.center is not None and settings.center.type == "EMPTY"
+    disk = settings.disk
+    assert disk.enabled and disk.use_isco and disk.doppler
+    assert disk.outer_radius == 3.0 and disk.profile == "NOVIKOV_THORNE"
+    assert settings.pass_redshift and "redshift" in settings.passes()
+    # another preset turns the disk off again
+    assert bpy.ops.symray.apply_preset(preset="KERR") == {"FINISHED"}
+    assert not settings.disk.enabled
+
+
+def test_compositor_sees_the_redshift_pass(scene):
+    scene.render.engine = "SYMRAY"
+    settings = scene.symray
+    settings.pass_error = settings.pass_steps = settings.pass_ending = False
+    if hasattr(scene, "compositing_node_group"):  # Blender 5
+        tree = bpy.data.node_groups.new("Compositing", "CompositorNodeTree")
+        scene.compositing_node_group = tree
+    else:
+        scene.use_nodes = True
+        tree = scene.node_tree
+    node = tree.nodes.new("CompositorNodeRLayers")
+
+    def outputs() -> set[str]:
+        return {o.name for o in node.outputs if o.enabled and o.name.startswith("SymRay")}
+
+    assert outputs() == set()
+    settings.pass_redshift = True
+    assert outputs() == {"SymRay Redshift"}
+
+
+def test_disk_settings_are_checked(addon, scene, helpers):
+    _disk_scene(scene, helpers)
+    validation = addon.module("symray_addon.validation")
+    settings = scene.symray
+    assert validation.settings_problems(settings) == []
+    isco = validation.inner_edge(settings)
+    assert isco == pytest.approx(0.25 * 2.320883041761887, rel=1e-6)  # a/M = 0.9, M = 0.25
+    settings.disk.use_isco = False
+    settings.disk.inner_radius = 0.9 * isco
+    assert any(p.startswith("Disk Inner Radius must be a finite number in [") for p in
+               validation.settings_problems(settings))  # fmt: skip
+    settings.disk.inner_radius = 1.0
+    assert validation.settings_problems(settings) == []
+    settings.disk.opacity = 0.5
+    assert validation.settings_problems(settings) == []
+    settings["disk"]["opacity"] = 0.0  # a .blend or script past the limits
+    assert any(p.startswith("Disk Opacity must be a finite number in (0, 1]") for p in
+               validation.settings_problems(settings))  # fmt: skip
+    settings.disk.opacity = 1.0
+    settings["disk"]["temperature"] = float("nan")  # a .blend or script past the limits
+    assert any(p.startswith("Disk Temperature must be") for p in
+               validation.settings_problems(settings))  # fmt: skip
+    settings.disk.temperature = 5000.0
+    settings.model = "MEDIUM"
+    assert "Accretion Disk needs a Schwarzschild or Kerr model" in validation.settings_problems(
+        settings
+    )
+    job = addon.module("symray_addon.render_job")
+    with pytest.raises(ValueError, match="Accretion Disk needs"):
+        job.prepare(scene, bpy.context.evaluated_depsgraph_get())
+
+
+def test_f12_writes_the_redshift_pass(addon, scene, helpers, tmp_path):
+    _disk_scene(scene, helpers)
+    scene.render.engine = "SYMRAY"
+    image = scene.render.image_settings
+    if "media_type" in image.bl_rna.properties:
+        image.media_type = "MULTI_LAYER_IMAGE"
+    image.file_format = "OPEN_EXR_MULTILAYER"
+    image.color_depth = "32"
+    scene.render.filepath = str(tmp_path / "disk")
+    scene.render.use_file_extension = True
+    bpy.ops.render.render(write_still=True)
+    with OpenEXR.File(str(tmp_path / "disk.exr"), separate_channels=True) as f:
+        channels = {n: np.array(c.pixels) for part in f.parts for n, c in part.channels.items()}
+    g = next(v for k, v in channels.items() if k.endswith("SymRay Redshift.X"))
+    job = addon.module("symray_addon.render_job")
+    reference = job.run(job.prepare(scene, bpy.context.evaluated_depsgraph_get()))
+    on = np.isfinite(reference.passes["redshift"])
+    assert on.sum() > 20
+    np.testing.assert_array_equal(np.isfinite(g), on)
+    # rtol: F12 reads the render depsgraph, the reference the viewport's (float32 camera
+    # matrices that differ in the last bits; see test_render.py)
+    np.testing.assert_allclose(g[on], reference.passes["redshift"][on], rtol=1e-4)
+    assert g[on].min() < 0.9 and g[on].max() > 1.1  # the receding and approaching sides
+    left = on & (np.arange(32) < 16)[None, :]
+    assert np.median(g[left]) > np.median(g[on & ~left])  # approaching side: x < 0, left
