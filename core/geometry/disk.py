@@ -32,7 +32,7 @@ import numpy as np
 
 from .. import blackbody, checks
 
-_HOLE_CHARTS = ("kerr_schild", "spherical", "isotropic")
+_HOLE_CHARTS = ("kerr_schild", "spherical", "isotropic", "kerr_bl")
 """Charts of the Schwarzschild and Kerr models (and the tracer's forms of them)."""
 PROFILES = ("novikov_thorne", "power_law")
 """Temperature profiles: Novikov–Thorne, or T_in (r / r_in)^(-3/4)."""

@@ -18,7 +18,8 @@ light to the ray's radiance and keeps (1 - a) of what lies behind, like a volume
 goes on (the redshift pass keeps the first crossing's g).
 
 Charts: Kerr–Schild (Kerr; Schwarzschild as Kerr–Schild with a = 0), Boyer–Lindquist
-(Kerr traced in its own chart), and Schwarzschild's isotropic optical medium (explicit
+(Kerr traced in its own chart, and kerr_bl: Kerr–Schild Kerr's form for the explicit
+split, core/models/kerr_split.py), and Schwarzschild's isotropic optical medium (explicit
 splittings), whose momentum is the spatial part of −k/E: p_t = 1 there. Rays are traced
 backwards (p = −k), which flips p_t, p_φ and both p·u alike: g is their ratio.
 """

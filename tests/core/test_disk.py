@@ -89,8 +89,9 @@ def test_kerr_redshift_matches_constants_of_motion(chart, a):
     Q, P = spacetime_momenta(
         tracer.model, tracer.chart, S, (directions[on] @ tracer.rotation).T.copy()
     )
-    # p_phi = p.xi_phi: x p_y - y p_x in Kerr–Schild, p_phi itself in Boyer–Lindquist
-    p_phi = Q[1] * P[2] - Q[2] * P[1] if chart == "kerr_schild" else P[3]
+    # p_phi = p.xi_phi in the tracing chart (x p_y - y p_x in Kerr–Schild, p_phi itself in
+    # Boyer–Lindquist, also the form Kerr–Schild Kerr takes for the default explicit split)
+    p_phi = np.einsum("ij,ij->j", tracer.chart.axial_killing(S), P[1:])
     p_t = P[0]
     hit = res.position[on]
     assert np.allclose(hit[:, 2], 0.0, atol=1e-9)  # on the equatorial plane
@@ -394,9 +395,13 @@ def test_adaptive_sampling_traces_the_disk():
         background=(0.0, 0.0, 0.0),
     )
     cam = camera_at(20.0, 96, 48)
-    tiled = core.render(scene, cam, tolerance_px=1.0, samples=4, workers=1, parallel="threads")
+    # gauss4, with which the bound below was measured: the sampling is under test here, not
+    # the method; Kerr's default explicit split spends more of its 0.5 px budget (measured:
+    # 99 % of g within 2.2e-3 of its own plain render)
+    tiled = core.render(scene, cam, tolerance_px=1.0, samples=4, workers=1, parallel="threads",
+                        method="gauss4")  # fmt: skip
     plain = core.render(scene, cam, tolerance=1e-6, passes=("ending", "redshift"), workers=1,
-                        parallel="threads")  # fmt: skip
+                        parallel="threads", method="gauss4")  # fmt: skip
     g, ending = tiled.passes["redshift"], tiled.passes["ending"]
     hit = ending == ENDING["hit"]
     assert hit.sum() > 1000 and np.all(np.isfinite(g[hit])) and np.all(np.isnan(g[~hit]))
