@@ -62,7 +62,7 @@ is traced (one round instead of two more: each round costs a batch's per-step ov
 AA_CONTRAST = 0.03
 """A pixel is supersampled where its colour differs from a neighbour's by more than this
 (largest channel difference, linear RGB) or its ending does."""
-FIRST_SAMPLES = 9
+FIRST_SAMPLES = 5
 """A supersampled pixel gets its centre and 4 more points first; the rest of ``samples``
 only where these differ by more than AA_CONTRAST (a pixel flagged by a neighbour's edge
 but itself uniform stops there)."""
