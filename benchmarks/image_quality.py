@@ -175,7 +175,7 @@ def before_after(out_dir: str, width: int = 320, height: int = 180) -> None:
     scene, cam = kerr_board_scene(), _black_hole_camera(width, height)
     before = core.render(scene, cam, tolerance=0.25 * cam.pixel_angle(), passes=()).rgba
     after = core.render(scene, cam, tolerance_px=0.25, samples=16, passes=()).rgba
-    y0, x0, size = height // 2 - 42, width // 2 - 48, 30  # the shadow's upper-left edge
+    y0, x0, size = height // 2 - 34, width // 2 - 34, 30  # the shadow's upper-left edge
     rows = []
     for image in (before, after):
         zoom = np.kron(image[y0 : y0 + size, x0 : x0 + size], np.ones((6, 6, 1)))

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from .steps import FAR_FIELD_CONSTANT
+from .steps import FAR_FIELD_CONSTANT, FAR_FIELD_SHARE
 
 
 class Region:
@@ -111,7 +111,7 @@ def region_for(model: Any, tolerance: float, extent: float, radius: float | None
     sphere; around a mass of radius sqrt(2 C / tol) M (first-order far field).
 
     Beyond R the far field leaves an error ~ C (M / R)^2 (FAR_FIELD_CONSTANT): R keeps it
-    below tolerance / 2, and at least 1.5x beyond the camera and the objects.
+    below FAR_FIELD_SHARE x tolerance, and at least 1.5x beyond the camera and the objects.
     """
     if model.bounds is not None and radius is None:
         return BoxRegion(np.asarray(model.bounds[0], float), np.asarray(model.bounds[1], float))
@@ -119,7 +119,8 @@ def region_for(model: Any, tolerance: float, extent: float, radius: float | None
         rg = float(model.rg)
         if rg > 0:
             tol = min(max(float(tolerance), 1e-14), 1e-1)
-            radius = min(0.5 * rg * math.sqrt(2 * FAR_FIELD_CONSTANT / tol), 1e6 * rg)
+            share = FAR_FIELD_SHARE * tol
+            radius = min(0.5 * rg * math.sqrt(FAR_FIELD_CONSTANT / share), 1e6 * rg)
             radius = max(radius, 1.5 * extent)
         else:
             radius = 2.0 * extent

@@ -101,8 +101,8 @@ def test_anti_aliasing_converges_to_the_area_average():
 
 
 def test_error_pass_tells_the_truth_on_a_small_frame():
-    """Kerr a/M = 0.9, a board and a sphere at 0.25 px, against dopri5 at 1e-11 rad with
-    a far region: of the pixels whose true error exceeds a tenth of the tolerance, >= 90 %
+    """Kerr a/M = 0.9, a board and a sphere at 1 px (Preview), against dopri5 at 1e-11 rad
+    with a far region: of the pixels whose true error exceeds a tenth of the tolerance, >= 90 %
     are estimated within 3x; fewer than 2 % of all pixels are under-reported by > 3x (the
     issue's 1 % is met on the benchmark's larger frame, benchmarks/image_quality.py; a
     48x27 frame has few pixels to spread the interpolated edge pixels over)."""
@@ -110,7 +110,7 @@ def test_error_pass_tells_the_truth_on_a_small_frame():
     passes = ("error_px", "ending", "direction")
     ref = core.render(scene, cam, method="dopri5", tolerance=1e-11, passes=passes,
                       max_steps=10**6)  # fmt: skip
-    run = core.render(scene, cam, tolerance_px=0.25, passes=passes)
+    run = core.render(scene, cam, tolerance_px=1.0, passes=passes)
     pixel = run.summary["pixel_angle"]
     same = ref.passes["ending"] == run.passes["ending"]
     seen = same & (ref.passes["ending"] != core.ENDING["captured"])
@@ -118,7 +118,7 @@ def test_error_pass_tells_the_truth_on_a_small_frame():
     v = run.passes["direction"][seen].astype(float)
     truth = np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), np.sum(u * v, axis=1)) / pixel
     est = run.passes["error_px"][seen].astype(float)
-    big = truth > 0.025
+    big = truth > 0.1
     assert big.sum() > 50
     within = (est[big] <= 3 * truth[big]) & (est[big] >= truth[big] / 3)
     assert within.mean() >= 0.9
