@@ -254,6 +254,21 @@ def operator_error(call: Callable[[], object]) -> str:
     return str(info.value)
 
 
+def symray_outputs(scene) -> Callable[[], set[str]]:
+    """A compositor Render Layers node of ``scene`` -> a function giving its enabled
+    "SymRay ..." outputs (the passes update_render_passes declared)."""
+    import bpy
+
+    if hasattr(scene, "compositing_node_group"):  # Blender 5
+        tree = bpy.data.node_groups.new("Compositing", "CompositorNodeTree")
+        scene.compositing_node_group = tree
+    else:
+        scene.use_nodes = True
+        tree = scene.node_tree
+    node = tree.nodes.new("CompositorNodeRLayers")
+    return lambda: {o.name for o in node.outputs if o.enabled and o.name.startswith("SymRay")}
+
+
 @pytest.fixture
 def helpers():
     """The scene-building helpers above, for test modules (conftest is not importable)."""
@@ -270,4 +285,5 @@ def helpers():
         image_array=image_array,
         frame_directions=frame_directions,
         operator_error=operator_error,
+        symray_outputs=symray_outputs,
     )

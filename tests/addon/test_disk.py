@@ -39,20 +39,11 @@ def test_preset_sets_the_scene(scene):
     assert not settings.disk.enabled
 
 
-def test_compositor_sees_the_redshift_pass(scene):
+def test_compositor_sees_the_redshift_pass(scene, helpers):
     scene.render.engine = "SYMRAY"
     settings = scene.symray
     settings.pass_error = settings.pass_steps = settings.pass_ending = False
-    if hasattr(scene, "compositing_node_group"):  # Blender 5
-        tree = bpy.data.node_groups.new("Compositing", "CompositorNodeTree")
-        scene.compositing_node_group = tree
-    else:
-        scene.use_nodes = True
-        tree = scene.node_tree
-    node = tree.nodes.new("CompositorNodeRLayers")
-
-    def outputs() -> set[str]:
-        return {o.name for o in node.outputs if o.enabled and o.name.startswith("SymRay")}
+    outputs = helpers.symray_outputs(scene)
 
     assert outputs() == set()
     settings.pass_redshift = True

@@ -169,21 +169,12 @@ def test_panel_shows_nothing_for_a_good_setup(scene):
         assert _labels(scene) == [], model
 
 
-def test_pass_toggles_reach_the_compositor(scene):
+def test_pass_toggles_reach_the_compositor(scene, helpers):
     """The View Layer › Passes toggles re-register the engine's passes: the Render Layers
     node of the compositor shows exactly the passes switched on."""
     scene.render.engine = "SYMRAY"
     scene.symray.pass_error, scene.symray.pass_steps = True, False
-    if bpy.app.version >= (5, 0, 0):
-        tree = bpy.data.node_groups.new("Compositing", "CompositorNodeTree")
-        scene.compositing_node_group = tree
-    else:
-        scene.use_nodes = True
-        tree = scene.node_tree
-    node = tree.nodes.new("CompositorNodeRLayers")
-
-    def shown() -> set[str]:
-        return {o.name for o in node.outputs if o.enabled and o.name.startswith("SymRay")}
+    shown = helpers.symray_outputs(scene)
 
     assert shown() == {"SymRay Error"}
     scene.symray.pass_ending = True

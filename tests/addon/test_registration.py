@@ -174,21 +174,12 @@ def test_presets(scene, preset, model):
         assert settings.refractive_index_error == ""
 
 
-def test_compositor_sees_passes(scene):
+def test_compositor_sees_passes(scene, helpers):
     """Render Layers node outputs follow the pass toggles (update_render_passes)."""
     scene.render.engine = "SYMRAY"
     settings = scene.symray
     settings.pass_error, settings.pass_steps, settings.pass_ending = True, True, False
-    if hasattr(scene, "compositing_node_group"):  # Blender 5
-        tree = bpy.data.node_groups.new("Compositing", "CompositorNodeTree")
-        scene.compositing_node_group = tree
-    else:
-        scene.use_nodes = True
-        tree = scene.node_tree
-    node = tree.nodes.new("CompositorNodeRLayers")
-
-    def outputs() -> set[str]:
-        return {o.name for o in node.outputs if o.enabled and o.name.startswith("SymRay")}
+    outputs = helpers.symray_outputs(scene)
 
     assert outputs() == {"SymRay Error", "SymRay Steps"}
     settings.pass_ending = True
