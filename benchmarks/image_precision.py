@@ -36,6 +36,7 @@ import numpy as np
 import core
 from core import hamiltonians as hm
 from core.presets import MIRAGE_VIEWS, mirage_view
+from core.sampling import angle_between
 from core.trace import TraceOptions, Tracer
 
 OUT = os.path.join("out", "bench")
@@ -184,7 +185,7 @@ def pixel_errors(case: SceneCase, ref, run) -> tuple[np.ndarray, int]:
     esc = same & (ref[0] == core.ENDING["escaped"])
     hit = same & (ref[0] == core.ENDING["hit"])
     u, v = ref[1][esc], run[1][esc]
-    angle = np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), np.einsum("ij,ij->i", u, v))
+    angle = angle_between(u, v)
     dist = np.linalg.norm(ref[2][hit] - origins[hit], axis=1)
     moved = np.linalg.norm(run[2][hit] - ref[2][hit], axis=1) / (dist * case.pixel)
     return np.concatenate([angle / case.pixel, moved]), int(np.count_nonzero(~same))

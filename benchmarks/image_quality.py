@@ -35,6 +35,7 @@ from image_precision import _black_hole_camera, schwarzschild_scene
 
 import core
 from core import hamiltonians as hm
+from core.sampling import angle_between
 
 OUT = os.path.join("out", "bench")
 
@@ -57,8 +58,7 @@ def true_error_px(ref, run, pixel: float) -> np.ndarray:
     e_ref, e_run = ref.passes["ending"].ravel(), run.passes["ending"].ravel()
     u, v = _seen(ref), _seen(run)
     with np.errstate(all="ignore"):
-        cross = np.linalg.norm(np.cross(u, v), axis=1)
-        angle = np.arctan2(cross, np.einsum("ij,ij->i", u, v)) / pixel
+        angle = angle_between(u, v) / pixel
     angle = np.where(e_ref == e_run, angle, np.inf)
     return np.where((e_ref == e_run) & (e_ref == core.ENDING["captured"]), np.nan, angle)
 
@@ -206,7 +206,7 @@ def _within(ref: dict, run: dict, pixel: float, px: float = 0.25) -> float:
     escaped = (ref["ending"] == core.ENDING["escaped"]).ravel()
     u, v = ref["seen"].reshape(-1, 3)[escaped], run["seen"].reshape(-1, 3)[escaped]
     with np.errstate(all="ignore"):
-        angle = np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), np.sum(u * v, axis=1))
+        angle = angle_between(u, v)
     same = (run["ending"].ravel() == ref["ending"].ravel())[escaped]
     return float(np.mean(same & (angle / pixel <= px)))
 

@@ -3,42 +3,7 @@
 The models live in :mod:`core.models`, one kind per module; this module re-exports them.
 """
 
-from .models import (
-    BLOCK,
-    ExpressionHamiltonian,
-    FrozenQ,
-    Hamiltonian,
-    KerrSchild,
-    Medium,
-    MetricHamiltonian,
-    Minkowski,
-    SphericalSpacetime,
-    blocked,
-    from_expression,
-    kerr,
-    kerr_horizon,
-    medium,
-    metric,
-    minkowski,
-    schwarzschild,
-)
+from . import models as _models
+from .models import *  # noqa: F403 (a facade: every public name of core.models, one list)
 
-__all__ = [
-    "BLOCK",
-    "ExpressionHamiltonian",
-    "FrozenQ",
-    "Hamiltonian",
-    "KerrSchild",
-    "Medium",
-    "MetricHamiltonian",
-    "Minkowski",
-    "SphericalSpacetime",
-    "blocked",
-    "from_expression",
-    "kerr",
-    "kerr_horizon",
-    "medium",
-    "metric",
-    "minkowski",
-    "schwarzschild",
-]
+__all__ = list(_models.__all__)

@@ -4,34 +4,7 @@ The public name of :mod:`core.geometry` (hits, primitives, meshes, groups, textu
 volumes; one subject per module there); see core/geometry/hits.py for the contract.
 """
 
-from .geometry import (
-    AccretionDisk,
-    Disk,
-    Group,
-    Hits,
-    Intersector,
-    Plane,
-    Sphere,
-    Texture,
-    TriangleMesh,
-    Volume,
-    checker,
-    colormap,
-    segment_overlaps,
-)
+from . import geometry as _geometry
+from .geometry import *  # noqa: F403 (a facade: every public name of core.geometry, one list)
 
-__all__ = [
-    "AccretionDisk",
-    "Disk",
-    "Group",
-    "Hits",
-    "Intersector",
-    "Plane",
-    "Sphere",
-    "Texture",
-    "TriangleMesh",
-    "Volume",
-    "checker",
-    "colormap",
-    "segment_overlaps",
-]
+__all__ = list(_geometry.__all__)

@@ -335,7 +335,7 @@ class TileSampler:
             alike &= nodes.plain[j, i] & (nodes.ending[j, i] == ending)
             alike &= (nodes.object_id[j, i] == object_id) & (nodes.clearance[j, i] > clear)
         mean = sum(nodes.direction[j, i] for j, i in corners)
-        deviation = _angle(mean, nodes.direction[cj, ci])
+        deviation = angle_between(mean, nodes.direction[cj, ci])
         deviation = np.where(ending == ENDING["captured"], 0.0, deviation)
         accepted = alike & (INTERPOLATION_SAFETY * deviation <= self.interpolation)
         return accepted, deviation
@@ -579,14 +579,14 @@ def _richardson(seen_fine, ending_fine, seen_coarse, ending_coarse, order: int) 
     cubic's order (HIT_ORDER), whatever the method's."""
     orders = np.where(ending_fine == ENDING["hit"], min(order, HIT_ORDER), order)
     with np.errstate(all="ignore"):
-        err = _angle(seen_coarse, seen_fine) / (COMPANION_RATIO**orders - 1.0)
+        err = angle_between(seen_coarse, seen_fine) / (COMPANION_RATIO**orders - 1.0)
     err = np.where(ending_coarse == ending_fine, err, np.pi)
     err = np.where(ending_fine == ENDING["captured"], 0.0, err)
     bad = (ending_fine == ENDING["failed"]) | (ending_fine == ENDING["max_steps"])
     return np.where(bad | ~np.isfinite(err), np.inf, err)
 
 
-def _angle(u, v) -> np.ndarray:
+def angle_between(u, v) -> np.ndarray:
     """Angle between vectors (..., 3), accurate for tiny angles (atan2 of |u x v| and u.v)."""
     cross = np.linalg.norm(np.cross(u, v), axis=-1)
     return np.arctan2(cross, np.einsum("...i,...i->...", u, v))

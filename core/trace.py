@@ -1,49 +1,6 @@
 """The public name of :mod:`core.tracing` (Scene, Tracer, the step rule, ENDING, ...)."""
 
-from .tracing import (
-    DEFAULT_METHOD,
-    ENDING,
-    ERROR_CONSTANTS,
-    FAR_FIELD_CONSTANT,
-    MAX_SPLIT_STEP,
-    MAX_STEP,
-    SOLVE_SHARE,
-    BoxRegion,
-    RayResults,
-    Region,
-    Scene,
-    SceneGeometry,
-    SphereRegion,
-    Stepper,
-    TraceOptions,
-    Tracer,
-    default_method,
-    default_step,
-    region_for,
-    solver_tolerance,
-    tracing_model,
-)
+from . import tracing as _tracing
+from .tracing import *  # noqa: F403 (a facade: every public name of core.tracing, one list)
 
-__all__ = [
-    "DEFAULT_METHOD",
-    "ENDING",
-    "ERROR_CONSTANTS",
-    "FAR_FIELD_CONSTANT",
-    "MAX_SPLIT_STEP",
-    "MAX_STEP",
-    "SOLVE_SHARE",
-    "BoxRegion",
-    "RayResults",
-    "Region",
-    "Scene",
-    "SceneGeometry",
-    "SphereRegion",
-    "Stepper",
-    "TraceOptions",
-    "Tracer",
-    "default_method",
-    "default_step",
-    "region_for",
-    "solver_tolerance",
-    "tracing_model",
-]
+__all__ = list(_tracing.__all__)
