@@ -28,11 +28,11 @@ accepted only when all its rays end the same way (the same object, for hits).
 
 Anti-aliasing (``samples`` > 1): a pixel whose colour differs from a neighbour's by more
 than ``AA_CONTRAST`` (or whose ending does) gets up to ``samples`` points spread over its
-filter footprint (its centre and an R2 low-discrepancy pattern, the same in every pixel;
-``FIRST_SAMPLES`` first, the rest where those disagree), each shaded by interpolation
-inside an accepted block or by a traced ray elsewhere; its colour is their
-filter-weighted mean (box over the pixel, or Blackman-Harris of width ``filter_size`` as in
-Cycles). Other pixels keep their centre's colour.
+filter footprint (the cells of a k x k grid, k = ceil(sqrt(samples)), the same in every
+pixel, farthest-first; ``FIRST_SAMPLES`` first, the rest where those disagree), each
+shaded by interpolation inside an accepted block or by a traced ray elsewhere; its colour
+is their filter-weighted mean (box over the pixel, or Blackman-Harris of width
+``filter_size`` as in Cycles). Other pixels keep their centre's colour.
 """
 
 from __future__ import annotations
@@ -63,9 +63,9 @@ AA_CONTRAST = 0.03
 """A pixel is supersampled where its colour differs from a neighbour's by more than this
 (largest channel difference, linear RGB) or its ending does."""
 FIRST_SAMPLES = 5
-"""A supersampled pixel gets its centre and 4 more points first; the rest of ``samples``
-only where these differ by more than AA_CONTRAST (a pixel flagged by a neighbour's edge
-but itself uniform stops there)."""
+"""A supersampled pixel gets 5 points first (with 16 samples: the corner cells of its 4 x 4
+grid and one near the middle); the rest of ``samples`` only where these differ by more than
+AA_CONTRAST (a pixel flagged by a neighbour's edge but itself uniform stops there)."""
 FILTERS = ("box", "blackman_harris")
 """Reconstruction filters: the pixel's square, or Cycles' default (width ``filter_size``)."""
 CLEARANCE = 2.0
@@ -120,16 +120,27 @@ def tiles(width: int, height: int, size: int | None = None, rows: int | None = N
 
 def sample_offsets(samples: int, pixel_filter: str, filter_size: float) -> tuple:
     """Sub-pixel offsets (S, 2) from the pixel centre and their filter weights (S,): the
-    centre first, then an R2 low-discrepancy pattern over the filter's footprint."""
-    g = 1.32471795724474602596  # the plastic number: the R2 sequence (Roberts 2018)
-    k = np.arange(1, samples)[:, None]
-    unit = np.concatenate([[[0.5, 0.5]], np.mod(0.5 + k * np.array([1.0 / g, 1.0 / g**2]), 1.0)])
+    cells of a k x k grid (k = ceil(sqrt(S))) over the filter's footprint, farthest-first."""
+    unit = stratified_points(samples)
     if pixel_filter == "box":
         return unit - 0.5, np.ones(samples)
     offsets = (unit - 0.5) * filter_size
     window = 0.35875 - 0.48829 * np.cos(2 * np.pi * unit) + 0.14128 * np.cos(4 * np.pi * unit)
     window -= 0.01168 * np.cos(6 * np.pi * unit)
     return offsets, np.prod(window, axis=1)
+
+
+def stratified_points(n: int) -> np.ndarray:
+    """n points (n, 2) in the unit square: centres of a k x k grid's cells, k = ceil(sqrt n),
+    in farthest-point order from the one nearest the middle (every prefix is spread out)."""
+    k = math.isqrt(n - 1) + 1 if n > 1 else 1
+    cells = (np.stack(np.meshgrid(np.arange(k), np.arange(k)), axis=-1).reshape(-1, 2) + 0.5) / k
+    order = [int(np.argmin(np.hypot(*(cells - 0.5).T)))]
+    gap = np.hypot(*(cells - cells[order[0]]).T)
+    while len(order) < n:
+        order.append(int(np.argmax(gap)))
+        gap = np.minimum(gap, np.hypot(*(cells - cells[order[-1]]).T))
+    return cells[order]
 
 
 @dataclass
