@@ -53,7 +53,20 @@ def inverse_metric_soa(model, Q: np.ndarray) -> np.ndarray:
 
 
 def spacetime_momenta(model, chart, S: np.ndarray, D: np.ndarray):
-    """(Q, P) (4, N) for photons at spatial coords S seen along local Cartesian directions D."""
+    """(Q, P) (4, N) for photons at spatial coords S seen along local Cartesian directions D.
+    The observer's frame is set up once per distinct start (a camera's rays share one)."""
+    n_rays = S.shape[1]
+    points, where = np.unique(S, axis=1, return_inverse=True)
+    where = where.reshape(-1)
+    g, u, E = _observer_frames(model, chart, points)
+    k = -u[where] + np.einsum("nia,an->ni", E[where], D)
+    P = np.ascontiguousarray(np.einsum("nij,nj->in", g[where], k))
+    return np.vstack([np.zeros((1, n_rays)), S]), P
+
+
+def _observer_frames(model, chart, S: np.ndarray):
+    """At spatial coords S (3, N): the metric g (N, 4, 4), the observer's u (N, 4) and its
+    spatial triad E (N, 4, 3) (the module); an ObserverError where none exists."""
     n_rays = S.shape[1]
     Q = np.vstack([np.zeros((1, n_rays)), S])
     with np.errstate(all="ignore"):
@@ -82,9 +95,7 @@ def spacetime_momenta(model, chart, S: np.ndarray, D: np.ndarray):
     E, spacelike = _orthonormalize(g, V)
     if not spacelike.all():
         raise _diagnose(model, chart, Q, ginv, ~spacelike)
-    k = -u + np.einsum("nia,an->ni", E, D)
-    P = np.ascontiguousarray(np.einsum("nij,nj->in", g, k))
-    return Q, P
+    return g, u, E
 
 
 def zamo_omega(g_tphi: np.ndarray, g_phiphi: np.ndarray) -> np.ndarray:

@@ -267,21 +267,20 @@ def sphere_geodesic(Q: np.ndarray, P: np.ndarray, c) -> None:
     """The flow of c (p_theta^2 + p_phi^2 / sin^2 theta) / 2 over unit time, in place on
     (theta, phi, p_theta, p_phi) = (Q[2], Q[3], P[2], P[3]): the unit vector n turns about
     J = p_theta e_phi - (p_phi / sin theta) e_theta by c |J| (a great circle, through the
-    poles as well: no coordinate singularity in the flow; J_z = p_phi is kept)."""
-    th, ph = Q[2], Q[3]
-    st, ct, sp, cp = np.sin(th), np.cos(th), np.sin(ph), np.cos(ph)
-    n = np.stack([st * cp, st * sp, ct])
-    e_t = np.stack([ct * cp, ct * sp, -st])
-    e_p = np.stack([-sp, cp, np.zeros_like(sp)])
+    poles as well: no coordinate singularity in the flow; J_z = p_phi is kept). Written in
+    the frame (e_rho, e_phi, z) at the old phi: n' = cos w n + sin w (J x n) / |J|."""
+    st, ct = np.sin(Q[2]), np.cos(Q[2])
+    p_t = P[2]
     with np.errstate(divide="ignore", invalid="ignore"):
-        J = P[2] * e_p - (P[3] / st) * e_t
-    size = np.sqrt(np.einsum("ij,ij->j", J, J))
-    omega = c * size
+        spin = P[3] / st  # (J x n) . e_phi
+        size = np.sqrt(p_t * p_t + spin * spin)
+        omega = c * size
+        cw, sw = np.cos(omega), np.sin(omega) / np.where(size > 0, size, np.inf)
+    along_rho = cw * st + sw * p_t * ct  # n' . e_rho(phi)
+    along_phi = sw * spin  # n' . e_phi(phi)
+    rho = np.hypot(along_rho, along_phi)
+    Q[2] = np.arctan2(rho, cw * ct - sw * p_t * st)
+    Q[3] += np.arctan2(along_phi, along_rho)
     with np.errstate(divide="ignore", invalid="ignore"):
-        axis = J / np.where(size > 0, size, 1.0)
-    n = np.cos(omega) * n + np.sin(omega) * np.cross(axis, n, axis=0)
-    rho = np.hypot(n[0], n[1])
-    Q[2] = np.arctan2(rho, n[2])
-    turned = np.arctan2(n[1], n[0])
-    Q[3] = ph + np.remainder(turned - ph + np.pi, 2.0 * np.pi) - np.pi
-    P[2] = -J[0] * np.sin(Q[3]) + J[1] * np.cos(Q[3])
+        # J . e_phi(phi'), with e_phi(phi') = cos d e_phi(phi) - sin d e_rho(phi)
+        P[2] = (p_t * along_rho + spin * ct * along_phi) / rho
