@@ -219,14 +219,21 @@ class TileSampler:
         their Richardson error in radians from a companion run at COMPANION_RATIO x the
         step; sub-pixel samples need none: the pass reports pixel centres)."""
         origins, directions = self.camera.rays_at(xy)
-        self.rays += xy.shape[0] if step is None else 0
-        rays = self.tracer.trace(origins, directions, step=step, cancel=cancel)
+        n = xy.shape[0]
+        self.rays += n if step is None else 0
         if not (self.with_error and companion):
+            rays = self.tracer.trace(origins, directions, step=step, cancel=cancel)
             return rays, seen_direction(rays, origins), None
         step = step or self.tracer.step
         assert step is not None
-        coarse = self.tracer.trace(origins, directions, step=COMPANION_RATIO * step, cancel=cancel)
-        self.error_rays += xy.shape[0]
+        both = self.tracer.trace(
+            np.concatenate([origins, origins]),
+            np.concatenate([directions, directions]),
+            step=np.repeat([step, COMPANION_RATIO * step], n),
+            cancel=cancel,
+        )  # one batch: the companion shares the main run's per-step overhead
+        rays, coarse = both.take(slice(0, n)), both.take(slice(n, None))
+        self.error_rays += n
         return (
             rays,
             seen_direction(rays, origins),
@@ -302,15 +309,16 @@ class TileSampler:
             jj, ii = np.mgrid[0:ny, 0:nx]
             self._trace_nodes(nodes, jj.ravel(), ii.ravel(), origin, cancel)
         else:
-            self._refine(nodes, blocks, s, origin, cancel)
+            self._refine(nodes, blocks, s, (h + 1, w + 1), origin, cancel)
         self._retrace(nodes, cancel)
         if cancel is not None and cancel():
             return None
         return self._pixels(tile, nodes, blocks, origin, cancel)
 
-    def _refine(self, nodes: _Nodes, blocks: _Blocks, s: int, origin, cancel) -> None:
+    def _refine(self, nodes: _Nodes, blocks: _Blocks, s: int, last, origin, cancel) -> None:
         """Trace and accept blocks level by level, from size s down to FINEST; the nodes of
-        blocks still refused there are all traced."""
+        blocks still refused there are all traced. Only blocks reaching the tile's nodes
+        (rows and columns up to ``last``: the lattice may run past them) are refined."""
         ny, nx = nodes.traced.shape
         bj, bi = (a.ravel() for a in np.mgrid[0 : ny - 1 : s, 0 : nx - 1 : s])
         while bj.size:
@@ -326,11 +334,13 @@ class TileSampler:
             if s <= FINEST:
                 dj, di = (a.ravel() for a in np.mgrid[0 : s + 1, 0 : s + 1])
                 jj, ii = (sj[:, None] + dj).ravel(), (si[:, None] + di).ravel()
-                self._trace_nodes(nodes, jj, ii, origin, cancel)
+                inside = (jj <= last[0]) & (ii <= last[1])
+                self._trace_nodes(nodes, jj[inside], ii[inside], origin, cancel)
                 return
             bj = np.concatenate([sj, sj, sj + half, sj + half])
             bi = np.concatenate([si, si + half, si, si + half])
-            s = half
+            reach = (bj <= last[0]) & (bi <= last[1])
+            bj, bi, s = bj[reach], bi[reach], half
 
     def _accept(self, nodes: _Nodes, bj, bi, s: int) -> tuple[np.ndarray, np.ndarray]:
         """Which blocks (size s) are interpolated, and their centres' deviation (radians):

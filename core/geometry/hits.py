@@ -9,7 +9,7 @@ and the other fields are 0. Normals are the geometric, outward (sphere) or user-
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -39,6 +39,10 @@ class Hits:
 
     def __len__(self) -> int:
         return self.hit.shape[0]
+
+    def take(self, rows: np.ndarray | slice) -> Hits:
+        """The hits of the segments ``rows`` only (a slice or indices)."""
+        return Hits(*(getattr(self, f.name)[rows] for f in fields(self)))
 
     def assign(self, rows: np.ndarray, other: Hits, other_rows: np.ndarray) -> None:
         """Replace the hits ``rows`` by ``other``'s ``other_rows``, in place (every field)."""

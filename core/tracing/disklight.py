@@ -97,7 +97,7 @@ class DiskLight:
         got = np.zeros(rows.shape[0], dtype=bool)
         other = np.flatnonzero(~cross)
         got[other] = self.geometry.record_hits(rows[other], a[other], b[other],
-                                               _take(hits, other), out)  # fmt: skip
+                                               hits.take(other), out)  # fmt: skip
         on = np.flatnonzero(cross)
         if on.size == 0:
             return got
@@ -128,10 +128,3 @@ class DiskLight:
         out.ending[r[bad]] = ENDING["failed"]
         rgb = self.disk.colour(np.where(bad, 0.0, g), self.model.radius_at(X))
         return rgb, bad
-
-
-def _take(hits: Hits, rows: np.ndarray) -> Hits:
-    """The hits of the segments ``rows`` only."""
-    out = Hits.miss(rows.shape[0])
-    out.assign(np.arange(rows.shape[0]), hits, rows)
-    return out

@@ -6,7 +6,7 @@ sent to the intersector, and only the volumes a segment's bounds meet are integr
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
@@ -49,6 +49,10 @@ class RayResults:
             object_id=np.full(n, -1, dtype=np.int32),
             tangent=np.zeros((n, 3)),
         )
+
+    def take(self, rows: slice | np.ndarray) -> RayResults:
+        """The results of the rays ``rows`` (a slice or indices)."""
+        return RayResults(**{f.name: getattr(self, f.name)[rows] for f in fields(self)})
 
     def accumulate(
         self, rows: np.ndarray, radiance: np.ndarray | None, trans: np.ndarray | None

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..integrators import Method, PoincareTransformed
+from ..integrators._common import take
 from ..integrators.system import CaptureTest
 
 SPLITS = 3  # a failed step is retried as 2, then 4, then 8 shorter steps
@@ -49,6 +50,7 @@ class Stepper:
             return new, ok, drift
         bad = np.flatnonzero(~ok)
         K_bad = K.subset(bad)
+        h = take(h, bad)
         mid, ok_mid, drift_mid = self.step(
             K_bad, tuple(a[..., bad] for a in state), 0.5 * h, splits - 1
         )
@@ -60,7 +62,7 @@ class Stepper:
         if go.any():
             g = np.flatnonzero(go)
             e2, o2, d2 = self.step(
-                K_bad.subset(g), tuple(a[..., g] for a in mid), 0.5 * h, splits - 1
+                K_bad.subset(g), tuple(a[..., g] for a in mid), 0.5 * take(h, g), splits - 1
             )
             for a, b in zip(end, e2, strict=True):
                 a[..., g] = b

@@ -20,6 +20,7 @@ import numpy as np
 from .. import checks, integrators
 from ..charts import chart_for
 from ..geometry import segment_meets_box
+from ..integrators._common import take
 from ..observer import medium_momenta, spacetime_momenta
 from . import dense
 from .disklight import DiskLight
@@ -148,11 +149,15 @@ class Tracer:
         self,
         origins: np.ndarray,
         directions: np.ndarray,
-        step: float | None = None,
+        step: float | np.ndarray | None = None,
         cancel: Callable[[], bool] | None = None,
     ) -> RayResults:
-        """Trace rays (N, 3) from world origins along unit world directions."""
+        """Trace rays (N, 3) from world origins along unit world directions, at ``step``
+        (the tracer's by default; one for all, or (N,) per ray: runs at several steps share
+        one batch, and its per-step overhead)."""
         n = origins.shape[0]
+        if np.ndim(step) and np.shape(step) != (n,):
+            raise ValueError(f"step: one for all rays or one per ray ({n}), got {np.shape(step)}")
         out = RayResults.empty(n, origins, directions)
         if not self.curved:
             self._straight(np.arange(n), origins, directions, out)
@@ -165,10 +170,12 @@ class Tracer:
         if outside.size:
             self._straight_to_region(outside, origins, directions, start, out)
         todo = np.flatnonzero(np.isfinite(start[:, 0]) & (out.ending < 0))
-        h = step or self.step
+        h = self.step if step is None else step
         assert h is not None  # a curved scene's tracer has a step
         if todo.size:
             camera = self._to_local(origins[todo]).T  # (3, M): where each ray is seen from
+            if np.ndim(h):
+                h = np.asarray(h, dtype=np.float64)[todo]
             self._integrate(todo, start[todo].T.copy(), D[todo].T.copy(), out, h, cancel, camera)
         return out
 
@@ -268,7 +275,7 @@ class Tracer:
                 idx, X, camera = idx[keep], X[:, keep], camera[:, keep]
                 state = tuple(a[..., keep] for a in state)
                 K = K.subset(keep)
-                H0, streak = H0[keep], streak[keep]
+                H0, streak, h = H0[keep], streak[keep], take(h, keep)
             X_prev = X
         out.ending[idx] = ENDING["max_steps"]
         out.steps[idx] = step
