@@ -124,7 +124,7 @@ def render(
     # with tolerance_px the companion run always goes: its estimate picks the rays to redo
     with_error = "error" in passes or "error_px" in passes or tolerance_px is not None
     with_error = with_error and tracer.curved
-    image = _Buffers(n, with_error, camera.width)
+    image = _Buffers(n, with_error, camera.width, "direction" in passes)
     kind, count = workers_module.choose(parallel, workers, n, cores)
     sampled = samples > 1 or (tolerance_px is not None and tracer.curved)
     if sampled:
@@ -160,8 +160,8 @@ def render(
     result = image.result(camera, passes, time.perf_counter() - start_time, was_cancelled, tracer)
     result.summary["parallel"] = f"{count} {kind}" if kind != "inline" else "inline"
     result.summary["pixel_angle"] = pixel_angle
-    if "error_px" in result.passes:
-        result.passes["error_px"] = result.passes["error_px"] / np.float32(pixel_angle)
+    if "error_px" in result.passes:  # its own copy: divided in place (no full-frame temporary)
+        result.passes["error_px"] /= np.float32(pixel_angle)
     _summarise_px(result.summary, pixel_angle)
     return result
 
@@ -318,32 +318,61 @@ def _trace_chunk(tracer: Tracer, origins, directions, with_error: bool, cancel, 
 
 
 class _Buffers:
-    """Flat per-pixel buffers filled chunk by chunk (spans of flat indices, or tiles)."""
+    """Flat per-pixel buffers filled chunk by chunk (spans of flat indices, or tiles).
 
-    def __init__(self, n: int, with_error: bool, width: int):
+    Only the output's: the energy error is kept as its running maximum, the seen
+    directions only for the ``direction`` pass. They are allocated at the first chunk
+    stored, after the worker processes have forked: a worker forked with them would keep
+    the original of every page the caller then writes (copy-on-write), a full-frame copy
+    of what was filled before the fork (issue 13: 17 bytes a pixel in the workers, 20 in
+    the caller, that grew with the image).
+    """
+
+    def __init__(self, n: int, with_error: bool, width: int, with_direction: bool):
+        self.n = n
+        self.with_error = with_error
+        self.with_direction = with_direction
+        self.width = width
+        self.rays = 0
+        self.error_rays = 0
+        self.energy_max: float | None = None  # over pixels with a finite error, not captured
+        self.allocated = False
+
+    def allocate(self) -> None:
+        """The full-frame buffers (once; the first store or the result does it)."""
+        if self.allocated:
+            return
+        n = self.n
         self.rgba = np.zeros((n, 4), dtype=np.float32)
         self.error = np.zeros(n, dtype=np.float32)
         self.steps = np.zeros(n, dtype=np.int32)
         self.ending = np.full(n, -1, dtype=np.int8)
-        self.energy = np.zeros(n)
         self.redshift = np.full(n, np.nan, dtype=np.float32)
-        self.direction = np.full((n, 3), np.nan, dtype=np.float32)
-        self.with_error = with_error
-        self.width = width
-        self.rays = 0
-        self.error_rays = 0
+        self.direction = np.full((n if self.with_direction else 0, 3), np.nan, dtype=np.float32)
+        self.allocated = True
+
+    def _energy(self, idx, energy) -> None:
+        """Fold the energy errors of stored pixels ``idx`` into ``energy_max``."""
+        ending = self.ending[idx]
+        kept = (ending >= 0) & np.isfinite(self.error[idx]) & (ending != ENDING["captured"])
+        if np.any(kept):
+            top = float(np.max(np.asarray(energy)[kept]))
+            if self.energy_max is not None:  # np.maximum: a NaN stays, as in one np.max
+                top = float(np.maximum(self.energy_max, top))
+            self.energy_max = top
 
     def store(self, span, chunk, background: Background) -> int:
         """Store a finished chunk; -> the number of pixels it filled."""
+        self.allocate()
         if isinstance(chunk[0], Tile):
             return self._store_tile(*chunk)
         a, b = span
         rays, seen, error = chunk
         self.rgba[a:b] = shade(rays, background)
-        self.direction[a:b] = seen
+        if self.with_direction:
+            self.direction[a:b] = seen
         self.steps[a:b] = rays.steps
         self.ending[a:b] = rays.ending
-        self.energy[a:b] = rays.energy_error
         self.redshift[a:b] = rays.redshift
         self.rays += b - a
         if error is not None:
@@ -351,6 +380,7 @@ class _Buffers:
             self.error_rays += b - a
         failed = rays.ending == ENDING["failed"]
         self.error[a:b][failed] = np.inf
+        self._energy(slice(a, b), rays.energy_error)
         return b - a
 
     def _rows(self, tile: Tile) -> np.ndarray:
@@ -363,10 +393,11 @@ class _Buffers:
         self.rgba[idx] = part.rgba
         self.steps[idx] = part.steps
         self.ending[idx] = part.ending
-        self.energy[idx] = part.energy
         self.error[idx] = part.error
-        self.direction[idx] = part.direction
+        if self.with_direction:
+            self.direction[idx] = part.direction
         self.redshift[idx] = part.redshift
+        self._energy(idx, part.energy)
         self.rays += part.rays
         self.error_rays += part.error_rays
         return idx.size
@@ -387,6 +418,7 @@ class _Buffers:
         return (tile.x0, tile.y0, tile.x1, tile.y1), out
 
     def result(self, camera, passes, seconds, cancelled, tracer) -> RenderResult:
+        self.allocate()
         h, w = camera.height, camera.width
         out = RenderResult(self.rgba.reshape(h, w, 4), cancelled=cancelled)
         if "error" in passes:
@@ -410,9 +442,11 @@ class _Buffers:
         traced = self.ending >= 0
         finite = traced & np.isfinite(self.error) & (self.ending != ENDING["captured"])
         errs = self.error[finite] if self.with_error else self.error[:0]
+        del finite
+        error_max = float(np.max(errs)) if errs.size else None
         counts = {name: int(np.count_nonzero(self.ending == code)) for name, code in ENDING.items()}
         # no estimate (no error pass, nothing integrated, every ray failed): None, never 0
-        integrated = self.energy[finite] if tracer.curved else self.energy[:0]
+        energy_max = self.energy_max if tracer.curved else None
         return {
             "time_s": seconds,
             "rays": self.rays,
@@ -420,11 +454,12 @@ class _Buffers:
             "error_rays": self.error_rays,
             "steps": int(self.steps.sum()),
             "failed": counts["failed"],
-            "error_median": float(np.median(errs)) if errs.size else None,
-            "error_max": float(np.max(errs)) if errs.size else None,
+            # errs is a copy: the median may sort it in place (no second full-frame one)
+            "error_median": float(np.median(errs, overwrite_input=True)) if errs.size else None,
+            "error_max": error_max,
             # |H - H0| at the end of the rays that colour a pixel (a captured ray's last
             # step inside the horizon says nothing about the image)
-            "energy_error_max": float(np.max(integrated)) if integrated.size else None,
+            "energy_error_max": energy_max,
             "endings": counts,
             "step": tracer.step,
             "region_radius": None if tracer.region is None else tracer.region.radius,
