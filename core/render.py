@@ -54,6 +54,10 @@ _MIN_CHUNK = 2048
 TRACE_SHARE = 0.5
 """With ``tolerance_px``, the integration and far field get this share of it (the tracer's
 ``tolerance``); the image interpolation gets the rest."""
+TILES_PER_WORKER = 2
+"""Tiles per worker (core.render's bands, _tiles_for): the work of a frame is rarely even
+over its rows (the hole, the photon ring), and a worker with a second tile to take
+evens it out; each tile costs a few batches' per-step overhead."""
 
 
 @dataclass
@@ -193,16 +197,16 @@ def _tile_work(sampler: TileSampler, tile_list):
 
 def _tiles_for(camera, workers: int) -> list[Tile]:
     """The image's tiles: bands of whole rows (the width split only past MAX_TILE_PIXELS),
-    STRIDE m - 1 rows each (with the lattice's two margin rows, whole coarsest blocks), at
-    least two per worker where the image is tall enough, and at most MAX_TILE_PIXELS: every
-    round of a tile's quadtree is then one batch as large as the image allows (a batch's
-    per-step overhead is paid per round, whatever its size)."""
+    TILES_PER_WORKER per worker, of equal height, at most MAX_TILE_PIXELS each (a band's
+    lattice may run past its last row: only blocks reaching the band are refined). Every
+    round of a tile's quadtree is one batch, whose per-step overhead is paid per round
+    whatever its size: fewer, larger tiles cost less, more balance the workers better."""
     w, h, stride = camera.width, camera.height, sampling_module.STRIDE
     most = sampling_module.MAX_TILE_PIXELS
     cols = w if w * (2 * stride - 1) <= most else stride * max(2, most // (2 * stride**2)) - 1
-    m = max(2, -(-(-(-h // (2 * workers)) + 1) // stride))
-    m = min(m, max(2, (most // cols + 1) // stride))
-    return tiles(w, h, cols, stride * m - 1)
+    bands = max(TILES_PER_WORKER * workers, -(-h * cols // most))
+    rows = max(-(-h // bands), stride - 1)
+    return tiles(w, h, cols, -(-h // -(-h // rows)))
 
 
 def _check_sampling(tolerance_px, samples, pixel_filter, filter_size) -> None:

@@ -37,6 +37,7 @@ is their filter-weighted mean (box over the pixel, or Blackman-Harris of width
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -296,7 +297,11 @@ class TileSampler:
 
     # --- the quadtree ------------------------------------------------------------------
     def render_tile(self, tile: Tile, cancel=None) -> TileResult | None:
-        """Colour and passes of one tile (None if cancelled)."""
+        """Colour and passes of one tile (None if cancelled). Threads share the sampler:
+        each tile works on its own shallow copy (its origin and ray counts)."""
+        return copy.copy(self)._render_tile(tile, cancel)
+
+    def _render_tile(self, tile: Tile, cancel) -> TileResult | None:
         self.rays = self.error_rays = 0
         h, w = tile.shape
         s = STRIDE if self.interpolation > 0 else 1

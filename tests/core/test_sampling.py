@@ -149,3 +149,16 @@ def test_tiles_shown_progressively_are_the_image():
     assert np.all(seen == 1) and calls[0] >= 2
     np.testing.assert_array_equal(canvas, result.rgba)
     assert result.summary["pixels"] == 1200 and 0 < result.summary["rays"]
+
+
+def test_threads_share_the_sampler_safely():
+    """Two threads render tiles at once (the sampler is shared): the image is exactly the
+    one-worker image (each tile had kept its own origin only since the race was found: two
+    16-row bands drew each other's rows)."""
+    cam = core.Camera.orthographic((0, 0, 5), (0, 0, 0), (0, 1, 0), 8.0, 32, 64)
+    scene = _edge_scene(0.3)
+    one = core.render(scene, cam, samples=4, pixel_filter="box", passes=(), workers=1)
+    two = core.render(scene, cam, samples=4, pixel_filter="box", passes=(), workers=2,
+                      parallel="threads")  # fmt: skip
+    assert two.summary["parallel"] == "2 threads"
+    np.testing.assert_array_equal(two.rgba, one.rgba)
