@@ -27,7 +27,8 @@ Sections (``--only``):
 - ``quality``: issue #13's targets (benchmarks/image_quality.py): error-pass honesty on the
   Kerr board scene, anti-aliasing against 8x8 supersampling, Preview and Final frames
   (512x288; ``--full``: 1920x1080, targets <= 20 s and <= 5 min), and with ``--baseline
-  DIR`` (a checkout of af19e2b) the speed-up over it at equal measured accuracy.
+  DIR`` (a checkout of af19e2b) the speed-up over it at equal measured accuracy (512x288;
+  ``--full`` adds 1920x1080, one run each, without the accuracy reference).
 - ``calibrate`` (``--full``): the error constants behind the tolerance -> step rule
   (core.trace.ERROR_CONSTANTS) and the far-field constant.
 
@@ -591,6 +592,9 @@ def bench_quality(full: bool, baseline: str | None) -> None:
     image_quality.anti_aliasing(128)
     if baseline:
         image_quality.versus(baseline, 512, 288)
+        if full:  # af19e2b takes ~2.5 min a 1080p frame: one run each; a dopri5 1e-11
+            # reference would take ~15 min more: accuracy is measured at 512x288
+            image_quality.versus(baseline, 1920, 1080, repeats=1, reference=False)
     image_quality.speed(*((1920, 1080) if full else (512, 288)))
 
 
