@@ -203,7 +203,7 @@ class Tracer:
             out.ending[rows[miss]] = ENDING["escaped"]
 
     # --- the integration ---------------------------------------------------------------
-    def _integrate(self, rows, X, D, out: RayResults, h: float, cancel, camera):
+    def _integrate(self, rows, X, D, out: RayResults, h: float | np.ndarray, cancel, camera):
         """Follow rays from local positions X (3, M) along local directions D (3, M).
 
         Per step, everything is done in the model's local frame on (3, M) arrays; world
