@@ -68,17 +68,12 @@ def _observer_frames(model, chart, S: np.ndarray):
     """At spatial coords S (3, N): the metric g (N, 4, 4), the observer's u (N, 4) and its
     spatial triad E (N, 4, 3) (the module); an ObserverError where none exists."""
     n_rays = S.shape[1]
-    Q = np.vstack([np.zeros((1, n_rays)), S])
-    with np.errstate(all="ignore"):
-        ginv = inverse_metric_soa(model, Q)
-        try:
-            g = np.linalg.inv(ginv)
-        except np.linalg.LinAlgError:
-            raise _diagnose(model, chart, Q, ginv, np.ones(n_rays, dtype=bool)) from None
+    Q, ginv, g = _metric(model, S)
+    if g is None:
+        raise _diagnose(model, chart, Q, ginv, np.ones(n_rays, dtype=bool))
     xi_t = np.zeros((n_rays, 4))
     xi_t[:, 0] = 1.0
-    xi_phi = np.zeros((n_rays, 4))
-    xi_phi[:, 1:] = chart.axial_killing(S).T
+    xi_phi = _axial_vector(chart, S)
     omega = zamo_omega(_dot(g, xi_t, xi_phi), _dot(g, xi_phi, xi_phi))
     u = xi_t + omega[:, None] * xi_phi
     norm2 = _dot(g, u, u)
@@ -98,6 +93,25 @@ def _observer_frames(model, chart, S: np.ndarray):
     return g, u, E
 
 
+def _metric(model, S: np.ndarray):
+    """At spatial coords S (3, N): Q (4, N) at t = 0, g^ij and g_ij (N, 4, 4); g_ij None
+    where g^ij cannot be inverted."""
+    Q = np.vstack([np.zeros((1, S.shape[1])), S])
+    with np.errstate(all="ignore"):
+        ginv = inverse_metric_soa(model, Q)
+        try:
+            return Q, ginv, np.linalg.inv(ginv)
+        except np.linalg.LinAlgError:
+            return Q, ginv, None
+
+
+def _axial_vector(chart, S: np.ndarray) -> np.ndarray:
+    """ξ_φ (N, 4), the rotation about z, at spatial coords S (3, N)."""
+    xi_phi = np.zeros((S.shape[1], 4))
+    xi_phi[:, 1:] = chart.axial_killing(S).T
+    return xi_phi
+
+
 def zamo_omega(g_tphi: np.ndarray, g_phiphi: np.ndarray) -> np.ndarray:
     """Angular velocity ω = −g(ξ_t, ξ_φ) / g(ξ_φ, ξ_φ) of the zero-angular-momentum observer
     (0 on the axis, where g(ξ_φ, ξ_φ) = 0)."""
@@ -112,17 +126,11 @@ def killing_block(model, chart, S: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
     form). NaN where the metric is singular."""
     if chart.time_index is None:
         return model.killing_block_soa(S)
-    n_rays = S.shape[1]
-    Q = np.vstack([np.zeros((1, n_rays)), S])
-    with np.errstate(all="ignore"):
-        ginv = inverse_metric_soa(model, Q)
-        try:
-            g = np.linalg.inv(ginv)
-        except np.linalg.LinAlgError:
-            nan = np.full(n_rays, np.nan)
-            return nan, nan, nan
-    xi_phi = np.zeros((n_rays, 4))
-    xi_phi[:, 1:] = chart.axial_killing(S).T
+    _, _, g = _metric(model, S)
+    if g is None:
+        nan = np.full(S.shape[1], np.nan)
+        return nan, nan, nan
+    xi_phi = _axial_vector(chart, S)
     return g[:, 0, 0], np.einsum("ni,ni->n", g[:, 0, :], xi_phi), _dot(g, xi_phi, xi_phi)
 
 

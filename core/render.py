@@ -12,6 +12,7 @@ that ran out of steps in ``MAX_STEPS_COLOR``, never as a plausible colour.
 
 from __future__ import annotations
 
+import math
 import re
 import time
 from collections.abc import Callable, Sequence
@@ -204,9 +205,9 @@ def _tiles_for(camera, workers: int) -> list[Tile]:
     w, h, stride = camera.width, camera.height, sampling_module.STRIDE
     most = sampling_module.MAX_TILE_PIXELS
     cols = w if w * (2 * stride - 1) <= most else stride * max(2, most // (2 * stride**2)) - 1
-    bands = max(TILES_PER_WORKER * workers, -(-h * cols // most))
-    rows = max(-(-h // bands), stride - 1)
-    return tiles(w, h, cols, -(-h // -(-h // rows)))
+    bands = max(TILES_PER_WORKER * workers, math.ceil(h * cols / most))
+    bands = min(bands, math.ceil(h / (stride - 1)))  # bands of at least STRIDE - 1 rows
+    return tiles(w, h, cols, math.ceil(h / bands))
 
 
 def _check_sampling(tolerance_px, samples, pixel_filter, filter_size) -> None:
