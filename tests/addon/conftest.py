@@ -3,7 +3,9 @@
 Once per session (per xdist worker) the extension zip is built (or dist/ reused when it is
 newer than every source file), installed with ``bpy.ops.extensions.package_install_files``
 into a temporary Blender user folder (BLENDER_USER_RESOURCES, set here before bpy is
-imported) and enabled. Each test starts from an empty scene.
+imported) and enabled. Each test starts from an empty scene (``scene``) or from Blender's
+own factory startup file (``factory_scene``: the cube, the light and the camera in the
+"Collection" child collection, as a new user sees it).
 
 Without the bpy module the whole folder is skipped.
 """
@@ -115,6 +117,20 @@ def scene(addon: Addon):
     sc.symray.pass_error = False
     sc.symray.tolerance = 1e-4
     sc.symray.quality = "RADIANS"  # the tests below were written for radians, one ray a pixel
+    return sc
+
+
+@pytest.fixture
+def factory_scene(addon: Addon):
+    """Blender's factory startup scene (Cube, Light, Camera in "Collection", the grey
+    World) with SymRay as the render engine at a small resolution; nothing else changed."""
+    import bpy
+
+    bpy.ops.wm.read_homefile(use_factory_startup=True)
+    sc = bpy.context.scene
+    sc.render.engine = "SYMRAY"
+    sc.render.resolution_x, sc.render.resolution_y = 64, 48
+    sc.render.resolution_percentage = 100
     return sc
 
 
