@@ -15,10 +15,12 @@ from __future__ import annotations
 
 import ctypes
 import itertools
+import mmap
 import multiprocessing
 import os
 import sys
 import threading
+import time
 import warnings
 from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import (
@@ -29,6 +31,8 @@ from concurrent.futures import (
     wait,
 )
 from typing import Any, TypeVar
+
+import numpy as np
 
 PARALLEL = ("auto", "processes", "threads")
 """How chunks run: "auto" = processes where fork exists and the image is big enough."""
@@ -43,6 +47,11 @@ IN_FLIGHT_PER_WORKER = 2
 one queued. Finished chunks wait for the caller (its shading and storing), so this bounds
 the results held in memory (issue 11: a 4096x4096 flat frame peaked at 2.1 GB in two
 processes, 0.75 GB inline, before)."""
+
+BLAS_BUFFER = 33 << 20
+"""Address space (bytes) a BLAS buffer takes (OpenBLAS maps 32 MiB and a page)."""
+_BLAS_WARM_S = 0.05  # how long the threads of _prepare_blas call BLAS together
+_blas_callers = 1  # concurrent BLAS callers the BLAS library holds buffers for
 
 Span = tuple[int, int]
 Cancel = Callable[[], bool]
@@ -153,10 +162,72 @@ def run_chunks(
             finally:
                 _JOBS.pop(token, None)
             return
+    _prepare_blas(workers + 1)  # and the caller's thread: it shades finished chunks
     with ThreadPoolExecutor(max_workers=workers) as pool:
         yield from _bounded(
-            lambda span: pool.submit(job, span, cancelled), spans, limit, cancelled, lambda: None
+            lambda span: _submit_to_thread(pool, job, span, cancelled),
+            spans,
+            limit,
+            cancelled,
+            lambda: None,
         )
+
+
+def _submit_to_thread(pool: ThreadPoolExecutor, job, span: Span, cancelled: Cancel) -> Future:
+    """pool.submit(job, span, cancelled); a thread that cannot start for want of memory
+    (its stack) raises MemoryError, as the job's own arrays would."""
+    try:
+        return pool.submit(job, span, cancelled)
+    except RuntimeError as exc:
+        if "start new thread" not in str(exc):
+            raise
+        raise MemoryError(f"no memory for a worker thread ({exc})") from exc
+
+
+def _prepare_blas(callers: int) -> None:
+    """Have numpy's BLAS map a buffer for each of ``callers`` threads calling it at once.
+
+    OpenBLAS maps a buffer for a call that finds all its buffers in use, and keeps it for
+    the process's life; where that map fails, it ends the process (0.3.34: "Memory
+    allocation still failed after 10 retries", exit 1) or retries forever (0.3.23). Worker
+    threads calling BLAS together (matmul, solve) need one each: mapped here, before the
+    chunks' arrays take the memory, they are there when the memory runs out, and numpy's
+    MemoryError reaches the caller instead. Where even this headroom is missing:
+    MemoryError. Forked workers need none: each inherits its parent's buffer.
+    """
+    global _blas_callers
+    if callers <= _blas_callers:
+        return
+    together = threading.Barrier(callers)
+    small = np.ones((48, 48))  # below OpenBLAS's threading threshold: the caller's buffer
+
+    def call_blas() -> None:
+        try:
+            together.wait()
+        except threading.BrokenBarrierError:  # no headroom: _prepare_blas raises
+            return
+        end = time.perf_counter() + _BLAS_WARM_S
+        while time.perf_counter() < end:  # inside BLAS ~all the time: the calls overlap
+            small @ small
+
+    helpers = [threading.Thread(target=call_blas, daemon=True) for _ in range(callers - 1)]
+    try:
+        for thread in helpers:
+            thread.start()  # their stacks are mapped before the headroom is looked at
+        # map the address space the new buffers need, and release it for them
+        mmap.mmap(-1, (callers - _blas_callers) * BLAS_BUFFER).close()
+    except (OSError, RuntimeError) as exc:  # RuntimeError: a thread could not start
+        together.abort()
+        raise MemoryError(f"no memory for {callers} threads' BLAS buffers") from exc
+    finally:
+        if together.broken:
+            for thread in helpers:
+                if thread.ident is not None:
+                    thread.join()
+    call_blas()
+    for thread in helpers:
+        thread.join()
+    _blas_callers = callers
 
 
 class _PoolUnavailable(Exception):

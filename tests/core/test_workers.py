@@ -4,6 +4,8 @@ errors and the fallback (core.workers)."""
 import errno
 import multiprocessing
 import os
+import subprocess
+import sys
 import threading
 import time
 import weakref
@@ -153,6 +155,67 @@ def test_a_fork_that_fails_falls_back_to_threads(monkeypatch):
     for child in multiprocessing.active_children():
         child.join(5)
     assert not multiprocessing.active_children() and not workers._JOBS
+
+
+_LOW_MEMORY_CHILD = """
+import resource, sys
+import core
+from tests.core.test_workers import camera, mirage_scene
+
+def address_space():
+    with open("/proc/self/status") as status:
+        return next(int(line.split()[1]) << 10 for line in status if line.startswith("VmSize"))
+
+scene = mirage_scene()
+core.render(scene, camera(8), method="rk4", tolerance=1e-2, workers=1)  # numpy and BLAS warm
+limit = address_space() + (int(sys.argv[1]) << 20)
+resource.setrlimit(resource.RLIMIT_AS, (limit, resource.RLIM_INFINITY))
+try:  # 48 x 48: two chunks, one per thread
+    out = core.render(scene, camera(48), method="rk4", tolerance=1e-2, workers=2,
+                      parallel="threads")
+except MemoryError:
+    print("MemoryError")
+else:
+    print("rendered", out.summary["parallel"], int(out.summary["steps"]))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS and /proc")
+def test_threads_out_of_memory_raise_memory_error_never_exit():
+    """Issue 22 item 10: threads under an address-space limit end with MemoryError (the
+    add-on's "ran out of memory"), never by OpenBLAS ending the process ("Memory allocation
+    still failed after 10 retries", exit 1: before, at 16, 32 and often 48 MiB above the
+    warm process). With room enough the image is the one rendered inline."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    env = dict(os.environ, PYTHONPATH=root)
+    outcomes = {}
+    for mib in (16, 32, 48, 512):
+        child = subprocess.run(
+            [sys.executable, "-c", _LOW_MEMORY_CHILD, str(mib)],
+            capture_output=True, text=True, cwd=root, env=env, timeout=120,
+        )  # fmt: skip
+        assert child.returncode == 0, (mib, child.returncode, child.stdout, child.stderr)
+        outcomes[mib] = child.stdout.split()
+    assert all(outcomes[mib] == ["MemoryError"] for mib in (16, 32))
+    assert outcomes[48][0] in ("MemoryError", "rendered")
+    inline = core.render(mirage_scene(), camera(48), method="rk4", tolerance=1e-2, workers=1)
+    assert outcomes[512] == ["rendered", "2", "threads", str(int(inline.summary["steps"]))]
+
+
+def test_a_thread_that_cannot_start_is_out_of_memory(monkeypatch):
+    """A worker thread whose stack cannot be mapped raises MemoryError (the add-on's "ran
+    out of memory"), not Python's RuntimeError("can't start new thread")."""
+
+    def no_thread(self):
+        raise RuntimeError("can't start new thread")
+
+    monkeypatch.setattr(threading.Thread, "start", no_thread)
+    monkeypatch.setattr(workers, "_blas_callers", 1)  # as in a fresh process
+    with pytest.raises(MemoryError, match="BLAS buffers"):  # _prepare_blas's helper thread
+        list(workers.run_chunks(_chunk_of_rays, [(0, 10)], "threads", 1, workers.CancelLatch(None)))
+    monkeypatch.setattr(workers, "_blas_callers", 2)  # as if prepared: the pool's thread
+    with pytest.raises(MemoryError, match="worker thread"):
+        list(workers.run_chunks(_chunk_of_rays, [(0, 10)], "threads", 1, workers.CancelLatch(None)))
 
 
 def _chunk_of_rays(span, cancel):
