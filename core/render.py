@@ -295,7 +295,7 @@ def check_scene_camera(scene: Scene, position, tolerance: float = 1e-8) -> None:
 def tracer_for_camera(scene: Scene, options: TraceOptions, extent: float, position) -> Tracer:
     """The scene's tracer; with the default method (options.method None) and a model whose
     explicit split cannot start rays at the camera (Kerr's Boyer–Lindquist split: a camera
-    on the polar axis or within its capture radius, where Kerr–Schild still can), the
+    on the polar axis, where Kerr–Schild still can), the
     tracer of the implicit default (DEFAULT_METHOD) in the model's own chart instead."""
     tracer = Tracer(scene, options, extent)
     if options.method is not None or not tracer.curved:

@@ -411,3 +411,22 @@ def test_adaptive_sampling_traces_the_disk():
     # 99 % within 2.3e-4 measured; the worst (15 %) where g changes steeply across a pixel
     # (the shadow's edge, higher-order images): the rays there are 0.5 px accurate only
     assert np.quantile(ratio, 0.99) < 1e-3
+
+
+def test_kerr_split_redshift_agrees_with_dopri5_to_float32():
+    """a/M = 0.9 at 80 deg with a disk to 8 rg, 24x16: g of the default method (the explicit
+    split, tolerance 1e-8) is dopri5's at 1e-11 within 1e-8 relative, so the redshift pass
+    (float32) agrees to one float32 unit (the split's long steps put the disk's crossing off
+    by ~1e-5 on the step's cubic Hermite path: g off by up to 8e-6)."""
+    scene = core.Scene(
+        model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"), disk=core.AccretionDisk(r_out=8.0)
+    )
+    cam = camera_at(20.0, 24, 16)
+    tracer, _, _, split = trace(scene, cam)
+    assert tracer.method.name == "blanes_moan_s10"
+    ref = trace(scene, cam, method="dopri5", tolerance=1e-11)[3]
+    on = np.isfinite(ref.redshift)
+    assert on.sum() > 150 and np.array_equal(np.isfinite(split.redshift), on)
+    assert np.max(np.abs(split.redshift[on] / ref.redshift[on] - 1)) < 1e-8
+    g, g_ref = (x.redshift[on].astype(np.float32) for x in (split, ref))  # the pass's type
+    assert np.max(np.abs(g / g_ref - 1)) <= np.finfo(np.float32).eps
