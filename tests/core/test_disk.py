@@ -411,3 +411,43 @@ def test_adaptive_sampling_traces_the_disk():
     # 99 % within 2.3e-4 measured; the worst (15 %) where g changes steeply across a pixel
     # (the shadow's edge, higher-order images): the rays there are 0.5 px accurate only
     assert np.quantile(ratio, 0.99) < 1e-3
+
+
+# --- a camera in the disk's plane ---------------------------------------------------------
+
+
+def _in_plane_view(z, look, opacity):
+    """A 16 x 12 camera at (0, -5, z), inside the disk (r_out 8), looking up, down or
+    along the plane (towards the hole); (render, ray directions' z)."""
+    scene = core.Scene(
+        model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"),
+        disk=core.AccretionDisk(r_out=8.0, opacity=opacity),
+        background="procedural",
+    )
+    target, up = {"up": ((0, -5, 1), (0, 1, 0)), "down": ((0, -5, -1), (0, 1, 0)),
+                  "along": ((0, 0, 0), (0, 0, 1))}[look]  # fmt: skip
+    cam = core.Camera.perspective(position=(0, -5, z), look_at=np.add(target, (0, 0, z)),
+                                  up=up, fov_deg=60, width=16, height=12)  # fmt: skip
+    out = core.render(scene, cam, tolerance=1e-6, workers=1, parallel="threads")
+    return out, cam.rays()[1][:, 2].reshape(12, 16)
+
+
+@pytest.mark.parametrize("opacity", [1.0, 0.6])
+def test_a_camera_in_the_disk_plane_sees_what_a_camera_beside_it_sees(opacity):
+    """A camera exactly in the disk's plane (z = 0) inside its outer radius: a ray leaving
+    the plane does not cross the disk where it starts (every pixel was disk, even looking
+    straight up). Each ray sees what it sees from z = 1e-9 on its side of the plane (the
+    limit): up and down away from the disk, along the plane the halves of the two."""
+    for look in ("up", "down", "along"):
+        at, dz = _in_plane_view(0.0, look, opacity)
+        above, _ = _in_plane_view(1e-9, look, opacity)
+        below, _ = _in_plane_view(-1e-9, look, opacity)
+        assert np.all(dz != 0)
+        side = (dz > 0)[..., None]
+        expected = np.where(side, above.rgba, below.rgba)
+        np.testing.assert_allclose(at.rgba, expected, atol=1e-6)
+        ending = np.where(side[..., 0], above.passes["ending"], below.passes["ending"])
+        np.testing.assert_array_equal(at.passes["ending"], ending)
+        if look != "along":  # looking away from the plane: no disk at all, only sky
+            assert np.all(at.passes["ending"] == ENDING["escaped"])
+            assert np.all(np.isnan(at.passes["redshift"]))
