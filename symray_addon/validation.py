@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..core import checks, expressions
-from ..core.geometry.disk import isco
+from ..core.geometry.disk import check_spin, isco
 from ..core.integrators import METHODS, Splitting
 
 INDEX_NAMES: tuple[str, ...] = ("x", "y", "z")
@@ -290,6 +290,8 @@ def _disk_checks(settings: Any) -> list[Callable[[], Any]]:
         lambda: checks.check_range("Disk Brightness", disk.brightness, 0.0),
         lambda: checks.check_range("Disk Opacity", disk.opacity, 0.0, 1.0, lo_open=True),
     ]
+    if settings.model == "KERR" and not spin_problem(settings.spin):
+        found.append(lambda: check_spin(settings.spin, "Spin a/M"))
     if not disk.use_isco:
         found.append(
             lambda: checks.check_range(

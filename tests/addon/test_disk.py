@@ -107,3 +107,27 @@ def test_f12_writes_the_redshift_pass(addon, scene, helpers, tmp_path):
     assert g[on].min() < 0.9 and g[on].max() > 1.1  # the receding and approaching sides
     left = on & (np.arange(32) < 16)[None, :]
     assert np.median(g[left]) > np.median(g[on & ~left])  # approaching side: x < 0, left
+
+
+@pytest.mark.parametrize("spin", [1.0, -1.0])
+def test_an_extremal_spin_with_the_disk_is_a_named_problem(addon, scene, helpers, spin):
+    """Spin a/M = ±1 with the disk: the panel's checks name it as it is typed, and a render
+    refuses with the same message (it was a bare ZeroDivisionError, the panel silent);
+    without the disk, or just below ±1, nothing is wrong."""
+    _disk_scene(scene, helpers)
+    validation = addon.module("symray_addon.validation")
+    settings = scene.symray
+    settings.spin = spin
+    message = (
+        f"Spin a/M must lie in (-1, 1) with an accretion disk, got {spin:g}: at ±1 the disk's "
+        "innermost stable orbit meets the horizon"
+    )
+    assert [p for p in validation.settings_problems(settings) if p.startswith(message)]
+    job = addon.module("symray_addon.render_job")
+    with pytest.raises(ValueError, match=r"Spin a/M must lie in \(-1, 1\) with an accretion"):
+        job.prepare(scene, bpy.context.evaluated_depsgraph_get())
+    settings.disk.enabled = False
+    assert validation.settings_problems(settings) == []
+    settings.disk.enabled = True
+    settings.spin = 0.9999 * spin
+    assert validation.settings_problems(settings) == []

@@ -326,6 +326,34 @@ def test_disk_refusals():
         Tracer(scene, TraceOptions())
 
 
+@pytest.mark.parametrize("spin", [1.0, -1.0])
+def test_an_extremal_hole_refuses_the_disk_by_name(spin):
+    """|a/M| = 1: the prograde ISCO meets the horizon (r = M); a disk there is refused with a
+    message naming the spin and why (it was a bare ZeroDivisionError at the first disk
+    hit); just below, the Novikov–Thorne closed form still matches the Page–Thorne
+    quadrature and a render has every disk pixel's g finite."""
+    message = r"spin a/M must lie in \(-1, 1\) with an accretion disk, got -?1: at ±1 the disk's"
+    with pytest.raises(ValueError, match=message):
+        core.Scene(model=hm.kerr(rg=1.0, a=0.5 * spin, chart="kerr_schild"),
+                   disk=core.AccretionDisk(r_out=8.0))  # fmt: skip
+    with pytest.raises(ValueError, match=message):
+        diskmod.novikov_thorne_flux(np.array([2.0]), 0.5, 0.5 * spin, 1.0)
+    M, a = 1.0, 0.9999 * spin  # the near-extremal spin the message suggests
+    r_in = diskmod.isco(M, a)
+    rs = r_in * np.array([1.05, 1.4, 2.0, 5.0])
+    ratio = diskmod.novikov_thorne_flux(rs, M, a, r_in) / [
+        page_thorne_flux(r, M, abs(a), r_in) for r in rs
+    ]
+    np.testing.assert_allclose(ratio, ratio[0], rtol=1e-6)  # 1.7e-8 measured
+    scene = core.Scene(model=hm.kerr(rg=1.0, a=0.5 * 0.9999 * spin, chart="kerr_schild"),
+                       disk=core.AccretionDisk(r_out=8.0), background=(0.0, 0.0, 0.0))  # fmt: skip
+    out = core.render(scene, camera_at(20.0, 16, 8), tolerance=1e-6, workers=1,
+                      parallel="threads")  # fmt: skip
+    hit = out.passes["ending"] == ENDING["hit"]
+    assert hit.sum() > 40 and np.all(np.isfinite(out.passes["redshift"][hit]))
+    assert out.summary["failed"] == 0
+
+
 def test_a_disk_hit_without_a_finite_g_is_flagged_failed():
     """A ray whose g cannot be computed (here: a NaN momentum) is counted failed and gets no
     disk colour, never a plausible one."""
