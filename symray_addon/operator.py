@@ -209,11 +209,15 @@ class SYMRAY_OT_bake_lighting(bpy.types.Operator):
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         """Bake (or find in the cache) every object's lighting for the current frame."""
+        warnings: list[str] = []
         try:
-            surfaces = bake.bake_surfaces(context.scene, context.evaluated_depsgraph_get())
+            depsgraph = context.evaluated_depsgraph_get()
+            surfaces = bake.bake_surfaces(context.scene, depsgraph, warnings)
         except Exception as err:  # every failure is reported, whatever it is
             self.report({"ERROR"}, render_job.failure_message(err))
             return {"CANCELLED"}
+        for warning in warnings:
+            self.report({"WARNING"}, warning)
         self.report({"INFO"}, f"SymRay: lighting of {len(surfaces)} objects baked")
         return {"FINISHED"}
 

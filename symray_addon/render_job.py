@@ -132,7 +132,7 @@ def _baked_surfaces(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, warn
     if settings.lighting == "AUTO" and not bake.can_bake_now(scene, depsgraph):
         warnings.append(UNBAKED_WARNING)
         return None
-    return bake.bake_surfaces(scene, depsgraph)
+    return bake.bake_surfaces(scene, depsgraph, warnings)
 
 
 def run(
