@@ -392,13 +392,50 @@ def test_operator_writes_exr(addon, scene, helpers, tmp_path):
     stacked = np.stack([rgba["R"], rgba["G"], rgba["B"], rgba["A"]], axis=-1)
     np.testing.assert_array_equal(stacked, image)  # 32-bit float, same orientation
     passes = read_exr(tmp_path / "result.passes.exr")
-    assert passes["G"].max() > 0  # steps
-    assert set(passes["B"].ravel()) <= {float(c) for c in addon.core.ENDING.values()}
-    leftovers = [f for f in os.listdir(tmp_path) if f.startswith(".symray-")]
-    assert leftovers == []
+    assert passes["SymRay Steps.X"].max() > 0
+    codes = {float(c) for c in addon.core.ENDING.values()}
+    assert set(passes["SymRay Ending.X"].ravel()) <= codes
+    assert sorted(os.listdir(tmp_path)) == ["result.exr", "result.passes.exr"]  # no temporaries
     umask = os.umask(0)
     os.umask(umask)
     assert (tmp_path / "result.exr").stat().st_mode & 0o777 == 0o666 & ~umask
+    # Blender reads the files back as they were written
+    loaded = bpy.data.images.load(str(tmp_path / "result.exr"))
+    pixels = np.empty(32 * 24 * 4, dtype=np.float32)
+    loaded.pixels.foreach_get(pixels)
+    np.testing.assert_array_equal(pixels.reshape(24, 32, 4)[::-1], image)
+    bpy.data.images.remove(loaded)
+
+
+@pytest.mark.parametrize("transparent", [False, True])
+def test_passes_exr_holds_the_passes_switched_on_by_name(
+    addon, scene, helpers, tmp_path, transparent
+):
+    """Issue 22 item 14: passes switched off were written as zeros (ones for redshift) in
+    anonymous R, G, B, A channels: a reader took them for real values. Now each pass switched
+    on is a layer named as the engine's pass, and a pass switched off has none (Film ›
+    Transparent computes the ending pass for itself: still not written when it is off)."""
+    _hole_scene(scene, helpers)
+    scene.render.resolution_x, scene.render.resolution_y = 16, 12
+    scene.render.film_transparent = transparent
+    settings = scene.symray
+    settings.pass_error, settings.pass_steps = True, True
+    settings.pass_ending, settings.pass_redshift = False, False
+    settings.exr_path = str(tmp_path / "r.exr")
+    assert bpy.ops.symray.render() == {"FINISHED"}
+    reference = _render_with_ending(addon, scene)
+    passes = read_exr(tmp_path / "r.passes.exr")
+    assert set(passes) == {"SymRay Error.X", "SymRay Steps.X"}
+    np.testing.assert_array_equal(passes["SymRay Steps.X"], reference.passes["steps"])
+    np.testing.assert_array_equal(passes["SymRay Error.X"], reference.passes["error_px"])
+    settings.pass_error, settings.pass_steps = False, False
+    settings.pass_ending, settings.pass_redshift = True, True
+    assert bpy.ops.symray.render() == {"FINISHED"}
+    reference = _render_with_ending(addon, scene)
+    passes = read_exr(tmp_path / "r.passes.exr")
+    assert set(passes) == {"SymRay Ending.X", "SymRay Redshift.X"}
+    assert np.isnan(passes["SymRay Redshift.X"]).all()  # no disk: NaN everywhere
+    np.testing.assert_array_equal(passes["SymRay Ending.X"], reference.passes["ending"])
 
 
 def test_render_task_cancel_keeps_previous_image(addon, scene, helpers):
@@ -507,6 +544,7 @@ def _drive_modal(addon, scene, cancel: bool):
         _timer=object(),
         _image_name=scene.symray.image_name,
         _exr_path="",
+        _passes=(),
         report=lambda kind, text: reports.append((kind, text)),
     )
     fake._status = lambda ctx, text: cls._status(ctx, text)
