@@ -573,3 +573,79 @@ def test_modal_operator_finishes_and_cancels(addon, scene, helpers):
     outcome, reports, wm, status = _drive_modal(addon, scene, cancel=False)
     assert outcome == {"FINISHED"} and reports[-1][0] == {"INFO"}
     assert helpers.image_array(scene.symray.image_name).shape == (48, 32, 4)
+
+
+def _prepared(addon, scene):
+    return addon.module("symray_addon.render_job").prepare(
+        scene, bpy.context.evaluated_depsgraph_get()
+    )
+
+
+@pytest.mark.parametrize("size, used", [(0.0, 0.01), (500.0, 2.0), (1.5, 1.5), (0.01, 0.01)])
+def test_film_filter_size_outside_the_supported_range_is_clamped_visibly(
+    addon, scene, helpers, size, used
+):
+    """Issue 22 item 14: Filter Size 0 rendered as 0.01 px and 500 as 2 px, silently."""
+    flat_scene(scene, helpers)
+    scene.render.filter_size = size
+    job = _prepared(addon, scene)
+    assert job.options["filter_size"] == pytest.approx(used)
+    notes = [w for w in job.warnings if "Filter Size" in w]
+    if size == used:
+        assert notes == []
+    else:
+        assert notes == [
+            f"Film › Filter Size {size:g} px is outside the 0.01–2 px SymRay supports: "
+            f"{used:g} px used"
+        ]
+
+
+IGNORED = {
+    "dof": "Depth of Field (camera 'Camera')",
+    "motion_blur": "Motion Blur",
+    "use_pass_z": "The Z pass",
+    "use_pass_normal": "The Normal pass",
+    "use_pass_cryptomatte_object": "The Cryptomatte Object pass",
+    "use_pass_cryptomatte_material": "The Cryptomatte Material pass",
+    "use_pass_cryptomatte_asset": "The Cryptomatte Asset pass",
+}
+
+
+def _switch_on(scene, what: str) -> None:
+    if what == "dof":
+        scene.camera.data.dof.use_dof = True
+    elif what == "motion_blur":
+        scene.render.use_motion_blur = True
+    else:
+        setattr(bpy.context.view_layer, what, True)
+
+
+def test_unsupported_settings_are_named_once_per_render(addon, factory_scene):
+    """Issue 22 item 16: depth of field, motion blur and the Z, Normal and Cryptomatte
+    passes changed nothing (byte-identical images) and said nothing. Each one switched on
+    is now a warning of its own, once per render, for the operator and for F12."""
+    factory_scene.symray.lighting = "UNLIT"
+    assert [w for w in _prepared(addon, factory_scene).warnings if "not supported" in w] == []
+    for what, name in IGNORED.items():  # one more each time
+        _switch_on(factory_scene, what)
+        warnings = [w for w in _prepared(addon, factory_scene).warnings if "not supported" in w]
+        assert sum(w.startswith(name) for w in warnings) == 1, warnings
+    warnings = _prepared(addon, factory_scene).warnings
+    ignored = [w for w in warnings if "not supported by SymRay yet" in w]
+    assert len(ignored) == len(IGNORED)  # all on: one each, nothing twice
+    for name in IGNORED.values():
+        assert sum(w.startswith(name) for w in ignored) == 1, ignored
+
+
+def test_the_engine_reports_the_unsupported_settings(addon, factory_scene, capfd):
+    """F12 reports each of them as a warning (Blender prints reports in background mode),
+    once per frame."""
+    factory_scene.symray.lighting = "UNLIT"
+    factory_scene.symray.quality = "PREVIEW"
+    for what in IGNORED:
+        _switch_on(factory_scene, what)
+    capfd.readouterr()
+    assert bpy.ops.render.render() == {"FINISHED"}
+    printed = capfd.readouterr().out.splitlines()
+    for name in IGNORED.values():
+        assert sum(line.startswith(f"Warning: {name}") for line in printed) == 1, printed
