@@ -70,8 +70,7 @@ class SymRayDiskSettings(bpy.types.PropertyGroup):
         min=0.0,
         max=1e6,
         soft_max=100.0,
-        description="Luminance of a disk point at Temperature seen without shift (at most "
-        "1e6)",
+        description="Luminance of a disk point at Temperature seen without shift (at most 1e6)",
     )
     opacity: bpy.props.FloatProperty(  # type: ignore[valid-type]
         name="Opacity",
