@@ -204,22 +204,30 @@ def test_a_failed_passes_write_keeps_both_exr_files(
     image = helpers.image_array(scene.symray.image_name).copy()
     cube = bpy.data.materials["Red"].node_tree.nodes["Principled BSDF"]
     cube.inputs["Base Color"].default_value = (0.1, 0.2, 0.9, 1.0)  # a different image
-    real_replace, real_fsync = os.replace, os.fsync
+    real_replace = os.replace
 
     def replace(src, dst):
         if str(dst).endswith(".passes.exr"):
             raise OSError(22, "Invalid argument")
         return real_replace(src, dst)
 
-    def fsync(fd):
-        if ".passes.exr" in os.readlink(f"/proc/self/fd/{fd}"):
+    imageio = addon.module("core.imageio")
+    real_writer = imageio._bytes_writer
+
+    def disk_full_on_passes(data):
+        def write(tmp):
+            if ".out.passes.exr." not in tmp:
+                return real_writer(data)(tmp)
+            with open(tmp, "wb") as f:
+                f.write(data[: len(data) // 2])
             raise OSError(28, "No space left on device")
-        return real_fsync(fd)
+
+        return write
 
     if stage == "replace":
         monkeypatch.setattr(os, "replace", replace)
     else:
-        monkeypatch.setattr(os, "fsync", fsync)
+        monkeypatch.setattr(imageio, "_bytes_writer", disk_full_on_passes)
     message = helpers.operator_error(lambda: bpy.ops.symray.render())
     reason = "Invalid argument" if stage == "replace" else "No space left on device"
     assert f"cannot write image '{files[1]}': {reason}; no file was changed" in message
