@@ -261,3 +261,22 @@ def test_blenders_own_images_are_refused_before_anything_is_written(
     assert "TypeError" not in message and "nothing was written" in message
     assert [f.read_bytes() for f in files] == before
     np.testing.assert_array_equal(helpers.image_array(previous), image)
+
+
+def test_an_image_failing_after_the_exr_pair_says_what_was_written(
+    addon, scene, helpers, tmp_path, monkeypatch
+):
+    """Issue 22 item 12: "nothing was written" while the EXR pair had been replaced."""
+    files, _before = _exr_pair(scene, helpers, tmp_path)
+    output = addon.module("symray_addon.output")
+
+    def broken(_name, _rgba):
+        raise TypeError("no such image type")
+
+    monkeypatch.setattr(output, "write_image", broken)
+    message = helpers.operator_error(lambda: bpy.ops.symray.render())
+    assert (
+        "SymRay could not write image 'SymRay Result' (TypeError: no such image type); "
+        f"'{files[0]}' and '{files[1]}' were written"
+    ) in message
+    assert "nothing was written" not in message
