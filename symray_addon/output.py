@@ -230,4 +230,4 @@ def write_exr(
     try:
         return imageio.write_exr_files(files)
     except imageio.ImageWriteError as err:
-        raise OSError(f"SymRay {str(err)[0].lower()}{str(err)[1:]}") from None
+        raise OSError(f"SymRay {err}") from None  # "cannot write image '<path>': ..."
