@@ -269,6 +269,36 @@ def _copy_exclusion(source: bpy.types.LayerCollection, target: bpy.types.LayerCo
             _copy_exclusion(child, twin)
 
 
+def _copy_view_layer(
+    scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, temp: bpy.types.Scene
+) -> None:
+    """Exclude in ``temp``'s view layer the collections the rendered view layer excludes.
+
+    A new scene's view layer has its layer collections only once it is synced with the
+    collections linked to it (``frame_set`` or ``update``)."""
+    layer = scene.view_layers.get(depsgraph.view_layer.name) if depsgraph.view_layer else None
+    target = temp.view_layers[0].layer_collection
+    if layer is None or layer.layer_collection is None or target is None:
+        raise ValueError(f"The view layers of '{scene.name}' could not be read for baking")
+    _copy_exclusion(layer.layer_collection, target)
+
+
+def _sync_view_layers(scene: bpy.types.Scene) -> None:
+    """Bring ``scene``'s view layers up to date with its collections again.
+
+    Adding or removing datablocks (the temporary scene, images, copies) marks every view
+    layer out of sync, and Blender syncs them lazily. An animation render keeps one
+    depsgraph of the scene for all its frames and copies the scene into it at the next
+    frame without syncing: an out-of-sync view layer there crashes Blender (Blender 5;
+    ``render(animation=True)``, ``blender -b -a``). Reading a layer collection's children
+    syncs its view layer, without evaluating anything.
+    """
+    for layer in scene.view_layers:
+        if layer.layer_collection is not None:
+            for _child in layer.layer_collection.children:
+                break
+
+
 @contextmanager
 def _bake_scene(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> Iterator[Any]:
     """A temporary Cycles scene holding ``scene``'s objects, removed afterwards."""
@@ -280,9 +310,6 @@ def _bake_scene(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> Itera
                 "Cycles add-on, or set Surface Lighting to Unlit"
             )
         _link_collections(scene, temp)
-        layer = scene.view_layers.get(depsgraph.view_layer.name) if depsgraph.view_layer else None
-        if layer is not None:
-            _copy_exclusion(layer.layer_collection, temp.view_layers[0].layer_collection)
         temp.world = scene.world
         temp.render.engine = "CYCLES"
         temp.render.threads_mode = scene.render.threads_mode
@@ -290,9 +317,11 @@ def _bake_scene(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> Itera
         temp.cycles.device = "CPU"
         temp.cycles.samples = int(scene.symray.bake_samples)
         temp.frame_set(scene.frame_current, subframe=scene.frame_subframe)
+        _copy_view_layer(scene, depsgraph, temp)
         yield temp
     finally:
         bpy.data.scenes.remove(temp)
+        _sync_view_layers(scene)
 
 
 def resolution(area: float, uv_area: float, texel: float, max_resolution: int) -> int:
