@@ -275,12 +275,14 @@ def _copy_view_layer(
     """Exclude in ``temp``'s view layer the collections the rendered view layer excludes.
 
     A new scene's view layer has its layer collections only once it is synced with the
-    collections linked to it (``frame_set`` or ``update``)."""
+    collections linked to it (``frame_set`` or ``update``), and its objects are those of
+    the collections left only once it is synced again (``update``)."""
     layer = scene.view_layers.get(depsgraph.view_layer.name) if depsgraph.view_layer else None
-    target = temp.view_layers[0].layer_collection
-    if layer is None or layer.layer_collection is None or target is None:
+    target = temp.view_layers[0]
+    if layer is None or layer.layer_collection is None or target.layer_collection is None:
         raise ValueError(f"The view layers of '{scene.name}' could not be read for baking")
-    _copy_exclusion(layer.layer_collection, target)
+    _copy_exclusion(layer.layer_collection, target.layer_collection)
+    target.update()
 
 
 def _sync_view_layers(scene: bpy.types.Scene) -> None:
