@@ -285,20 +285,21 @@ def _copy_view_layer(
     target.update()
 
 
-def _sync_view_layers(scene: bpy.types.Scene) -> None:
-    """Bring ``scene``'s view layers up to date with its collections again.
+def _sync_view_layers() -> None:
+    """Bring every scene's view layers up to date with their collections again.
 
-    Adding or removing datablocks (the temporary scene, images, copies) marks every view
-    layer out of sync, and Blender syncs them lazily. An animation render keeps one
-    depsgraph of the scene for all its frames and copies the scene into it at the next
-    frame without syncing: an out-of-sync view layer there crashes Blender (Blender 5;
-    ``render(animation=True)``, ``blender -b -a``). Reading a layer collection's children
-    syncs its view layer, without evaluating anything.
+    Adding or removing datablocks (the temporary scene, images, copies) marks the view
+    layers of every scene out of sync, and Blender syncs them lazily. An animation render
+    keeps one depsgraph of its scene for all frames; at the next frame it copies the scene
+    again, and a copy of an out-of-sync view layer syncs itself into bases that point to
+    no original, which crashes Blender 5 (``render(animation=True)``, ``blender -b -a``).
+    Iterating a layer collection's children syncs its view layer, evaluating nothing.
     """
-    for layer in scene.view_layers:
-        if layer.layer_collection is not None:
-            for _child in layer.layer_collection.children:
-                break
+    for scene in bpy.data.scenes:
+        for layer in scene.view_layers:
+            if layer.layer_collection is not None:
+                for _child in layer.layer_collection.children:
+                    break
 
 
 @contextmanager
@@ -323,7 +324,7 @@ def _bake_scene(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> Itera
         yield temp
     finally:
         bpy.data.scenes.remove(temp)
-        _sync_view_layers(scene)
+        _sync_view_layers()
 
 
 def resolution(area: float, uv_area: float, texel: float, max_resolution: int) -> int:

@@ -106,7 +106,7 @@ def test_factory_scene_bakes_by_every_path(addon, factory_scene, tmp_path):
     np.testing.assert_allclose(operator[..., :4], f12, atol=1e-6)
     diff = np.abs(f12[..., :3] - want[..., :3])[cube]
     print(f"factory cube: mean |SymRay - Cycles| {diff.mean():.4f} on {cube.sum()} pixels")
-    assert diff.mean() < 0.03
+    assert diff.mean() < 0.04  # 0.022 measured (64 bake samples, 128 Cycles samples)
     assert np.abs(f12[..., :3] - unlit[..., :3])[cube].mean() > 0.1
 
 
