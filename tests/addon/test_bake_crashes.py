@@ -12,7 +12,6 @@ import json
 import os
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 import bpy
@@ -59,7 +58,6 @@ def _diffuse_factory(scene) -> None:
     bsdf.inputs["Specular IOR Level"].default_value = 0.0
     scene.symray.model = "FLAT"
     scene.symray.quality = "RADIANS"
-    scene.symray.pass_ending = True
     scene.symray.bake_texel_size = 0.1
     scene.symray.bake_samples = 64
     scene.render.filter_size = 0.01
@@ -80,30 +78,34 @@ def _cycles(scene, path: Path) -> np.ndarray:
 
 
 def test_factory_scene_bakes_by_every_path(addon, factory_scene, tmp_path):
-    """Bake Lighting, Render SymRay Image and F12 bake the factory scene (objects in a
-    child collection); the lit cube matches Cycles' render of the same scene, and differs
-    from the unlit cube."""
+    """Bake Lighting (then F12 reusing its bake), Render SymRay Image and F12 bake the
+    factory scene (objects in a child collection) alike; the lit cube matches Cycles'
+    render of the same scene, and differs from the unlit cube."""
     scene = factory_scene
     _diffuse_factory(scene)
     bake = addon.module("symray_addon.bake")
     bake.clear_cache()
     want = _cycles(scene, tmp_path / "cycles.exr")
 
-    baked = bake.stats["baked"]
+    baked, reused = bake.stats["baked"], bake.stats["reused"]
     assert bpy.ops.symray.bake_lighting() == {"FINISHED"}
     assert bake.stats["baked"] - baked == 1  # the cube
-
+    f12 = _f12(scene, tmp_path / "f12.exr")  # reuses that bake
+    assert (bake.stats["baked"] - baked, bake.stats["reused"] - reused) == (1, 1)
     bake.clear_cache()
-    assert bpy.ops.symray.render() == {"FINISHED"}
+    assert bpy.ops.symray.render() == {"FINISHED"}  # bakes again
+    assert bake.stats["baked"] - baked == 2
     operator = _result()
     bake.clear_cache()
-    f12 = _f12(scene, tmp_path / "f12.exr")
+    fresh = _f12(scene, tmp_path / "fresh.exr")  # F12 bakes itself
+    assert bake.stats["baked"] - baked == 3
     scene.symray.lighting = "UNLIT"
     unlit = _f12(scene, tmp_path / "unlit.exr")
 
     cube = np.abs(unlit[..., :3] - unlit[0, 0, :3]).max(axis=-1) > 0.01
     assert cube.sum() > 100
-    np.testing.assert_allclose(operator[..., :4], f12, atol=1e-6)
+    np.testing.assert_allclose(operator, f12, atol=1e-6)
+    np.testing.assert_allclose(fresh, f12, atol=1e-6)
     diff = np.abs(f12[..., :3] - want[..., :3])[cube]
     print(f"factory cube: mean |SymRay - Cycles| {diff.mean():.4f} on {cube.sum()} pixels")
     assert diff.mean() < 0.04  # 0.022 measured (64 bake samples, 128 Cycles samples)
@@ -182,19 +184,21 @@ def test_bake_copies_nested_collections_and_exclusions(addon, factory_scene):
     assert (shaded[..., 0] - unglowed[..., 0]).max() > 0.1  # the panel's red light
 
 
-def _animate(extension_zip, out: Path, *args: str) -> tuple[subprocess.CompletedProcess, dict]:
-    """Run animation_job.py in a Python process of its own (with its own user folder)."""
-    out.mkdir(parents=True, exist_ok=True)
-    env = dict(os.environ, BLENDER_USER_RESOURCES=tempfile.mkdtemp(prefix="symray-anim-"))
+def _animate(extension_zip, tmp_path: Path, *args: str) -> tuple[Path, dict]:
+    """Run animation_job.py in a Python process of its own (its own Blender user folder);
+    return its output folder and its report."""
+    out, user = tmp_path / "out", tmp_path / "user"
+    out.mkdir()
+    user.mkdir()
     proc = subprocess.run(
         [sys.executable, str(JOB), str(extension_zip), str(out), *args],
-        env=env,
+        env=dict(os.environ, BLENDER_USER_RESOURCES=str(user)),
         capture_output=True,
         text=True,
         timeout=600,
     )
     assert proc.returncode == 0, f"exit {proc.returncode}\n{proc.stdout[-3000:]}\n{proc.stderr}"
-    return proc, json.loads((out / "report.json").read_text(encoding="utf-8"))
+    return out, json.loads((out / "report.json").read_text(encoding="utf-8"))
 
 
 def test_animation_bakes_every_frame_without_crashing(addon, extension_zip, tmp_path):
@@ -202,15 +206,15 @@ def test_animation_bakes_every_frame_without_crashing(addon, extension_zip, tmp_
     (a farm's `blender -b -a`): Blender exits normally, each frame is written, baked
     anew, and equals an F12 still of that frame from a fresh bake; lit differs from
     unlit, and the cube moves."""
-    _proc, report = _animate(
+    out, report = _animate(
         extension_zip, tmp_path, "--frames", "3", "--stills", "1,3", "--unlit", "3"
     )
     assert report["baked_in_animation"] == 3 and report["scenes"] == 1
-    frames = [_exr(tmp_path / f"frame_{k:04d}.exr") for k in (1, 2, 3)]
+    frames = [_exr(out / f"frame_{k:04d}.exr") for k in (1, 2, 3)]
     for k in (1, 3):
-        still = _exr(tmp_path / f"still_{k:04d}.exr")
+        still = _exr(out / f"still_{k:04d}.exr")
         np.testing.assert_allclose(frames[k - 1], still, atol=1e-4)
-    unlit = _exr(tmp_path / "unlit_0003.exr")
+    unlit = _exr(out / "unlit_0003.exr")
     cube = np.abs(unlit[..., :3] - unlit[0, 0, :3]).max(axis=-1) > 0.01
     assert cube.sum() > 20
     assert np.abs(frames[2][..., :3] - unlit[..., :3])[cube].mean() > 0.1
@@ -224,9 +228,9 @@ def test_animation_soak_memory(addon, extension_zip, tmp_path):
     One frame's figure moves by up to ~50 MiB between runs (the allocators keep and give
     back blocks as they like), so each end is the median of five frames (3-7 and 26-30),
     after glibc's malloc_trim; the raw figures are printed too."""
-    _proc, report = _animate(extension_zip, tmp_path, "--frames", "30", "--texel", "0.05")
+    out, report = _animate(extension_zip, tmp_path, "--frames", "30", "--texel", "0.05")
     assert report["baked_in_animation"] == 30
-    assert all((tmp_path / f"frame_{k:04d}.exr").is_file() for k in range(1, 31))
+    assert all((out / f"frame_{k:04d}.exr").is_file() for k in range(1, 31))
     raw, trimmed = (
         {int(k): v / 2**20 for k, v in report[key].items()} for key in ("rss", "trimmed_rss")
     )
