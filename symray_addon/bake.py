@@ -378,6 +378,39 @@ def _copy_exclusion(source: bpy.types.LayerCollection, target: bpy.types.LayerCo
             _copy_exclusion(child, twin)
 
 
+def _copy_view_layer(
+    scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, temp: bpy.types.Scene
+) -> None:
+    """Exclude in ``temp``'s view layer the collections the rendered view layer excludes.
+
+    A new scene's view layer has its layer collections only once it is synced with the
+    collections linked to it (``frame_set`` or ``update``), and its objects are those of
+    the collections left only once it is synced again (``update``)."""
+    layer = scene.view_layers.get(depsgraph.view_layer.name) if depsgraph.view_layer else None
+    target = temp.view_layers[0]
+    if layer is None or layer.layer_collection is None or target.layer_collection is None:
+        raise ValueError(f"The view layers of '{scene.name}' could not be read for baking")
+    _copy_exclusion(layer.layer_collection, target.layer_collection)
+    target.update()
+
+
+def _sync_view_layers() -> None:
+    """Bring every scene's view layers up to date with their collections again.
+
+    Adding or removing datablocks (the temporary scene, images, copies) marks the view
+    layers of every scene out of sync, and Blender syncs them lazily. An animation render
+    keeps one depsgraph of its scene for all frames; at the next frame it copies the scene
+    again, and a copy of an out-of-sync view layer syncs itself into bases that point to
+    no original, which crashes Blender 5 (``render(animation=True)``, ``blender -b -a``).
+    Iterating a layer collection's children syncs its view layer, evaluating nothing.
+    """
+    for scene in bpy.data.scenes:
+        for layer in scene.view_layers:
+            if layer.layer_collection is not None:
+                for _child in layer.layer_collection.children:
+                    break
+
+
 @contextmanager
 def _bake_scene(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> Iterator[Any]:
     """A temporary Cycles scene holding ``scene``'s objects, removed afterwards."""
@@ -389,9 +422,6 @@ def _bake_scene(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> Itera
                 "Cycles add-on, or set Surface Lighting to Unlit"
             )
         _link_collections(scene, temp)
-        layer = scene.view_layers.get(depsgraph.view_layer.name) if depsgraph.view_layer else None
-        if layer is not None:
-            _copy_exclusion(layer.layer_collection, temp.view_layers[0].layer_collection)
         temp.world = scene.world
         temp.render.engine = "CYCLES"
         temp.render.threads_mode = scene.render.threads_mode
@@ -399,9 +429,11 @@ def _bake_scene(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> Itera
         temp.cycles.device = "CPU"
         temp.cycles.samples = int(scene.symray.bake_samples)
         temp.frame_set(scene.frame_current, subframe=scene.frame_subframe)
+        _copy_view_layer(scene, depsgraph, temp)
         yield temp
     finally:
         bpy.data.scenes.remove(temp)
+        _sync_view_layers()
 
 
 def resolution(area: float, uv_area: float, texel: float, max_resolution: int) -> int:
