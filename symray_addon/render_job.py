@@ -78,7 +78,7 @@ def prepare(
     model = models.build_model(settings, properties.metric_source(settings))
     models.check_camera(settings, model, where, np.array(kwargs["matrix_world"])[:3, 3])
 
-    warnings: list[str] = []
+    warnings = validation.ignored_settings(scene, depsgraph.view_layer, camera_object)
     baked = _baked_surfaces(scene, depsgraph, warnings)
     intersector = export_meshes.build_intersector(depsgraph, baked, warnings)
     if intersector is None and model is None:
@@ -104,7 +104,7 @@ def prepare(
         "method": None if settings.method == "AUTO" else settings.method,
         **settings.accuracy(),
         # Blender's pixel filter (Film > Filter Size), Cycles' Blackman-Harris
-        "filter_size": min(max(float(scene.render.filter_size), 0.01), 2.0),
+        "filter_size": validation.filter_size(scene.render.filter_size, warnings),
         "max_steps": int(settings.max_steps),
         "passes": passes,
         "parallel": settings.parallel.lower(),
@@ -135,7 +135,7 @@ def _baked_surfaces(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, warn
     if settings.lighting == "AUTO" and not bake.can_bake_now(scene, depsgraph):
         warnings.append(UNBAKED_WARNING)
         return None
-    return bake.bake_surfaces(scene, depsgraph)
+    return bake.bake_surfaces(scene, depsgraph, warnings)
 
 
 def run(
