@@ -3,19 +3,22 @@
 Images in the core are linear, straight-alpha float arrays (h, w, 4), row 0 at the top.
 ``write_png`` applies the sRGB transfer function by default (like Blender's "Standard"
 view transform) to the colour channels, never to alpha; pass ``srgb=False`` to store the
-values as they are. ``write_exr`` stores linear float channels unchanged.
+values as they are. ``write_exr`` stores linear float channels unchanged (numpy + zlib;
+reading an EXR needs the optional OpenEXR package).
 
 Every write goes to a temporary file in the target's directory, then ``os.replace``: a failed
-write never leaves a partial file and never clobbers the previous one.
+write never leaves a partial file and never clobbers the previous one. ``write_exr_files``
+writes several files as one: all are replaced, or none.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import struct
 import tempfile
 import zlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -24,12 +27,15 @@ __all__ = [
     "FAILED_COLOR",
     "ImageWriteError",
     "atomic_write",
+    "atomic_write_all",
+    "exr_bytes",
     "linear_to_srgb",
     "png_bytes",
     "read_exr",
     "read_png",
     "srgb_to_linear",
     "write_exr",
+    "write_exr_files",
     "write_png",
 ]
 
@@ -74,32 +80,103 @@ def _umask() -> int:
     return 0o022
 
 
-def atomic_write(path: str | os.PathLike, write: Callable[[str], None]) -> str:
-    """Run ``write(tmp_path)`` then move the temporary file onto path; clean up on failure."""
-    path = os.fspath(path)
-    directory = os.path.dirname(os.path.abspath(path))
+def _temp_for(path: str) -> str:
+    """A fresh temporary file next to ``path`` (ImageWriteError naming path if impossible)."""
     if os.path.isdir(path):
         raise ImageWriteError(f"cannot write image {path!r}: it is a directory")
+    directory = os.path.dirname(os.path.abspath(path))
     try:
         fd, tmp = tempfile.mkstemp(prefix="." + os.path.basename(path) + ".", suffix=".tmp",
                                    dir=directory)  # fmt: skip
     except OSError as e:
         raise ImageWriteError(f"cannot write image {path!r}: {e.strerror or e}") from e
     os.close(fd)
+    return tmp
+
+
+def _unlink_quietly(path: str) -> None:
     try:
-        write(tmp)
-        mode = os.stat(path).st_mode & 0o777 if os.path.exists(path) else 0o666 & ~_umask()
-        os.chmod(tmp, mode)
-        os.replace(tmp, path)
-    except BaseException as e:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        if isinstance(e, Exception) and not isinstance(e, ImageWriteError):
-            raise ImageWriteError(f"cannot write image {path!r}: {e}") from e
+        os.unlink(path)
+    except OSError:
+        pass
+
+
+def _backup(path: str) -> str | None:
+    """A copy of ``path`` beside it (a hard link where the file system allows), or None
+    when there is no file there yet."""
+    if not os.path.exists(path):
+        return None
+    backup = _temp_for(path)
+    os.unlink(backup)
+    try:
+        os.link(path, backup)
+    except OSError:
+        shutil.copy2(path, backup)
+    return backup
+
+
+def _replace_all(pairs: Sequence[tuple[str, str]]) -> None:
+    """Move every temporary file over its target; if one move fails, put back the targets
+    already replaced (from backups) so that either all or none changed."""
+    backups = [_backup(path) for _tmp, path in pairs] if len(pairs) > 1 else [None]
+    done = 0
+    try:
+        for tmp, path in pairs:
+            os.replace(tmp, path)
+            done += 1
+    except BaseException:
+        for (_tmp, path), backup in zip(pairs[:done], backups, strict=False):
+            if backup is None:
+                _unlink_quietly(path)
+            else:
+                os.replace(backup, path)
         raise
-    return path
+    finally:
+        for backup in backups:
+            if backup is not None:
+                _unlink_quietly(backup)
+
+
+def atomic_write_all(files: Sequence[tuple[str | os.PathLike, Callable[[str], None]]]) -> list[str]:
+    """Write several files as one: each ``write(tmp_path)`` writes a temporary file, then
+    every temporary file replaces its target, or (on any failure) none does.
+
+    ImageWriteError names the file that failed and says that no file was changed.
+    """
+    paths = [os.fspath(path) for path, _write in files]
+    pairs: list[tuple[str, str]] = []
+    current = paths[0] if paths else ""
+    try:
+        for path, (_p, write) in zip(paths, files, strict=True):
+            current = path
+            pairs.append((_temp_for(path), path))
+            write(pairs[-1][0])
+            mode = os.stat(path).st_mode & 0o777 if os.path.exists(path) else 0o666 & ~_umask()
+            os.chmod(pairs[-1][0], mode)
+        current = ""
+        _replace_all(pairs)
+    except BaseException as e:
+        failed = current or _first_missing(pairs)
+        for tmp, _path in pairs:
+            _unlink_quietly(tmp)
+        if not isinstance(e, Exception):
+            raise
+        reason = e.strerror if isinstance(e, OSError) and e.strerror else str(e)
+        if isinstance(e, ImageWriteError):
+            reason = str(e).split(": ", 1)[-1]
+        unchanged = "; no file was changed" if len(paths) > 1 else ""
+        raise ImageWriteError(f"cannot write image {failed!r}: {reason}{unchanged}") from e
+    return paths
+
+
+def _first_missing(pairs: Sequence[tuple[str, str]]) -> str:
+    """The target whose temporary file was not moved (the one a failed replace was on)."""
+    return next((path for tmp, path in pairs if os.path.exists(tmp)), pairs[-1][1])
+
+
+def atomic_write(path: str | os.PathLike, write: Callable[[str], None]) -> str:
+    """Run ``write(tmp_path)`` then move the temporary file onto path; clean up on failure."""
+    return atomic_write_all([(path, write)])[0]
 
 
 # -- PNG ------------------------------------------------------------------------------------
@@ -148,15 +225,7 @@ def write_png(
     path: str | os.PathLike, image: Any, *, srgb: bool = True, bits: int = 8, level: int = 6
 ) -> str:
     """Write a linear float image (h, w[, 1-4]) as PNG, atomically; sRGB-encoded by default."""
-    data = png_bytes(image, srgb=srgb, bits=bits, level=level)
-
-    def write(tmp: str) -> None:
-        with open(tmp, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-
-    return atomic_write(path, write)
+    return atomic_write(path, _bytes_writer(png_bytes(image, srgb=srgb, bits=bits, level=level)))
 
 
 def _unfilter(raw: np.ndarray, h: int, stride: int, bpp: int) -> np.ndarray:
@@ -213,6 +282,13 @@ def read_png(path: str | os.PathLike, *, srgb: bool = True) -> np.ndarray:
 
 
 # -- OpenEXR -----------------------------------------------------------------------------------
+# Written here in numpy + zlib (single-part scanline files, the OpenEXR 2 layout); read
+# through the optional OpenEXR package.
+
+_EXR_MAGIC = 20000630
+_EXR_TYPES = {np.dtype(np.uint32): 0, np.dtype(np.float16): 1, np.dtype(np.float32): 2}
+_EXR_COMPRESSION = {"none": (0, 1), "zips": (2, 1), "zip": (3, 16)}
+"""Compression name -> (code in the header, scanlines per block)."""
 
 
 def _import_openexr():
@@ -220,7 +296,7 @@ def _import_openexr():
         import OpenEXR  # noqa: PLC0415 - optional dependency, imported only when needed
     except ImportError as e:
         raise ImportError(
-            "writing EXR files needs the 'OpenEXR' Python package (pip install openexr)"
+            "reading EXR files needs the 'OpenEXR' Python package (pip install openexr)"
         ) from e
     return OpenEXR
 
@@ -236,28 +312,104 @@ def _exr_channel(name: str, arr: Any, shape: tuple[int, ...] | None) -> np.ndarr
     return np.ascontiguousarray(a)
 
 
+def _exr_attribute(name: str, kind: str, value: bytes) -> bytes:
+    return name.encode() + b"\0" + kind.encode() + b"\0" + struct.pack("<i", len(value)) + value
+
+
+def _exr_header(arrays: Mapping[str, np.ndarray], code: int) -> bytes:
+    """Magic number, version 2 (single-part scanline) and the eight required attributes."""
+    h, w = next(iter(arrays.values())).shape
+    chlist = b"".join(
+        name.encode() + b"\0" + struct.pack("<iB3xii", _EXR_TYPES[a.dtype], 0, 1, 1)
+        for name, a in arrays.items()
+    )
+    window = struct.pack("<iiii", 0, 0, w - 1, h - 1)
+    attributes = [
+        _exr_attribute("channels", "chlist", chlist + b"\0"),
+        _exr_attribute("compression", "compression", bytes([code])),
+        _exr_attribute("dataWindow", "box2i", window),
+        _exr_attribute("displayWindow", "box2i", window),
+        _exr_attribute("lineOrder", "lineOrder", b"\0"),
+        _exr_attribute("pixelAspectRatio", "float", struct.pack("<f", 1.0)),
+        _exr_attribute("screenWindowCenter", "v2f", struct.pack("<ff", 0.0, 0.0)),
+        _exr_attribute("screenWindowWidth", "float", struct.pack("<f", 1.0)),
+    ]
+    return struct.pack("<ii", _EXR_MAGIC, 2) + b"".join(attributes) + b"\0"
+
+
+def _exr_zip(raw: bytes, level: int) -> bytes:
+    """OpenEXR's ZIP block coding: bytes split into even/odd halves, delta-coded, deflated;
+    the raw bytes when that is not smaller (as the format allows)."""
+    b = np.frombuffer(raw, dtype=np.uint8)
+    t = np.concatenate([b[0::2], b[1::2]]).astype(np.int16)
+    t[1:] = (t[1:] - t[:-1] + 128) & 0xFF
+    packed = zlib.compress(t.astype(np.uint8).tobytes(), level)
+    return packed if len(packed) < len(raw) else raw
+
+
+def exr_bytes(channels: Mapping[str, Any], *, compression: str = "zip", level: int = 6) -> bytes:
+    """Encode named (h, w) channels (float32; float16/uint32 kept) as an OpenEXR file."""
+    if not channels:
+        raise ValueError("write_exr needs at least one channel")
+    if compression not in _EXR_COMPRESSION:
+        raise ValueError(
+            f"EXR compression must be one of {sorted(_EXR_COMPRESSION)}, got {compression!r}"
+        )
+    shape, arrays = None, {}
+    for name in sorted(str(n) for n in channels):  # the format lists channels by name
+        if not name or "\0" in name or len(name.encode()) > 255:
+            raise ValueError(f"EXR channel name {name!r} must be 1 to 255 bytes, no NUL")
+        arrays[name] = _exr_channel(name, channels[name], shape)
+        shape = arrays[name].shape
+    code, lines = _EXR_COMPRESSION[compression]
+    h = next(iter(arrays.values())).shape[0]
+    # one row of the file: every channel's values of that scanline, little-endian, in order
+    rows = np.concatenate(
+        [
+            a.astype(a.dtype.newbyteorder("<")).view(np.uint8).reshape(h, -1)
+            for a in arrays.values()
+        ],
+        axis=1,
+    )
+    header = _exr_header(arrays, code)
+    starts = range(0, h, lines)
+    position = len(header) + 8 * len(starts)
+    offsets, blocks = [], []
+    for y in starts:
+        raw = rows[y : y + lines].tobytes()
+        data = raw if code == 0 else _exr_zip(raw, level)
+        offsets.append(position)
+        blocks.append(struct.pack("<ii", y, len(data)) + data)
+        position += len(blocks[-1])
+    return header + struct.pack(f"<{len(offsets)}Q", *offsets) + b"".join(blocks)
+
+
+def _bytes_writer(data: bytes) -> Callable[[str], None]:
+    """write(tmp) for atomic_write: the bytes, flushed to the disk."""
+
+    def write(tmp: str) -> None:
+        with open(tmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+
+    return write
+
+
 def write_exr(
     path: str | os.PathLike, channels: Mapping[str, Any], *, compression: str = "zip"
 ) -> str:
     """Write named (h, w) channels (float32; float16/uint32 kept) to an EXR file, atomically."""
-    exr = _import_openexr()
-    if not channels:
-        raise ValueError("write_exr needs at least one channel")
-    shape, arrays = None, {}
-    for name, arr in channels.items():
-        arrays[str(name)] = _exr_channel(str(name), arr, shape)
-        shape = arrays[str(name)].shape
-    modes = {"none": "NO_COMPRESSION", "zip": "ZIP_COMPRESSION", "piz": "PIZ_COMPRESSION",
-             "zips": "ZIPS_COMPRESSION", "rle": "RLE_COMPRESSION"}  # fmt: skip
-    if compression not in modes:
-        raise ValueError(f"EXR compression must be one of {sorted(modes)}, got {compression!r}")
-    # the compression constant by its name in the OpenEXR module (a lookup, not a probe)
-    header = {"compression": getattr(exr, modes[compression]), "type": exr.scanlineimage}
+    return write_exr_files([(path, channels)], compression=compression)[0]
 
-    def write(tmp: str) -> None:
-        exr.File(header, arrays).write(tmp)
 
-    return atomic_write(path, write)
+def write_exr_files(
+    files: Sequence[tuple[str | os.PathLike, Mapping[str, Any]]], *, compression: str = "zip"
+) -> list[str]:
+    """Write several EXR files (path, channels) as one: all are replaced, or none is
+    (atomic_write_all); returns their paths."""
+    encoded = [(path, exr_bytes(chans, compression=compression)) for path, chans in files]
+    return atomic_write_all([(path, _bytes_writer(data)) for path, data in encoded])
 
 
 def read_exr(path: str | os.PathLike) -> dict[str, np.ndarray]:

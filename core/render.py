@@ -295,7 +295,7 @@ def check_scene_camera(scene: Scene, position, tolerance: float = 1e-8) -> None:
 def tracer_for_camera(scene: Scene, options: TraceOptions, extent: float, position) -> Tracer:
     """The scene's tracer; with the default method (options.method None) and a model whose
     explicit split cannot start rays at the camera (Kerr's Boyer–Lindquist split: a camera
-    on the polar axis or within its capture radius, where Kerr–Schild still can), the
+    on the polar axis, where Kerr–Schild still can), the
     tracer of the implicit default (DEFAULT_METHOD) in the model's own chart instead."""
     tracer = Tracer(scene, options, extent)
     if options.method is not None or not tracer.curved:
@@ -499,7 +499,12 @@ def summary_text(summary: dict) -> str:
 
 
 def shade(rays: RayResults, background: Background) -> np.ndarray:
-    """RGBA (N, 4) of traced rays: surfaces, sky, black horizon, volumes; debug colours."""
+    """RGBA (N, 4) of traced rays: surfaces, sky, black horizon, volumes; debug colours.
+
+    What lies in front of a ray's ending (volumes, a translucent disk: radiance, and
+    transmittance T) covers 1 - T of it: alpha = 1 - T (1 - the ending's alpha). A
+    background of alpha 0 (Film › Transparent: (0, 0, 0, 0)) leaves the premultiplied
+    foreground, which composited over a background b gives radiance + T b again."""
     n = rays.ending.shape[0]
     color = np.zeros((n, 4))
     color[:, 3] = 1.0
@@ -509,6 +514,7 @@ def shade(rays: RayResults, background: Background) -> np.ndarray:
     if escaped.any():
         color[escaped] = background(rays.direction[escaped])
     color[:, :3] = rays.radiance + rays.transmittance[:, None] * color[:, :3]
+    color[:, 3] = 1.0 - rays.transmittance * (1.0 - color[:, 3])
     color[rays.ending == ENDING["failed"]] = FAILED_COLOR
     color[rays.ending == ENDING["max_steps"]] = MAX_STEPS_COLOR
     return color.astype(np.float32)

@@ -26,16 +26,23 @@ from __future__ import annotations
 
 import hashlib
 import math
+import os
 import threading
 from collections import OrderedDict
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import ExitStack, contextmanager
-from typing import Any
+from typing import Any, NamedTuple
 
 import bpy
 import numpy as np
 
-from .export_meshes import BakedSurface, _is_rendered, _mesh_arrays
+from .export_meshes import (
+    GEOMETRY_TYPES,
+    BakedSurface,
+    _is_rendered,
+    _mesh_arrays,
+    non_finite_warning,
+)
 from .materials import DEFAULT_COLOR, image_pixels, node_tree_of
 
 PASS_FILTER = {"EMIT", "DIRECT", "INDIRECT", "DIFFUSE"}
@@ -73,15 +80,20 @@ def wants_baking(settings: Any, depsgraph: bpy.types.Depsgraph) -> bool:
 
 
 def bake_surfaces(
-    scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph
+    scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, warnings: list[str] | None = None
 ) -> dict[str, BakedSurface]:
-    """Baked radiance of every rendered (non-instanced) object, by object name.
+    """Baked radiance of every rendered (non-instanced) object with faces, by object name.
 
-    Reuses cached bakes; bakes the others with Cycles (main thread only). Raises
-    ValueError when Cycles is missing, a bake fails, or one is needed off the main thread.
+    Reuses cached bakes; bakes the others with Cycles (main thread only). An object with
+    non-finite vertices is left out (and out of the others' bakes), named in ``warnings``.
+    Raises ValueError when Cycles is missing, a bake fails, or one is needed off the main
+    thread.
     """
     settings = scene.symray
-    targets, keys, missing = _lookup(scene, depsgraph)
+    targets, keys, missing, broken = _lookup(scene, depsgraph)
+    for obj in broken:
+        if warnings is not None and non_finite_warning(obj.name) not in warnings:
+            warnings.append(non_finite_warning(obj.name))
     if missing and threading.current_thread() is not threading.main_thread():
         raise ValueError(
             "Surface lighting is baked by Cycles on Blender's main thread, which F12 does "
@@ -91,7 +103,7 @@ def bake_surfaces(
     baking = {obj.name for obj in missing}
     found = {obj.name: _cache[keys[obj.name]] for obj in targets if obj.name not in baking}
     if missing:
-        with _bake_scene(scene, depsgraph) as temp:
+        with _bake_scene(scene, depsgraph) as temp, _hidden(obj.original for obj in broken):
             for obj in missing:
                 found[obj.name] = _bake_object(temp, depsgraph, obj, settings)
     for obj in targets:
@@ -109,20 +121,38 @@ def can_bake_now(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> bool
 
 
 def _lookup(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph):
-    """(objects to bake, their cache keys by name, those not in the cache)."""
-    targets = _targets(depsgraph)
-    base = _scene_key(scene, depsgraph)
+    """(objects to bake, their cache keys by name, those not in the cache, objects left
+    out for non-finite vertices)."""
+    candidates = _candidates(depsgraph)
+    meshes = {obj.name: _mesh_key(obj) for obj in candidates}
+    targets = [obj for obj in candidates if meshes[obj.name].faces and meshes[obj.name].finite]
+    broken = [obj for obj in candidates if meshes[obj.name].faces and not meshes[obj.name].finite]
+    base = _scene_key(scene, depsgraph, meshes)
     keys = {obj.name: _digest(base, obj.name) for obj in targets}
-    return targets, keys, [obj for obj in targets if keys[obj.name] not in _cache]
+    return targets, keys, [obj for obj in targets if keys[obj.name] not in _cache], broken
 
 
-def _targets(depsgraph: bpy.types.Depsgraph) -> list[bpy.types.Object]:
-    """The evaluated objects to bake: rendered geometry that is not an instance."""
+def _candidates(depsgraph: bpy.types.Depsgraph) -> list[bpy.types.Object]:
+    """The evaluated objects that may be baked: rendered geometry that is not an instance
+    (a curve or text object as itself: its mesh is the surface it renders)."""
     return [
         inst.object
         for inst in depsgraph.object_instances
-        if _is_rendered(inst) and not inst.is_instance
+        if not inst.is_instance
+        and inst.show_self
+        and inst.object.type in GEOMETRY_TYPES
+        and not inst.object.original.hide_render
     ]
+
+
+@contextmanager
+def _hidden(objects: Iterable[bpy.types.Object]) -> Iterator[None]:
+    """Hide ``objects`` (originals) from rendering until the block ends."""
+    with ExitStack() as stack:
+        for obj in objects:
+            stack.callback(setattr, obj, "hide_render", obj.hide_render)
+            obj.hide_render = True
+        yield
 
 
 def _remember(key: str, surface: BakedSurface) -> None:
@@ -181,7 +211,8 @@ def _tree_key(tree: bpy.types.NodeTree | None, depth: int = 0) -> tuple:
         stops = tuple((e.position, tuple(e.color)) for e in ramp.elements) if ramp else ()
         group = _tree_key(node.node_tree, depth + 1) if node.type == "GROUP" else ()
         own = _own_properties(node, bpy.types.Node)
-        nodes.append((node.name, node.bl_idname, node.mute, own, inputs, stops, group))
+        image = _image_key(getattr(node, "image", None))
+        nodes.append((node.name, node.bl_idname, node.mute, own, inputs, stops, group, image))
     links = tuple(
         (lk.from_node.name, lk.from_socket.identifier, lk.to_node.name, lk.to_socket.identifier)
         for lk in tree.links
@@ -202,26 +233,104 @@ def _matrix(matrix: Any) -> tuple:
     return tuple(np.array(matrix, dtype=np.float64).ravel().tolist())
 
 
-def _mesh_key(obj: bpy.types.Object) -> str:
-    """Hash of an evaluated object's triangles, UVs and material slots."""
+class _Mesh(NamedTuple):
+    """An evaluated object's mesh as the cache sees it."""
+
+    key: str
+    """Hash of its triangles, UVs, normals (smooth or flat) and material slots."""
+    faces: bool
+    """Whether it has a surface (a path or a wire has none: nothing to bake or hit)."""
+    finite: bool
+    """Whether its world-space vertices are all finite numbers."""
+
+
+def _mesh_key(obj: bpy.types.Object) -> _Mesh:
+    """The cache's view of an evaluated object's mesh (an empty one if it has none)."""
     try:
         mesh = obj.to_mesh()
     except RuntimeError:
-        return ""
+        mesh = None
     if mesh is None:
-        return ""
+        return _Mesh("", False, True)
     try:
         arrays = _mesh_arrays(mesh)
+        normals = np.empty(len(mesh.loop_triangles) * 9, dtype=np.float32)
+        mesh.loop_triangles.foreach_get("split_normals", normals)
     finally:
         obj.to_mesh_clear()
     h = hashlib.blake2b(digest_size=20)
-    for array in arrays:
+    for array in (*arrays, normals):
         h.update(np.ascontiguousarray(array).tobytes())
-    return h.hexdigest()
+    co, tri = arrays[0], arrays[1]
+    finite = bool(np.all(np.isfinite(co)) and np.all(np.isfinite(np.array(obj.matrix_world))))
+    return _Mesh(h.hexdigest(), len(tri) > 0, finite)
 
 
-def _scene_key(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> str:
-    """One key over everything that can change the light on any surface, and the settings."""
+OBJECT_FLAGS = (
+    "visible_camera",
+    "visible_diffuse",
+    "visible_glossy",
+    "visible_transmission",
+    "visible_volume_scatter",
+    "visible_shadow",
+    "visible_raycast",
+    "is_holdout",
+    "is_shadow_catcher",
+    "pass_index",
+)
+"""Object settings that change what Cycles bakes (ray visibility, holdout, ...)."""
+
+
+def _flags(obj: bpy.types.Object) -> tuple:
+    """An object's ray-visibility settings and colour (read by Object Info nodes)."""
+    original = obj.original
+    return tuple(getattr(original, name, None) for name in OBJECT_FLAGS) + tuple(obj.color)
+
+
+def _file_stamp(image: bpy.types.Image) -> tuple:
+    """(modification time, size) of an image's file, or () where it has none."""
+    try:
+        stat = os.stat(bpy.path.abspath(image.filepath, library=image.library))
+    except (OSError, ValueError):
+        return ()
+    return stat.st_mtime_ns, stat.st_size
+
+
+def _image_key(image: bpy.types.Image | None) -> tuple:
+    """What an image's pixels depend on: its settings and contents (the pixels when edited
+    in Blender, the packed file when packed, the file's time and size when on disk)."""
+    if image is None:
+        return ()
+    settings = (
+        image.name_full,
+        image.source,
+        image.filepath,
+        image.colorspace_settings.name,
+        image.alpha_mode,
+        image.generated_type,
+        tuple(image.generated_color),
+        image.generated_width,
+        image.generated_height,
+        image.use_generated_float,
+    )
+    if image.is_dirty:
+        pixels = np.empty(len(image.pixels), dtype=np.float32)
+        image.pixels.foreach_get(pixels)
+        content: Any = hashlib.blake2b(pixels.tobytes(), digest_size=20).hexdigest()
+    elif image.packed_file is not None:
+        content = hashlib.blake2b(image.packed_file.data, digest_size=20).hexdigest()
+    elif image.source == "GENERATED":
+        content = ()
+    else:
+        content = _file_stamp(image)
+    return settings, content
+
+
+def _scene_key(
+    scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, meshes: dict[str, _Mesh]
+) -> str:
+    """One key over everything that can change the light on any surface, and the settings.
+    ``meshes``: the objects' meshes known so far by name (the others are added)."""
     settings = scene.symray
     parts: list[Any] = [
         settings.bake_texel_size,
@@ -229,20 +338,20 @@ def _scene_key(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> str:
         settings.bake_samples,
         bpy.app.version,
     ]
-    meshes: dict[str, str] = {}
     for inst in depsgraph.object_instances:
         obj = inst.object
         if obj.type == "LIGHT" and inst.show_self and not obj.original.hide_render:
             light = obj.data
             tree = _tree_key(getattr(light, "node_tree", None))
             own = _own_properties(light, bpy.types.ID)  # not users, tags, ...
-            parts.append(("light", _matrix(inst.matrix_world), own, tree))
+            parts.append(("light", _matrix(inst.matrix_world), own, tree, _flags(obj)))
         elif _is_rendered(inst):
             if obj.name not in meshes:
                 meshes[obj.name] = _mesh_key(obj)
             slots = tuple(_material_key(slot.material) for slot in obj.material_slots)
-            parts.append((obj.name, inst.is_instance, _matrix(inst.matrix_world), slots))
-    parts.append(sorted(meshes.items()))
+            flags = _flags(obj)
+            parts.append((obj.name, inst.is_instance, _matrix(inst.matrix_world), slots, flags))
+    parts.append(sorted((name, mesh.key) for name, mesh in meshes.items()))
     world = scene.world
     if world is not None:
         parts.append(("world", tuple(world.color), _tree_key(node_tree_of(world))))
@@ -269,6 +378,39 @@ def _copy_exclusion(source: bpy.types.LayerCollection, target: bpy.types.LayerCo
             _copy_exclusion(child, twin)
 
 
+def _copy_view_layer(
+    scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, temp: bpy.types.Scene
+) -> None:
+    """Exclude in ``temp``'s view layer the collections the rendered view layer excludes.
+
+    A new scene's view layer has its layer collections only once it is synced with the
+    collections linked to it (``frame_set`` or ``update``), and its objects are those of
+    the collections left only once it is synced again (``update``)."""
+    layer = scene.view_layers.get(depsgraph.view_layer.name) if depsgraph.view_layer else None
+    target = temp.view_layers[0]
+    if layer is None or layer.layer_collection is None or target.layer_collection is None:
+        raise ValueError(f"The view layers of '{scene.name}' could not be read for baking")
+    _copy_exclusion(layer.layer_collection, target.layer_collection)
+    target.update()
+
+
+def _sync_view_layers() -> None:
+    """Bring every scene's view layers up to date with their collections again.
+
+    Adding or removing datablocks (the temporary scene, images, copies) marks the view
+    layers of every scene out of sync, and Blender syncs them lazily. An animation render
+    keeps one depsgraph of its scene for all frames; at the next frame it copies the scene
+    again, and a copy of an out-of-sync view layer syncs itself into bases that point to
+    no original, which crashes Blender 5 (``render(animation=True)``, ``blender -b -a``).
+    Iterating a layer collection's children syncs its view layer, evaluating nothing.
+    """
+    for scene in bpy.data.scenes:
+        for layer in scene.view_layers:
+            if layer.layer_collection is not None:
+                for _child in layer.layer_collection.children:
+                    break
+
+
 @contextmanager
 def _bake_scene(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> Iterator[Any]:
     """A temporary Cycles scene holding ``scene``'s objects, removed afterwards."""
@@ -280,9 +422,6 @@ def _bake_scene(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> Itera
                 "Cycles add-on, or set Surface Lighting to Unlit"
             )
         _link_collections(scene, temp)
-        layer = scene.view_layers.get(depsgraph.view_layer.name) if depsgraph.view_layer else None
-        if layer is not None:
-            _copy_exclusion(layer.layer_collection, temp.view_layers[0].layer_collection)
         temp.world = scene.world
         temp.render.engine = "CYCLES"
         temp.render.threads_mode = scene.render.threads_mode
@@ -290,9 +429,11 @@ def _bake_scene(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> Itera
         temp.cycles.device = "CPU"
         temp.cycles.samples = int(scene.symray.bake_samples)
         temp.frame_set(scene.frame_current, subframe=scene.frame_subframe)
+        _copy_view_layer(scene, depsgraph, temp)
         yield temp
     finally:
         bpy.data.scenes.remove(temp)
+        _sync_view_layers()
 
 
 def resolution(area: float, uv_area: float, texel: float, max_resolution: int) -> int:
@@ -398,7 +539,7 @@ def _temporary_copy(
     original.hide_render = True
     if not mesh.uv_layers or not _unique_uvs(mesh):
         mesh.uv_layers.active = mesh.uv_layers.new(name=TEMP_NAME)
-        _smart_project(temp, copy)
+        _smart_project(copy)
     return copy
 
 
@@ -455,17 +596,23 @@ def _context(temp: bpy.types.Scene, obj: bpy.types.Object, editing: bool = False
     )
 
 
-def _smart_project(temp: bpy.types.Scene, obj: bpy.types.Object) -> None:
-    """Smart UV Project the whole mesh of ``obj`` (a temporary object of ``temp``)."""
-    with _context(temp, obj):
-        bpy.ops.object.mode_set(mode="EDIT")
+def _smart_project(obj: bpy.types.Object) -> None:
+    """Smart UV Project the whole mesh of ``obj`` (a temporary object) in a scene of its
+    own: leaving Edit Mode leaves it for every object of the scene, none of the user's."""
+    scratch = bpy.data.scenes.new(TEMP_NAME)
     try:
-        with _context(temp, obj, editing=True):
-            bpy.ops.mesh.select_all(action="SELECT")
-            bpy.ops.uv.smart_project(island_margin=0.02)
+        scratch.collection.objects.link(obj)
+        with _context(scratch, obj):
+            bpy.ops.object.mode_set(mode="EDIT")
+        try:
+            with _context(scratch, obj, editing=True):
+                bpy.ops.mesh.select_all(action="SELECT")
+                bpy.ops.uv.smart_project(island_margin=0.02)
+        finally:
+            with _context(scratch, obj, editing=True):
+                bpy.ops.object.mode_set(mode="OBJECT")
     finally:
-        with _context(temp, obj, editing=True):
-            bpy.ops.object.mode_set(mode="OBJECT")
+        bpy.data.scenes.remove(scratch)
 
 
 def _add_image_nodes(stack: ExitStack, obj: bpy.types.Object, image: bpy.types.Image) -> None:

@@ -68,8 +68,9 @@ class SymRayDiskSettings(bpy.types.PropertyGroup):
         name="Brightness",
         default=1.0,
         min=0.0,
+        max=1e6,
         soft_max=100.0,
-        description="Luminance of a disk point at Temperature seen without shift",
+        description="Luminance of a disk point at Temperature seen without shift (at most 1e6)",
     )
     opacity: bpy.props.FloatProperty(  # type: ignore[valid-type]
         name="Opacity",

@@ -87,6 +87,7 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
             if result.cancelled or self.test_break():
                 self.end_result(res, cancel=True)
                 return
+            output.check_finite(result.rgba)
             self._write_result(res, result, passes)
         except BaseException:
             self.end_result(res, cancel=True)  # nothing of a failed frame is committed

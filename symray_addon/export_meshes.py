@@ -22,6 +22,10 @@ from ..core.intersect import Hits
 from .materials import MaterialSampler, material_sampler, unsupported_nodes
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
+CURVE_TYPES = {"CURVE", "FONT"}
+"""Objects whose surface the depsgraph lists again as a mesh instance of their own."""
+_UNUSED_LEVEL = 2**31 - 1
+"""``persistent_id`` entry of the instancing levels below a dupli's own."""
 
 
 @dataclass
@@ -57,6 +61,8 @@ class BVHIntersector:
         ``tri_uv`` (T, 3, 2) UVs of each triangle's corners, ``names`` object names by id.
         """
         self.vertices = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
+        if not np.all(np.isfinite(self.vertices)):
+            raise ValueError("BVHIntersector needs finite vertices (NaN or infinity found)")
         self.triangles = np.ascontiguousarray(triangles, dtype=np.int64).reshape(-1, 3)
         if len(self.triangles) == 0:
             raise ValueError("BVHIntersector needs at least one triangle")
@@ -197,11 +203,40 @@ def _mesh_arrays(mesh: bpy.types.Mesh, loop_uv: np.ndarray | None = None) -> tup
 
 
 def _is_rendered(instance: bpy.types.DepsgraphObjectInstance) -> bool:
-    """Whether an instance's own geometry shows in a render."""
+    """Whether an instance's own geometry shows in a render (as Cycles decides: a curve or
+    text object shows through the mesh instance of its surface, not as itself)."""
     obj = instance.object
     if obj.type not in GEOMETRY_TYPES or not instance.show_self:
         return False
-    return instance.is_instance or not obj.original.hide_render
+    if obj.type in CURVE_TYPES and not isinstance(obj.data, bpy.types.Mesh):
+        return False
+    if instance.is_instance and not own_surface(instance):
+        return True
+    return not obj.original.hide_render
+
+
+def own_surface(instance: bpy.types.DepsgraphObjectInstance) -> bool:
+    """Whether an instance is the mesh of a (not instanced) curve or text object's surface:
+    its own geometry, rendered and baked as that object."""
+    parent = instance.parent
+    return (
+        instance.is_instance
+        and parent is not None
+        and parent.original == instance.object.original
+        and parent.original.type in CURVE_TYPES
+        and instance.persistent_id[1] == _UNUSED_LEVEL
+    )
+
+
+def non_finite_warning(name: str) -> str:
+    """The warning for an object left out because of non-finite vertices."""
+    return f"Object '{name}' has NaN or infinite vertex coordinates: it is not rendered"
+
+
+def _note(warnings: list[str] | None, text: str) -> None:
+    """Append ``text`` to ``warnings`` unless it is there already."""
+    if warnings is not None and text not in warnings:
+        warnings.append(text)
 
 
 def build_intersector(
@@ -223,7 +258,8 @@ def build_intersector(
         if not _is_rendered(instance):
             continue
         obj = instance.object
-        surface = None if instance.is_instance or not baked else baked.get(obj.name)
+        instanced = instance.is_instance and not own_surface(instance)
+        surface = None if instanced or not baked else baked.get(obj.name)
         try:
             mesh = obj.to_mesh()
         except RuntimeError:
@@ -238,13 +274,15 @@ def build_intersector(
         if len(tri) == 0:
             continue
         matrix = np.array(instance.matrix_world, dtype=np.float64)
-        co = co @ matrix[:3, :3].T + matrix[:3, 3]
+        with np.errstate(invalid="ignore", over="ignore"):  # checked just below
+            co = co @ matrix[:3, :3].T + matrix[:3, 3]
+        if not np.all(np.isfinite(co)):
+            _note(warnings, non_finite_warning(obj.name))
+            continue
         if np.linalg.det(matrix[:3, :3]) < 0.0:  # mirrored: keep faces pointing outwards
             tri, uv = tri[:, ::-1], uv[:, ::-1]
-        if baked and instance.is_instance and warnings is not None:
-            note = "Instanced objects are not baked: they show their materials unlit"
-            if note not in warnings:
-                warnings.append(note)
+        if baked and instanced:
+            _note(warnings, "Instanced objects are not baked: they show their materials unlit")
         if surface is not None:
             samplers.append(surface.sampler())
             slot_map = np.array([len(samplers) - 1], dtype=np.int64)

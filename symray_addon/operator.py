@@ -75,14 +75,28 @@ class RenderTask:
         return self.result
 
 
-def finish(operator: bpy.types.Operator, result: Any, image_name: str, exr_path: str) -> set[str]:
-    """Write a finished render (EXR first, then the image); report and return the status."""
+def finish(
+    operator: bpy.types.Operator,
+    result: Any,
+    image_name: str,
+    exr_path: str,
+    passes: tuple[str, ...] = (),
+) -> set[str]:
+    """Write a finished render (the EXR pair with the ``passes`` switched on first, then
+    the image); report and return the status."""
     if result is None or getattr(result, "cancelled", False):
         operator.report({"WARNING"}, "SymRay render cancelled; the previous image is unchanged")
         return {"CANCELLED"}
-    if exr_path:
-        output.write_exr(exr_path, result.rgba, result.passes)
-    output.write_image(image_name, result.rgba)
+    output.check_finite(result.rgba)
+    written = output.write_exr(exr_path, result.rgba, result.passes, passes) if exr_path else []
+    try:
+        output.write_image(image_name, result.rgba)
+    except Exception as err:  # the message must say what was written before it
+        files = " and ".join(f"'{path}'" for path in written)
+        done = f"; {files} were written" if written else "; nothing was written"
+        raise OSError(
+            f"SymRay could not write image '{image_name}' ({type(err).__name__}: {err}){done}"
+        ) from err
     text = render_job.finished(result.summary)
     if bpy.app.background:
         print(f"SymRay: {text}")
@@ -105,17 +119,17 @@ class SYMRAY_OT_render(bpy.types.Operator):
         return context.scene is not None and not cls._running
 
     def _prepare(self, context: bpy.types.Context) -> tuple[render_job.RenderJob, str, str]:
-        """Check the settings and read the scene: the job, image name and EXR path."""
+        """Check the settings and read the scene: the job, image name and EXR path (the
+        passes switched on go to ``self._passes``)."""
         scene = context.scene
-        image_name = scene.symray.image_name.strip()
-        if not image_name:
-            raise ValueError("Set the name of the image SymRay should write")
+        image_name = output.check_image_name(scene.symray.image_name)
         exr_path = scene.symray.exr_path.strip()
         if exr_path:
             output.check_writable(exr_path)
         job = render_job.prepare(scene, context.evaluated_depsgraph_get())
         for warning in job.warnings:
             self.report({"WARNING"}, warning)
+        self._passes = scene.symray.passes()
         return job, image_name, exr_path
 
     def _failed(self, err: Exception) -> set[str]:
@@ -128,7 +142,7 @@ class SYMRAY_OT_render(bpy.types.Operator):
         try:
             job, image_name, exr_path = self._prepare(context)
             result = render_job.run(job)
-            return finish(self, result, image_name, exr_path)
+            return finish(self, result, image_name, exr_path, self._passes)
         except Exception as err:  # every failure is reported, whatever it is
             return self._failed(err)
 
@@ -181,7 +195,7 @@ class SYMRAY_OT_render(bpy.types.Operator):
             return {"PASS_THROUGH"}
         self._cleanup(context)
         try:
-            return finish(self, task.collect(), self._image_name, self._exr_path)
+            return finish(self, task.collect(), self._image_name, self._exr_path, self._passes)
         except Exception as err:  # every failure is reported, whatever it is
             return self._failed(err)
 
@@ -209,11 +223,15 @@ class SYMRAY_OT_bake_lighting(bpy.types.Operator):
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         """Bake (or find in the cache) every object's lighting for the current frame."""
+        warnings: list[str] = []
         try:
-            surfaces = bake.bake_surfaces(context.scene, context.evaluated_depsgraph_get())
+            depsgraph = context.evaluated_depsgraph_get()
+            surfaces = bake.bake_surfaces(context.scene, depsgraph, warnings)
         except Exception as err:  # every failure is reported, whatever it is
             self.report({"ERROR"}, render_job.failure_message(err))
             return {"CANCELLED"}
+        for warning in warnings:
+            self.report({"WARNING"}, warning)
         self.report({"INFO"}, f"SymRay: lighting of {len(surfaces)} objects baked")
         return {"FINISHED"}
 

@@ -1,14 +1,14 @@
-"""Results -> Blender images and OpenEXR files, through Blender's own image API.
+"""Results -> Blender images (Blender's image API) and the operator's OpenEXR files.
 
-The extension never imports the OpenEXR package (Blender does not bundle it). EXR files
-are written by Blender: a float Image saved with a scene's image settings (OpenEXR, 32-bit
-float, ZIP). Every file is first written to a temporary name in the target folder and
-then moved over the target with ``os.replace``, so a failed or cancelled write never
-leaves a half-written file behind.
+The operator's EXR files are encoded by core.imageio (numpy + zlib: 32-bit float, ZIP;
+Blender does not bundle the OpenEXR package, and its own writer names no channels).
+``<path>`` holds R, G, B, A; when passes are switched on, ``<stem>.passes.exr`` next to it
+holds one layer per pass switched on, named as the engine's passes: "SymRay Error.X"
+(pixels), "SymRay Steps.X", "SymRay Ending.X" (core.ENDING code), "SymRay Redshift.X"
+(NaN off the accretion disk); a pass switched off has no layer. Both files are written to
+temporary names in the target folder and then moved over the targets together: a failed
+write leaves both previous files as they were.
 
-The operator writes two files: ``<path>`` holds RGBA; when passes were computed,
-``<stem>.passes.exr`` next to it holds R = error (pixels), G = steps, B = ending code,
-A = redshift (NaN off the accretion disk; 1 when the pass was not computed).
 Renders through the SYMRAY engine (F12, ``blender -b``) use Blender's output settings
 instead: choose OpenEXR MultiLayer there to get every pass ("SymRay Error", ...) in one file.
 """
@@ -17,16 +17,21 @@ from __future__ import annotations
 
 import os
 import uuid
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
 
 import bpy
 import numpy as np
 
+from ..core import imageio
 from .properties import PASSES
 
-PASS_CHANNELS = tuple(name for name, _label, _toggle in PASSES)
-"""Order of the passes in the R, G, B, A channels of the operator's passes EXR."""
+PASS_LAYERS = {name: f"SymRay {label}.X" for name, label, _toggle in PASSES}
+"""Core pass -> its channel in the operator's passes EXR (the engine's pass name + '.X')."""
+BLENDER_IMAGES = {"RENDER_RESULT": "render result", "COMPOSITING": "compositor viewer"}
+"""Image types Blender fills itself (Image.type) -> what to call them in a message."""
+RESERVED_IMAGE_NAMES = ("Render Result", "Viewer Node")
+"""Names Blender gives its own images (they may not exist yet)."""
 
 
 def resolve_path(path: str) -> str:
@@ -56,6 +61,12 @@ def check_writable(path: str) -> str:
     if os.path.isdir(raw) or raw.endswith(("/", "\\")):
         raise OSError(f"EXR path '{raw}' is a folder, not a file")
     target = resolve_path(path)
+    extension = os.path.splitext(target)[1]
+    if extension.lower() != ".exr":
+        raise OSError(
+            f"EXR path '{path}' ends in '{extension}', not '.exr': SymRay writes OpenEXR "
+            "there and would replace that file; end the path in .exr"
+        )
     folder = os.path.dirname(target)
     if os.path.isdir(target):
         raise OSError(f"EXR path '{target}' is a folder, not a file")
@@ -66,6 +77,39 @@ def check_writable(path: str) -> str:
     if os.path.exists(target) and not os.access(target, os.W_OK):
         raise OSError(f"Cannot write EXR: '{target}' is not writable")
     return target
+
+
+def check_image_name(name: str) -> str:
+    """``name`` stripped; ValueError unless the operator can write an image of that name
+    (not empty, not one of the images Blender fills itself, not linked from a library)."""
+    name = name.strip()
+    if not name:
+        raise ValueError("Set the name of the image SymRay should write (SymRay › Output › Image)")
+    image = bpy.data.images.get(name)
+    kind = BLENDER_IMAGES.get(image.type) if image is not None else None
+    if kind is None and name in RESERVED_IMAGE_NAMES:
+        kind = BLENDER_IMAGES["RENDER_RESULT" if name == "Render Result" else "COMPOSITING"]
+    if kind is not None:
+        raise ValueError(
+            f"Image '{name}' is Blender's {kind}, which only Blender writes: choose another "
+            "name in SymRay › Output › Image (e.g. 'SymRay Result'); nothing was written"
+        )
+    if image is not None and image.library is not None:
+        raise ValueError(
+            f"Image '{name}' is linked from '{image.library.filepath}' and cannot be "
+            "changed: choose another name in SymRay › Output › Image; nothing was written"
+        )
+    return name
+
+
+def check_finite(rgba: np.ndarray) -> None:
+    """ValueError unless every colour value is finite (an inf or NaN pixel is never written)."""
+    bad = ~np.isfinite(rgba).all(axis=-1)
+    if bad.any():
+        raise ValueError(
+            f"{int(bad.sum())} pixels have a colour beyond 32-bit floats (inf or NaN; e.g. "
+            "a Disk Brightness or world strength too large): nothing was written"
+        )
 
 
 def bottom_up(image: np.ndarray, channels: int) -> np.ndarray:
@@ -130,16 +174,6 @@ def set_png_format(settings: bpy.types.ImageFormatSettings) -> None:
 
 
 @contextmanager
-def _scratch_scene() -> Iterator[bpy.types.Scene]:
-    """A temporary scene whose image settings drive Image.save_render; removed afterwards."""
-    scene = bpy.data.scenes.new("SymRay EXR Writer")
-    try:
-        yield scene
-    finally:
-        bpy.data.scenes.remove(scene)
-
-
-@contextmanager
 def atomic_target(path: str) -> Iterator[str]:
     """Yield a temporary file name next to ``path``; on success move it over ``path``."""
     folder = os.path.dirname(path) or "."
@@ -164,42 +198,36 @@ def save_render_atomic(image: bpy.types.Image, path: str, scene: bpy.types.Scene
             raise OSError(f"Cannot write '{path}': {err}") from None
 
 
-def write_exr(
-    path: str, rgba: np.ndarray, passes: Mapping[str, np.ndarray] | None = None
-) -> list[str]:
-    """Write ``rgba`` (and ``passes``, see module doc) as OpenEXR; returns the files written.
+def exr_layers(
+    passes: Mapping[str, np.ndarray], wanted: Sequence[str] = tuple(PASS_LAYERS)
+) -> dict[str, np.ndarray]:
+    """The passes EXR's channels: the passes in ``wanted`` that were computed, by layer name."""
+    return {
+        layer: np.asarray(passes[name], dtype=np.float32)
+        for name, layer in PASS_LAYERS.items()
+        if name in wanted and name in passes
+    }
 
-    ``path`` may be relative to the .blend ('//'); OSError if a file cannot be written.
+
+def write_exr(
+    path: str,
+    rgba: np.ndarray,
+    passes: Mapping[str, np.ndarray] | None = None,
+    wanted: Sequence[str] = tuple(PASS_LAYERS),
+) -> list[str]:
+    """Write ``rgba`` and the ``wanted`` passes (module doc) as OpenEXR, both files or
+    neither; returns the files written.
+
+    ``path`` may be relative to the .blend ('//'); OSError naming the file that failed.
     """
     target = check_writable(path)
-    h, w = rgba.shape[:2]
-    written: list[str] = []
-    images: list[bpy.types.Image] = []
+    check_finite(rgba)
+    colour = np.asarray(rgba, dtype=np.float32)
+    files = [(target, {c: colour[..., i] for i, c in enumerate("RGBA")})]
+    layers = exr_layers(passes or {}, wanted)
+    if layers:
+        files.append((passes_path(target), layers))
     try:
-        with _scratch_scene() as scene:
-            set_exr_format(scene.render.image_settings)
-            color = bpy.data.images.new(
-                "SymRay EXR", width=w, height=h, alpha=True, float_buffer=True
-            )
-            images.append(color)
-            _fill(color, rgba)
-            save_render_atomic(color, target, scene)
-            written.append(target)
-            present = [p for p in PASS_CHANNELS if passes and p in passes]
-            if present:
-                data = np.zeros((h, w, 4), dtype=np.float32)
-                data[..., 3] = 1.0
-                for channel, name in enumerate(PASS_CHANNELS):
-                    if name in present:
-                        data[..., channel] = passes[name]
-                extra = bpy.data.images.new(
-                    "SymRay EXR Passes", width=w, height=h, alpha=True, float_buffer=True
-                )
-                images.append(extra)
-                _fill(extra, data)
-                save_render_atomic(extra, passes_path(target), scene)
-                written.append(passes_path(target))
-    finally:
-        for image in images:
-            bpy.data.images.remove(image)
-    return written
+        return imageio.write_exr_files(files)
+    except imageio.ImageWriteError as err:
+        raise OSError(f"SymRay {err}") from None  # "cannot write image '<path>': ..."

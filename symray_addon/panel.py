@@ -274,6 +274,7 @@ class RENDER_PT_symray_film(SymRayPanelMixin, bpy.types.Panel):
         layout.use_property_split = True
         col = layout.column()
         col.prop(context.scene.render, "filter_size")
+        col.label(text="SymRay uses 0.01 to 2 px of it", icon="INFO")
         col.prop(context.scene.render, "film_transparent", text="Transparent")
 
 

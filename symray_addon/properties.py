@@ -11,7 +11,7 @@ PASSES = (("error_px", "Error", "pass_error"), ("steps", "Steps", "pass_steps"),
           ("ending", "Ending", "pass_ending"),
           ("redshift", "Redshift", "pass_redshift"))  # fmt: skip
 """(core pass, label, toggle) of the passes the add-on writes, in their one order: 'SymRay
-<label>' render passes and the operator's passes EXR channels. 'SymRay Error' is the
+<label>' render passes and the operator's passes EXR layers. 'SymRay Error' is the
 core's ``error_px`` (pixels of the camera)."""
 
 QUALITY_ITEMS = [
@@ -416,14 +416,16 @@ class SymRaySettings(bpy.types.PropertyGroup):
     image_name: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Image",
         default="SymRay Result",
-        description="Image the SymRay Render operator writes (created if missing)",
+        description="Image the SymRay Render operator writes (created if missing; not "
+        "Blender's own Render Result or Viewer Node)",
     )
     exr_path: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="EXR Path",
         default="",
         subtype="FILE_PATH",
         options=_PATH_OPTIONS,
-        description="Also write the operator's result as OpenEXR here (empty = no EXR; "
+        description="Also write the operator's result as OpenEXR here, a path ending in "
+        ".exr (none: .exr is added), with <name>.passes.exr beside it (empty = no EXR; "
         "'//' = next to the .blend, which must be saved)",
     )
 

@@ -24,6 +24,8 @@ from . import bake, export_camera, export_meshes, models, properties, validation
 Progress = Callable[[int, int], None]
 Cancel = Callable[[], bool]
 
+TRANSPARENT = (0.0, 0.0, 0.0, 0.0)
+"""The background of a render with Film › Transparent (premultiplied RGBA, as Blender's)."""
 last_summary: dict[str, Any] = {}
 """Summary of the last frame the engine or the operator finished (for scripts and tests)."""
 
@@ -76,7 +78,7 @@ def prepare(
     model = models.build_model(settings, properties.metric_source(settings))
     models.check_camera(settings, model, where, np.array(kwargs["matrix_world"])[:3, 3])
 
-    warnings: list[str] = []
+    warnings = validation.ignored_settings(scene, depsgraph.view_layer, camera_object)
     baked = _baked_surfaces(scene, depsgraph, warnings)
     intersector = export_meshes.build_intersector(depsgraph, baked, warnings)
     if intersector is None and model is None:
@@ -84,24 +86,25 @@ def prepare(
             "Nothing to render: the scene has no visible mesh objects and the "
             "model is Flat (choose a model or add objects)"
         )
+    transparent = bool(scene.render.film_transparent)
+    # Film › Transparent: a clear sky, so that what lies in front of it (a translucent disk,
+    # volumes) keeps its light and its coverage (core.render.shade)
+    background = TRANSPARENT if transparent else world.world_background(scene, settings.background)
     core_scene = core.Scene(
         model=model,
         center=tuple(where.center),
         axis=tuple(where.axis),
         rotation=where.rotation,
         objects=[] if intersector is None else [intersector],
-        background=world.world_background(scene, settings.background),
+        background=background,
         disk=models.build_disk(settings),
     )
-    transparent = bool(scene.render.film_transparent)
     passes = settings.passes()
-    if transparent and "ending" not in passes:
-        passes += ("ending",)  # needed to cut the background out
     options = {
         "method": None if settings.method == "AUTO" else settings.method,
         **settings.accuracy(),
         # Blender's pixel filter (Film > Filter Size), Cycles' Blackman-Harris
-        "filter_size": min(max(float(scene.render.filter_size), 0.01), 2.0),
+        "filter_size": validation.filter_size(scene.render.filter_size, warnings),
         "max_steps": int(settings.max_steps),
         "passes": passes,
         "parallel": settings.parallel.lower(),
@@ -132,7 +135,7 @@ def _baked_surfaces(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, warn
     if settings.lighting == "AUTO" and not bake.can_bake_now(scene, depsgraph):
         warnings.append(UNBAKED_WARNING)
         return None
-    return bake.bake_surfaces(scene, depsgraph)
+    return bake.bake_surfaces(scene, depsgraph, warnings)
 
 
 def run(
@@ -151,11 +154,6 @@ def run(
         on_tile=on_tile,
         **job.options,
     )
-    if job.transparent and not getattr(result, "cancelled", False):
-        ending = result.passes.get("ending")
-        if ending is not None:
-            escaped = ending == core.ENDING["escaped"]
-            result.rgba[escaped] = 0.0
     return result
 
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..core import checks, expressions
-from ..core.geometry.disk import isco
+from ..core.geometry.disk import check_spin, isco
 from ..core.integrators import METHODS, Splitting
 
 INDEX_NAMES: tuple[str, ...] = ("x", "y", "z")
@@ -39,6 +39,17 @@ TIME_SCALED_MODELS = frozenset({"SCHWARZSCHILD", "KERR"})
 SPLIT_MODELS = frozenset({"SCHWARZSCHILD", "MEDIUM", "KERR"})
 """Models whose tracing form offers an explicit split (the splitting methods need one);
 Kerr only below extremal (|a/M| < 1: its Boyer–Lindquist split)."""
+
+
+ACCURACY_PX = (1e-6, 100.0)
+"""Accuracy (px), the limits of its property (core.render accepts [1e-9, 100])."""
+SAMPLES = (1, 1024)
+"""Samples per pixel (core.render's limits; the property's too)."""
+DISK_BRIGHTNESS = (0.0, 1e6)
+"""Disk Brightness (the property's limits): far beyond any scene, far below float32's
+largest value (3.4e38), which a larger brightness reaches (inf pixels)."""
+FILTER_SIZE = (0.01, 2.0)
+"""Film › Filter Size SymRay's sampler honours, in pixels (Blender's property allows 0-500)."""
 
 
 @dataclass(frozen=True)
@@ -227,8 +238,10 @@ def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
     model = settings.model
     found = [
         lambda: checks.check_tolerance(typed_float(settings.tolerance), "Tolerance"),
-        lambda: checks.check_positive("Accuracy (px)", typed_float(settings.tolerance_px)),
-        lambda: checks.check_int("Samples", settings.samples),
+        lambda: checks.check_range(
+            "Accuracy (px)", typed_float(settings.tolerance_px), *ACCURACY_PX
+        ),
+        lambda: checks.check_int("Samples", settings.samples, *SAMPLES),
         lambda: checks.check_int("Max Steps", settings.max_steps),
         lambda: checks.check_int("Workers", settings.workers, 0),
         lambda: checks.check_render_method(settings.method, model in TIME_SCALED_MODELS),
@@ -250,7 +263,7 @@ def settings_problems(settings: Any) -> list[str]:
     """Messages for settings a render would refuse: values a .blend or a script can set
     beyond the properties' own ranges (NaN, 0, ...), a Kerr spin beyond extremal, a method
     that cannot trace the model. Empty when every setting is usable."""
-    problems = []
+    problems = enum_problems(settings) + enum_problems(settings.disk)
     for check in _settings_checks(settings):
         try:
             check()
@@ -287,9 +300,11 @@ def _disk_checks(settings: Any) -> list[Callable[[], Any]]:
     found = [
         lambda: checks.check_positive("Disk Outer Radius", disk.outer_radius),
         lambda: checks.check_range("Disk Temperature", disk.temperature, 100.0, 1e9),
-        lambda: checks.check_range("Disk Brightness", disk.brightness, 0.0),
+        lambda: checks.check_range("Disk Brightness", disk.brightness, *DISK_BRIGHTNESS),
         lambda: checks.check_range("Disk Opacity", disk.opacity, 0.0, 1.0, lo_open=True),
     ]
+    if settings.model == "KERR" and not spin_problem(settings.spin):
+        found.append(lambda: check_spin(settings.spin, "Spin a/M"))
     if not disk.use_isco:
         found.append(
             lambda: checks.check_range(
@@ -317,3 +332,69 @@ def inner_edge(settings: Any) -> float:
     mass = 0.5 * float(settings.rg)
     spin = float(settings.spin) if settings.model == "KERR" else 0.0
     return isco(mass, spin * mass)
+
+
+def enum_problems(settings: Any) -> list[str]:
+    """Messages for enum settings that hold none of their choices (a .blend or a script
+    writing the ID property, ``scene.symray["quality"] = 99``: Blender reads those as ''
+    and a render would silently use a default)."""
+    problems = []
+    for prop in settings.bl_rna.properties:
+        if prop.type != "ENUM" or prop.is_enum_flag:
+            continue
+        raw = settings.get(prop.identifier)
+        items = prop.enum_items
+        if raw is None or raw in {item.value for item in items}:
+            continue
+        choices = ", ".join(item.name for item in items)
+        problems.append(
+            f"{prop.name} holds {raw!r}, which is none of its choices ({choices}): choose "
+            "one in the SymRay panel"
+        )
+    return problems
+
+
+def filter_size(value: Any, warnings: list[str]) -> float:
+    """Film › Filter Size as the sampler uses it: clamped to FILTER_SIZE, with a warning
+    in ``warnings`` when it was outside (ValueError when it is not a finite number)."""
+    size = checks.check_range("Film › Filter Size", typed_float(value), 0.0)
+    lo, hi = FILTER_SIZE
+    used = min(max(size, lo), hi)
+    if used != size:
+        warnings.append(
+            f"Film › Filter Size {size:g} px is outside the {lo:g}–{hi:g} px SymRay "
+            f"supports: {used:g} px used"
+        )
+    return used
+
+
+def ignored_settings(scene: Any, view_layer: Any, camera: Any) -> list[str]:
+    """Warnings naming each setting of ``scene``, ``view_layer`` and ``camera`` (an
+    object) that SymRay does not support yet and so ignores: one line each."""
+    found = []
+    dof = getattr(getattr(camera, "data", None), "dof", None)
+    if getattr(dof, "use_dof", False):
+        found.append(
+            f"Depth of Field (camera '{camera.name}') is not supported by SymRay yet: the "
+            "image is rendered in focus everywhere"
+        )
+    if getattr(scene.render, "use_motion_blur", False):
+        found.append("Motion Blur is not supported by SymRay yet: the frame is rendered without it")
+    layer = getattr(view_layer, "name", "")
+    for toggle, name in IGNORED_PASSES:
+        if getattr(view_layer, toggle, False):
+            found.append(
+                f"The {name} pass (View Layer '{layer}' › Passes) is not supported by "
+                "SymRay yet: it is not written"
+            )
+    return found
+
+
+IGNORED_PASSES = (
+    ("use_pass_z", "Z"),
+    ("use_pass_normal", "Normal"),
+    ("use_pass_cryptomatte_object", "Cryptomatte Object"),
+    ("use_pass_cryptomatte_material", "Cryptomatte Material"),
+    ("use_pass_cryptomatte_asset", "Cryptomatte Asset"),
+)
+"""(view layer toggle, pass name) of Blender's passes SymRay does not write yet."""

@@ -46,6 +46,23 @@ def isco(mass: float, a: float) -> float:
     return mass * (3 + z2 - math.sqrt((3 - z1) * (3 + z1 + 2 * z2)))
 
 
+def check_spin(spin: Any, name: str = "Kerr spin a/M") -> float:
+    """``spin`` (a/M) as a float if a disk can orbit the hole: |a/M| < 1, else ValueError.
+
+    At |a/M| = 1 the prograde ISCO meets the horizon (Boyer–Lindquist r = M): the inner
+    edge's gas has u^t = ∞ (g = 0), and the Novikov–Thorne flux's roots x³ − 3x + 2 = 0
+    coincide. Below it everything is finite (a/M = 1 − 1e-12 measured).
+    """
+    x = checks.check_range(name, spin)
+    if not -1.0 < x < 1.0:
+        raise ValueError(
+            f"{name} must lie in (-1, 1) with an accretion disk, got {x:g}: at ±1 the "
+            "disk's innermost stable orbit meets the horizon (choose 0.9999 for a "
+            "near-extremal hole, or turn the disk off)"
+        )
+    return x
+
+
 def keplerian_omega(r: Any, mass: float, a: float) -> np.ndarray:
     """Angular velocity dφ/dt of prograde circular equatorial geodesics at BL radius r."""
     sign = -1.0 if a < 0 else 1.0
@@ -55,8 +72,8 @@ def keplerian_omega(r: Any, mass: float, a: float) -> np.ndarray:
 
 def novikov_thorne_flux(r: Any, mass: float, a: float, r_in: float) -> np.ndarray:
     """Flux of a Novikov–Thorne disk at BL radius r, relative units (Page & Thorne 1974,
-    closed form in x = √(r/M), zero torque at r_in); 0 inside r_in."""
-    chi = abs(a) / mass
+    closed form in x = √(r/M), zero torque at r_in); 0 inside r_in. |a| < mass."""
+    chi = abs(check_spin(a / mass))
     x = np.sqrt(np.asarray(r, dtype=np.float64) / mass)
     x0 = math.sqrt(r_in / mass)
     phase = math.acos(max(-1.0, min(1.0, chi)))
@@ -122,6 +139,7 @@ class AccretionDisk:
                 f"(rg > 0), got {type(model).__name__}"
             )
         mass, spin = 0.5 * rg, float(model.a)
+        check_spin(spin / mass)
         inner = isco(mass, spin)
         r_in = inner if self.r_in is None else float(self.r_in)
         checks.check_range("disk r_in", r_in, inner * (1 - 1e-12), self.r_out, hi_open=True)

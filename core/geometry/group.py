@@ -27,6 +27,9 @@ class Group:
         )
         if len(self.ids) != len(self.objects):
             raise ValueError("ids must have one entry per object")
+        for k, obj in enumerate(self.objects):
+            if np.isnan(np.asarray(obj.bounds, dtype=np.float64)).any():
+                raise ValueError(f"object {k} has NaN bounds (non-finite vertices?)")
         if self.objects:
             lo = np.min([np.asarray(o.bounds[0], np.float64) for o in self.objects], axis=0)
             hi = np.max([np.asarray(o.bounds[1], np.float64) for o in self.objects], axis=0)

@@ -197,11 +197,14 @@ class Disk(_Primitive):
         self.bounds = (self.center - half, self.center + half)
 
     def _hit(self, a, b):
+        """Crossings at t in (0, 1]: a segment starting on the plane (a camera in the
+        accretion disk's plane, a chord starting where the previous one ended on it) does
+        not cross it there."""
         d = b - a
         den = d @ self.normal
         with np.errstate(divide="ignore", invalid="ignore"):
             t = ((self.center - a) @ self.normal) / den
-        rows = np.flatnonzero((den != 0) & (t >= 0) & (t <= 1))
+        rows = np.flatnonzero((den != 0) & (t > 0) & (t <= 1))
         t = t[rows]
         p = a[rows] + t[:, None] * d[rows]
         local = p - self.center

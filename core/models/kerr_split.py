@@ -34,7 +34,8 @@ T = V = 0. Both parts are solved exactly (E and L are constants of both flows):
 Λ is not of Runge–Kutta–Nyström type (its kinetic part is not quadratic in p, and depends
 on theta), so the splittings for general A + B (core.integrators.splitting: blanes_moan_s6,
 blanes_moan_s10) are the ones that keep their order on it. BL cannot cross the horizon: rays
-that reach r_capture (below every spherical photon orbit, see capture_radius) are captured.
+moving in below r_capture (below every spherical photon orbit, see capture_radius) are
+captured (falling_soa), so a camera anywhere outside r+ sees out along its outgoing rays.
 The model is the renderer's form of a Kerr–Schild Kerr for an explicit splitting
 (KerrSchild.for_backward_tracing): its chart (core.charts.KerrBLChart) maps positions to
 and from the tracer's Kerr–Schild frame.
@@ -171,12 +172,20 @@ class KerrBoyerLindquist(Hamiltonian):
         return np.sqrt(0.5 * (rho2 + np.sqrt(rho2 * rho2 + 4 * self.a**2 * z * z)))
 
     def capture_test(self):
-        """Rays below r_capture (see captured_soa)."""
+        """Points at or past the horizon (see captured_soa)."""
         return self.captured_soa
 
     def captured_soa(self, Q: np.ndarray) -> np.ndarray:
-        """Rays at s < s(r_capture), or past the horizon (s NaN), (N,)."""
-        return ~(Q[1] >= self.s_capture)
+        """Points at or past the horizon r+ (s <= 0, where a step past it lands, or NaN),
+        (N,): only the rays' momenta tell whether one above r+ can still come out (see
+        falling_soa)."""
+        return ~(Q[1] > 0.0)
+
+    def falling_soa(self, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
+        """Rays that can no longer come back out, (N,): at or past the horizon, or below
+        r_capture moving in (p_s < 0; there is no radial turning point below r_ph). A
+        camera between r+ and r_capture sees out along its outgoing rays."""
+        return self.captured_soa(Q) | ((Q[1] < self.s_capture) & (P[1] < 0.0))
 
     def invariants_soa(self, Q, P):
         """E = -p_t, L = p_phi and the Carter constant (photons)."""

@@ -10,13 +10,29 @@ Rays inside the horizon are not checked.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from ..integrators import Method, PoincareTransformed
 from ..integrators._common import take
-from ..integrators.system import CaptureTest
+
+RayCapture = Callable[[np.ndarray, np.ndarray], np.ndarray]
+"""(Q, P) -> (N,) bool: rays that can no longer come out of a horizon (ray_capture_test)."""
+
+
+def ray_capture_test(model: Any) -> RayCapture | None:
+    """The tracer's capture test of a model: its ``falling_soa(Q, P)`` where it has one
+    (a capture that depends on the ray's direction), else its ``capture_test()`` on Q."""
+    falling = getattr(model, "falling_soa", None)
+    if falling is not None:
+        return falling
+    captured = model.capture_test()
+    if captured is None:
+        return None
+    return lambda Q, P: captured(Q)
+
 
 SPLITS = 3  # a failed step is retried as 2, then 4, then 8 shorter steps
 OFF_SHELL = 1e-3  # |H - H0| / (|H0| + |p|^2) after one step that has it retried in halves
@@ -33,7 +49,7 @@ State = tuple[np.ndarray, ...]
 class Stepper:
     """Steps of ``method`` on K = g (H - H0) of ``model``, retried in halves where they fail."""
 
-    def __init__(self, method: Method, model: Any, captured: CaptureTest | None) -> None:
+    def __init__(self, method: Method, model: Any, captured: RayCapture | None) -> None:
         self.method, self.model, self.captured = method, model, captured
 
     def step(
@@ -57,7 +73,7 @@ class Stepper:
         go = ok_mid.copy()
         if self.captured is not None:
             with np.errstate(all="ignore"):
-                go &= ~self.captured(method.qp(mid)[0])
+                go &= ~self.captured(*method.qp(mid))
         end, ok_end, drift_end = mid, ok_mid, drift_mid
         if go.any():
             g = np.flatnonzero(go)
@@ -85,5 +101,5 @@ class Stepper:
         with np.errstate(all="ignore"):
             off = drift > OFF_SHELL * (np.abs(H0) + np.einsum("ij,ij->j", P, P))
             if self.captured is not None:
-                off &= ~self.captured(Q)
+                off &= ~self.captured(Q, P)
         return off

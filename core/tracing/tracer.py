@@ -25,11 +25,14 @@ from ..observer import medium_momenta, spacetime_momenta
 from . import dense
 from .disklight import DiskLight
 from .regions import Region, region_for
-from .scene import ENDING, Scene
+from .scene import DISK_ID, ENDING, Scene
 from .segments import RayResults, SceneGeometry
-from .stepping import DRIFT, DRIFT_STEPS, SPLITS, Stepper
+from .stepping import DRIFT, DRIFT_STEPS, SPLITS, Stepper, ray_capture_test
 from .steps import default_method, default_step, solver_tolerance
 
+CROSSING_SHARE, CROSSING_ITERATIONS = 1e-6, 4
+"""The disk's crossing is found to |z| <= CROSSING_SHARE x tolerance x |X| (a share of the
+integration's own error there) in at most CROSSING_ITERATIONS Newton steps."""
 _FAR = 1e12  # length of the straight segment cast after a ray leaves the model's region
 CHORD_SHARE = 0.5
 """Chords near geometry stay within CHORD_SHARE x tolerance x (distance from the camera) of
@@ -95,7 +98,7 @@ class Tracer:
         self.region = region_for(model, options.tolerance, extent, radius)
         if scene.disk is not None:
             self.disk = self._disk_light(scene)
-        self.captured = model.capture_test()
+        self.captured = ray_capture_test(model)
         self.stepper = Stepper(self.method, model, self.captured)
         self._near = self.geometry.local_box(self._to_local)
         self.step = (
@@ -248,7 +251,7 @@ class Tracer:
                 step_ends = _StepEnds(self, K, start, (Q, P), h, camera)
                 ended |= self._segments(idx, X_prev, X, ok, out, step_ends, camera)
             if self.captured is not None:
-                captured = ~ended & self.captured(Q)
+                captured = ~ended & self.captured(Q, P)
                 if captured.any():
                     out.ending[idx[captured]] = ENDING["captured"]
                     out.position[idx[captured]] = self._to_world(X[:, captured].T)
@@ -313,13 +316,20 @@ class Tracer:
             path = dense.CubicPath(X0[:, g], V0[:, g], X1[:, g], V1[:, g], hg)
             limits = (deviation[g] / (n * n), allowed[g])
             state = step_ends.state(c[g]) if self.disk is not None else None
-            hit_rows[c[g]] = self._path_hits(idx[c[g]], path, int(n), limits, out, state)
+            cols = c[g]
+            hit_rows[cols] = self._path_hits(
+                idx[cols], path, int(n), limits, out, state,
+                lambda live, u, cols=cols: step_ends.plane_crossing(cols[live], u),
+            )  # fmt: skip
         return hit_rows
 
-    def _path_hits(self, rows, path: dense.CubicPath, n: int, limits, out: RayResults, state):
+    def _path_hits(
+        self, rows, path: dense.CubicPath, n: int, limits, out: RayResults, state, crossing
+    ):
         """Cast the n chords of each ray's cubic path in order (rays ``rows``), refine the
         chords that hit on the cubic, record hits and volume light (and the disk's light,
-        from ``state`` = (Q, P, camera) of the rays). -> (M,) bool: hit."""
+        from ``state`` = (Q, P, camera) of the rays, at the disk's crossing by the method
+        itself: ``crossing(live, u)``, see _StepEnds.plane_crossing). -> (M,) bool: hit."""
         hit = np.zeros(path.size, dtype=bool)
         alive = np.ones(path.size, dtype=bool)
         for j in range(n):
@@ -327,11 +337,16 @@ class Tracer:
             a = self._to_world(path.at(j / n, live).T)
             b = self._to_world(path.at((j + 1) / n, live).T)
             hits = self.geometry.cast(a, b)
+            guess = (j + np.where(hits.hit, hits.t, 0.0)) / n  # the hit's t on the cubic
             if hits.hit.any():
                 self._refine(path, live, hits, j / n, 1.0 / n, [x[live] for x in limits])
             if self.disk is None:
                 got = self.geometry.record_hits(rows[live], a, b, hits, out)
             else:
+                on = np.flatnonzero(hits.hit & (hits.object_id == DISK_ID))
+                if on.size:
+                    X, ok = crossing(live[on], guess[on])
+                    hits.position[on[ok]] = self._to_world(X[:, ok].T)
                 got = self.disk.record_hits(
                     rows[live], a, b, hits, [x[:, live] for x in state], out
                 )
@@ -448,6 +463,34 @@ class _StepEnds:
         ends = [self._velocity(K, Q[:, rows], P[:, rows]) for Q, P in (self.start, self.end)]
         h = self.h if np.ndim(self.h) == 0 else self.h[rows]
         return ends[0], ends[1], h
+
+    def plane_crossing(self, rows: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where the rays ``rows`` cross the local plane z = 0 within this step, by the
+        method's own partial steps from the step's start (Newton's method on the fraction u
+        of the step, from the cubic's estimate u): -> (X (3, M), ok (M,)); not ok where it
+        did not converge inside the step (the cubic's point stands). The disk's g depends on
+        where the ray crosses it, which the cubic only finds to O(h^4) (long split steps)."""
+        tracer, method = self.tracer, self.tracer.method
+        K = self.K.subset(rows)
+        Q0, P0 = (x[:, rows] for x in self.start)
+        h = self.h if np.ndim(self.h) == 0 else self.h[rows]
+        u = np.asarray(u, dtype=np.float64).copy()
+        X = np.full((3, rows.size), np.nan)
+        ok = np.zeros(rows.size, dtype=bool)
+        allowed = CROSSING_SHARE * tracer.options.tolerance
+        with np.errstate(all="ignore"):
+            for _ in range(CROSSING_ITERATIONS):
+                state, good = method.step(K, method.init(K, Q0.copy(), P0.copy()), u * h)
+                Q, P = method.qp(state)
+                X = tracer.chart.to_cartesian(Q[tracer.chart.offset :])
+                V = self._velocity(K, Q, P)
+                du = -X[2] / (h * V[2])
+                size = np.linalg.norm(X, axis=0)
+                ok = good & np.isfinite(du) & (np.abs(X[2]) <= allowed * size)
+                if ok.all():
+                    break
+                u = np.clip(u + np.where(np.isfinite(du), du, 0.0), 0.0, 1.0)
+        return X, ok
 
     def _velocity(self, K: Any, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
         chart = self.tracer.chart

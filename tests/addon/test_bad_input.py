@@ -219,3 +219,106 @@ def test_engine_reports_out_of_range_settings(addon, scene, helpers, rendered):
     with pytest.raises(RuntimeError, match="Tolerance must be a finite number"):
         bpy.ops.render.render()
     np.testing.assert_array_equal(helpers.image_array(scene.symray.image_name), rendered)
+
+
+# -- issue 22 item 14: settings handled silently ----------------------------------------
+
+
+@pytest.mark.parametrize(
+    "group, prop, label",
+    [("", "quality", "Quality"), ("", "method", "Method"), ("", "lighting", "Surface Lighting"),
+     ("disk", "profile", "Temperature Profile")],
+)  # fmt: skip
+def test_an_enum_holding_no_choice_is_refused(scene, helpers, rendered, group, prop, label):
+    """scene.symray["quality"] = 99 (a script, a damaged .blend) read as '' and rendered
+    with a default."""
+    settings = getattr(scene.symray, group) if group else scene.symray
+    settings[prop] = 99
+    assert getattr(settings, prop) == ""  # what Blender reads
+    message = _fails(helpers, scene, rendered, f"{label} holds 99, which is none of its choices")
+    assert "choose one in the SymRay panel" in message
+
+
+@pytest.mark.parametrize(
+    "prop, value, match",
+    [
+        ("tolerance_px", 1e-12, "Accuracy (px) must be a finite number in [1e-06, 100], got 1e-12"),
+        ("tolerance_px", 500.0, "Accuracy (px) must be a finite number in [1e-06, 100], got 500"),
+        ("samples", 5000, "Samples must be an integer in [1, 1024], got 5000"),
+    ],
+)
+def test_accuracy_and_samples_are_named_as_in_the_panel(
+    scene, helpers, rendered, prop, value, match
+):
+    """The core's "tolerance_px must lie in [1e-9, 100]" named no setting the panel shows."""
+    scene.symray.quality = "CUSTOM"
+    scene.symray[prop] = value
+    message = _fails(helpers, scene, rendered, match)
+    assert "tolerance" not in message.lower() and "samples must lie" not in message
+
+
+def _disk_scene(scene, helpers):
+    """Schwarzschild (rg 1) with its disk (ISCO to 10), seen from 30 units at 80 deg."""
+    scene.symray.model = "SCHWARZSCHILD"
+    scene.symray.center = helpers.add_empty(scene, "Hole")
+    scene.symray.disk.enabled = True
+    scene.symray.quality = "PREVIEW"
+    inc = math.radians(80.0)
+    helpers.add_camera(scene, location=(0.0, -30 * math.sin(inc), 30 * math.cos(inc)),
+                       rotation=(inc, 0.0, 0.0))  # fmt: skip
+    scene.render.resolution_x, scene.render.resolution_y = 16, 12
+
+
+def test_disk_brightness_never_makes_inf_pixels(scene, helpers, rendered):
+    """Brightness 3e38 gave inf pixels: the property stops at 1e6 (finite pixels), and a
+    value past it (a script writing the ID property) is refused."""
+    _disk_scene(scene, helpers)
+    scene.symray.disk.brightness = 3e38
+    assert scene.symray.disk.brightness == 1e6
+    assert bpy.ops.symray.render() == {"FINISHED"}
+    image = helpers.image_array(scene.symray.image_name)
+    assert np.isfinite(image).all() and image[..., :3].max() > 1e3  # the disk, bright
+    scene.symray.disk["brightness"] = 3e38
+    _fails(helpers, scene, image, "Disk Brightness must be a finite number in [0, 1e+06]")
+
+
+def test_no_inf_pixel_is_ever_written(addon, scene, helpers, rendered, tmp_path, monkeypatch):
+    """Whatever makes a colour overflow, neither the operator (image, EXR) nor F12 writes
+    it: an error naming the problem, the previous outputs kept."""
+    render_job = addon.module("symray_addon.render_job")
+    real_run = render_job.run
+
+    def overflowing(*args, **kwargs):
+        result = real_run(*args, **kwargs)
+        result.rgba[3, 5, 0] = np.inf
+        return result
+
+    monkeypatch.setattr(render_job, "run", overflowing)
+    scene.symray.exr_path = str(tmp_path / "x.exr")
+    _fails(helpers, scene, rendered, "1 pixels have a colour beyond 32-bit floats")
+    assert os.listdir(tmp_path) == []
+    scene.render.engine = "SYMRAY"
+    scene.render.filepath = str(tmp_path / "frame.png")
+    with pytest.raises(RuntimeError, match="beyond 32-bit floats"):
+        bpy.ops.render.render(write_still=True)
+    assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("name", ["picture.png", "picture.jpg", "picture.exr.png"])
+def test_an_exr_path_not_ending_in_exr_is_refused(scene, helpers, rendered, tmp_path, name):
+    """An EXR Path ending in .png overwrote the user's PNG with OpenEXR data. Refused
+    (rather than '.exr' appended: 'picture.png.exr' would surprise as much)."""
+    user_file = tmp_path / name
+    user_file.write_bytes(b"the user's picture")
+    scene.symray.exr_path = str(user_file)
+    ext = os.path.splitext(name)[1]
+    _fails(helpers, scene, rendered, f"ends in '{ext}', not '.exr'")
+    assert os.listdir(tmp_path) == [name] and user_file.read_bytes() == b"the user's picture"
+
+
+def test_exr_paths_that_are_accepted(scene, helpers, rendered, tmp_path):
+    """'.EXR' in capitals is an EXR path; a path without extension gets '.exr'."""
+    for path, written in (("A.EXR", ["A.EXR", "A.passes.EXR"]), ("b", ["b.exr", "b.passes.exr"])):
+        scene.symray.exr_path = str(tmp_path / path)
+        assert bpy.ops.symray.render() == {"FINISHED"}
+        assert set(written) <= set(os.listdir(tmp_path))

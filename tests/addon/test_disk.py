@@ -107,3 +107,71 @@ def test_f12_writes_the_redshift_pass(addon, scene, helpers, tmp_path):
     assert g[on].min() < 0.9 and g[on].max() > 1.1  # the receding and approaching sides
     left = on & (np.arange(32) < 16)[None, :]
     assert np.median(g[left]) > np.median(g[on & ~left])  # approaching side: x < 0, left
+
+
+@pytest.mark.parametrize("spin", [1.0, -1.0])
+def test_an_extremal_spin_with_the_disk_is_a_named_problem(addon, scene, helpers, spin):
+    """Spin a/M = ±1 with the disk: the panel's checks name it as it is typed, and a render
+    refuses with the same message (it was a bare ZeroDivisionError, the panel silent);
+    without the disk, or just below ±1, nothing is wrong."""
+    _disk_scene(scene, helpers)
+    validation = addon.module("symray_addon.validation")
+    settings = scene.symray
+    settings.spin = spin
+    message = (
+        f"Spin a/M must lie in (-1, 1) with an accretion disk, got {spin:g}: at ±1 the disk's "
+        "innermost stable orbit meets the horizon"
+    )
+    assert [p for p in validation.settings_problems(settings) if p.startswith(message)]
+    job = addon.module("symray_addon.render_job")
+    with pytest.raises(ValueError, match=r"Spin a/M must lie in \(-1, 1\) with an accretion"):
+        job.prepare(scene, bpy.context.evaluated_depsgraph_get())
+    settings.disk.enabled = False
+    assert validation.settings_problems(settings) == []
+    settings.disk.enabled = True
+    settings.spin = 0.9999 * spin
+    assert validation.settings_problems(settings) == []
+
+
+@pytest.mark.parametrize("quality", ["RADIANS", "FINAL"])
+def test_transparent_film_keeps_a_translucent_disk(addon, scene, helpers, quality):
+    """Film › Transparent with a translucent disk (the preset's, opacity 0.5): a ray
+    crossing the disk and escaping keeps the disk's light, premultiplied, with alpha
+    1 - 0.5^k after k crossings (it was RGBA 0). The transparent render composited over
+    the world colour is the opaque render, to float32, with one ray per pixel and with the
+    preset's 16 samples (the same samples and filter weights: the anti-aliasing decisions
+    agree here; a faint edge whose contrast is all in alpha would be anti-aliased in the
+    transparent render only)."""
+    _disk_scene(scene, helpers)
+    world = np.array([0.2, 0.3, 0.4])
+    helpers.set_world_color(scene, (*world, 1.0))
+    settings = scene.symray
+    settings.quality = quality
+    settings.disk.opacity = 0.5
+    settings.pass_ending = True
+    job = addon.module("symray_addon.render_job")
+    renders = {}
+    for transparent in (False, True):
+        scene.render.film_transparent = transparent
+        renders[transparent] = job.run(job.prepare(scene, bpy.context.evaluated_depsgraph_get()))
+    opaque, clear = renders[False].rgba, renders[True].rgba
+    assert np.all(opaque[..., 3] == 1.0)
+    composite = clear[..., :3] + (1.0 - clear[..., 3:]) * world
+    np.testing.assert_allclose(composite, opaque[..., :3], rtol=1e-6, atol=1e-7)
+    through = np.isfinite(renders[True].passes["redshift"])  # crossed the disk ...
+    through &= renders[True].passes["ending"] == addon.core.ENDING["escaped"]  # ... and out
+    assert through.sum() > 20
+    assert np.all(clear[through][:, :3] > 0.0)
+    if quality == "RADIANS":  # alpha of a pixel centre's ray after k crossings: 1 - 0.5^k
+        crossings = np.log2(1.0 - clear[through][:, 3].astype(np.float64))
+        np.testing.assert_allclose(crossings, np.round(crossings), atol=1e-6)
+        assert np.all(crossings <= -1) and np.mean(crossings == -1) > 0.8
+    else:
+        assert np.all(clear[through][:, 3] > 0.0)
+    sky = ~np.isfinite(renders[True].passes["redshift"])
+    sky &= renders[True].passes["ending"] == addon.core.ENDING["escaped"]
+    clear_sky = np.all(clear[sky] == 0.0, axis=1)
+    # with samples, pixels beside an edge whose centre sees the sky are partly covered
+    assert sky.sum() > 100 and (
+        np.all(clear_sky) if quality == "RADIANS" else clear_sky.mean() > 0.8
+    )

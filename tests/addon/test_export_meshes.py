@@ -162,3 +162,42 @@ def test_srgb_byte_texture_is_linearised(addon):
     assert pix[0, 0, 0] == pytest.approx(expected, rel=1e-5)
     assert pix[0, 0, 3] == pytest.approx(1.0)
     assert math.isclose(materials.srgb_to_linear(np.array(1.0)), 1.0)
+
+
+def _render(addon, scene):
+    """The operator's code path (prepare + run): the job and the core result."""
+    job = addon.module("symray_addon.render_job")
+    prepared = job.prepare(scene, bpy.context.evaluated_depsgraph_get())
+    return prepared, job.run(prepared)
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf])
+def test_a_non_finite_vertex_leaves_out_only_its_object(addon, scene, helpers, bad):
+    """One NaN or infinite vertex: that object is left out with a warning naming it; the
+    others render exactly as they do without it (not: every object gone, bounds NaN)."""
+    helpers.add_cube(scene, "Good", size=6.0, material=helpers.solid_material("R", (1, 0, 0, 1)))
+    verts = [(-2.0, -5.0, -2.0), (2.0, -5.0, -2.0), (2.0, -5.0, 2.0), (bad, -5.0, 2.0)]
+    helpers.add_mesh(scene, "Broken", verts, [(0, 1, 2, 3)])
+    helpers.add_camera(scene)
+    scene.symray.model = "FLAT"
+    scene.symray.lighting = "UNLIT"
+    scene.symray.pass_ending = True
+    job, result = _render(addon, scene)
+    assert len(job.warnings) == 1 and "'Broken'" in job.warnings[0], job.warnings
+    assert job.scene.objects[0].names == ["Good"]
+    bpy.data.objects.remove(bpy.data.objects["Broken"])
+    _job, want = _render(addon, scene)
+    hit = want.passes["ending"] == addon.core.ENDING["hit"]
+    assert hit.sum() > 300
+    np.testing.assert_array_equal(result.rgba, want.rgba)
+    np.testing.assert_allclose(result.rgba[hit][:, :3], np.tile((1.0, 0.0, 0.0), (hit.sum(), 1)))
+
+
+def test_bvh_intersector_refuses_non_finite_vertices(addon):
+    """Built directly with a NaN vertex, the intersector says so (its bounds would be NaN)."""
+    meshes = addon.module("symray_addon.export_meshes")
+    verts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [np.nan, 0, 0]], float)
+    with pytest.raises(ValueError, match="finite"):
+        meshes.BVHIntersector(
+            verts, [[0, 1, 2], [1, 2, 3]], [0, 0], [0, 0], np.zeros((2, 3, 2)), [None], ["A"]
+        )

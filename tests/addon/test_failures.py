@@ -181,3 +181,102 @@ def test_a_blend_relative_exr_path_needs_a_saved_file(addon, scene, helpers, tmp
     bpy.ops.wm.save_as_mainfile(filepath=str(saved / "scene.blend"))
     assert bpy.ops.symray.render() == {"FINISHED"}
     assert (saved / "x.exr").is_file() and not (tmp_path / "x.exr").exists()
+
+
+def _exr_pair(scene, helpers, tmp_path):
+    """A flat scene rendered once by the operator with an EXR path: the pair's bytes."""
+    _flat_scene(scene, helpers)
+    scene.symray.pass_steps = True
+    scene.symray.exr_path = str(tmp_path / "out.exr")
+    assert bpy.ops.symray.render() == {"FINISHED"}
+    files = [tmp_path / "out.exr", tmp_path / "out.passes.exr"]
+    return files, [f.read_bytes() for f in files]
+
+
+@pytest.mark.parametrize("stage", ["write", "replace"])
+def test_a_failed_passes_write_keeps_both_exr_files(
+    addon, scene, helpers, tmp_path, monkeypatch, stage
+):
+    """Issue 22 item 11: the passes EXR failing left a new RGBA file beside the old passes
+    file, with the message "Invalid argument". Now both stay as they were, and so does the
+    image; the message names the file and what failed."""
+    files, before = _exr_pair(scene, helpers, tmp_path)
+    image = helpers.image_array(scene.symray.image_name).copy()
+    cube = bpy.data.materials["Red"].node_tree.nodes["Principled BSDF"]
+    cube.inputs["Base Color"].default_value = (0.1, 0.2, 0.9, 1.0)  # a different image
+    real_replace = os.replace
+
+    def replace(src, dst):
+        if str(dst).endswith(".passes.exr"):
+            raise OSError(22, "Invalid argument")
+        return real_replace(src, dst)
+
+    imageio = addon.module("core.imageio")
+    real_writer = imageio._bytes_writer
+
+    def disk_full_on_passes(data):
+        def write(tmp):
+            if ".out.passes.exr." not in tmp:
+                return real_writer(data)(tmp)
+            with open(tmp, "wb") as f:
+                f.write(data[: len(data) // 2])
+            raise OSError(28, "No space left on device")
+
+        return write
+
+    if stage == "replace":
+        monkeypatch.setattr(os, "replace", replace)
+    else:
+        monkeypatch.setattr(imageio, "_bytes_writer", disk_full_on_passes)
+    message = helpers.operator_error(lambda: bpy.ops.symray.render())
+    reason = "Invalid argument" if stage == "replace" else "No space left on device"
+    assert f"cannot write image '{files[1]}': {reason}; no file was changed" in message
+    assert [f.read_bytes() for f in files] == before
+    assert sorted(os.listdir(tmp_path)) == ["out.exr", "out.passes.exr"]
+    np.testing.assert_array_equal(helpers.image_array(scene.symray.image_name), image)
+    monkeypatch.undo()
+    assert bpy.ops.symray.render() == {"FINISHED"}  # and the next render writes the pair
+    assert files[0].read_bytes() != before[0]  # the new colour
+
+
+@pytest.mark.parametrize("name", ["Render Result", "Viewer Node"])
+@pytest.mark.parametrize("exists", [False, True])
+def test_blenders_own_images_are_refused_before_anything_is_written(
+    addon, scene, helpers, tmp_path, name, exists
+):
+    """Issue 22 item 12: Image "Render Result" gave a TypeError text and "nothing was
+    written" while the EXR pair had been replaced."""
+    files, before = _exr_pair(scene, helpers, tmp_path)
+    image = helpers.image_array(scene.symray.image_name).copy()
+    if exists:  # Blender makes both once something is rendered and composited
+        scene.render.engine = "SYMRAY"
+        bpy.ops.render.render()
+        assert bpy.data.images.get("Render Result") is not None
+        if bpy.data.images.get(name) is None:
+            bpy.data.images.new(name, 4, 4).source  # noqa: B018 - a plain image of that name
+    previous = scene.symray.image_name
+    scene.symray.image_name = name
+    message = helpers.operator_error(lambda: bpy.ops.symray.render())
+    assert f"Image '{name}' is Blender's" in message and "choose another name" in message
+    assert "TypeError" not in message and "nothing was written" in message
+    assert [f.read_bytes() for f in files] == before
+    np.testing.assert_array_equal(helpers.image_array(previous), image)
+
+
+def test_an_image_failing_after_the_exr_pair_says_what_was_written(
+    addon, scene, helpers, tmp_path, monkeypatch
+):
+    """Issue 22 item 12: "nothing was written" while the EXR pair had been replaced."""
+    files, _before = _exr_pair(scene, helpers, tmp_path)
+    output = addon.module("symray_addon.output")
+
+    def broken(_name, _rgba):
+        raise TypeError("no such image type")
+
+    monkeypatch.setattr(output, "write_image", broken)
+    message = helpers.operator_error(lambda: bpy.ops.symray.render())
+    assert (
+        "SymRay could not write image 'SymRay Result' (TypeError: no such image type); "
+        f"'{files[0]}' and '{files[1]}' were written"
+    ) in message
+    assert "nothing was written" not in message

@@ -392,13 +392,50 @@ def test_operator_writes_exr(addon, scene, helpers, tmp_path):
     stacked = np.stack([rgba["R"], rgba["G"], rgba["B"], rgba["A"]], axis=-1)
     np.testing.assert_array_equal(stacked, image)  # 32-bit float, same orientation
     passes = read_exr(tmp_path / "result.passes.exr")
-    assert passes["G"].max() > 0  # steps
-    assert set(passes["B"].ravel()) <= {float(c) for c in addon.core.ENDING.values()}
-    leftovers = [f for f in os.listdir(tmp_path) if f.startswith(".symray-")]
-    assert leftovers == []
+    assert passes["SymRay Steps.X"].max() > 0
+    codes = {float(c) for c in addon.core.ENDING.values()}
+    assert set(passes["SymRay Ending.X"].ravel()) <= codes
+    assert sorted(os.listdir(tmp_path)) == ["result.exr", "result.passes.exr"]  # no temporaries
     umask = os.umask(0)
     os.umask(umask)
     assert (tmp_path / "result.exr").stat().st_mode & 0o777 == 0o666 & ~umask
+    # Blender reads the files back as they were written
+    loaded = bpy.data.images.load(str(tmp_path / "result.exr"))
+    pixels = np.empty(32 * 24 * 4, dtype=np.float32)
+    loaded.pixels.foreach_get(pixels)
+    np.testing.assert_array_equal(pixels.reshape(24, 32, 4)[::-1], image)
+    bpy.data.images.remove(loaded)
+
+
+@pytest.mark.parametrize("transparent", [False, True])
+def test_passes_exr_holds_the_passes_switched_on_by_name(
+    addon, scene, helpers, tmp_path, transparent
+):
+    """Issue 22 item 14: passes switched off were written as zeros (ones for redshift) in
+    anonymous R, G, B, A channels: a reader took them for real values. Now each pass switched
+    on is a layer named as the engine's pass, and a pass switched off has none (Film ›
+    Transparent computes the ending pass for itself: still not written when it is off)."""
+    _hole_scene(scene, helpers)
+    scene.render.resolution_x, scene.render.resolution_y = 16, 12
+    scene.render.film_transparent = transparent
+    settings = scene.symray
+    settings.pass_error, settings.pass_steps = True, True
+    settings.pass_ending, settings.pass_redshift = False, False
+    settings.exr_path = str(tmp_path / "r.exr")
+    assert bpy.ops.symray.render() == {"FINISHED"}
+    reference = _render_with_ending(addon, scene)
+    passes = read_exr(tmp_path / "r.passes.exr")
+    assert set(passes) == {"SymRay Error.X", "SymRay Steps.X"}
+    np.testing.assert_array_equal(passes["SymRay Steps.X"], reference.passes["steps"])
+    np.testing.assert_array_equal(passes["SymRay Error.X"], reference.passes["error_px"])
+    settings.pass_error, settings.pass_steps = False, False
+    settings.pass_ending, settings.pass_redshift = True, True
+    assert bpy.ops.symray.render() == {"FINISHED"}
+    reference = _render_with_ending(addon, scene)
+    passes = read_exr(tmp_path / "r.passes.exr")
+    assert set(passes) == {"SymRay Ending.X", "SymRay Redshift.X"}
+    assert np.isnan(passes["SymRay Redshift.X"]).all()  # no disk: NaN everywhere
+    np.testing.assert_array_equal(passes["SymRay Ending.X"], reference.passes["ending"])
 
 
 def test_render_task_cancel_keeps_previous_image(addon, scene, helpers):
@@ -507,6 +544,7 @@ def _drive_modal(addon, scene, cancel: bool):
         _timer=object(),
         _image_name=scene.symray.image_name,
         _exr_path="",
+        _passes=(),
         report=lambda kind, text: reports.append((kind, text)),
     )
     fake._status = lambda ctx, text: cls._status(ctx, text)
@@ -535,3 +573,79 @@ def test_modal_operator_finishes_and_cancels(addon, scene, helpers):
     outcome, reports, wm, status = _drive_modal(addon, scene, cancel=False)
     assert outcome == {"FINISHED"} and reports[-1][0] == {"INFO"}
     assert helpers.image_array(scene.symray.image_name).shape == (48, 32, 4)
+
+
+def _prepared(addon, scene):
+    return addon.module("symray_addon.render_job").prepare(
+        scene, bpy.context.evaluated_depsgraph_get()
+    )
+
+
+@pytest.mark.parametrize("size, used", [(0.0, 0.01), (500.0, 2.0), (1.5, 1.5), (0.01, 0.01)])
+def test_film_filter_size_outside_the_supported_range_is_clamped_visibly(
+    addon, scene, helpers, size, used
+):
+    """Issue 22 item 14: Filter Size 0 rendered as 0.01 px and 500 as 2 px, silently."""
+    flat_scene(scene, helpers)
+    scene.render.filter_size = size
+    job = _prepared(addon, scene)
+    assert job.options["filter_size"] == pytest.approx(used)
+    notes = [w for w in job.warnings if "Filter Size" in w]
+    if size == used:
+        assert notes == []
+    else:
+        assert notes == [
+            f"Film › Filter Size {size:g} px is outside the 0.01–2 px SymRay supports: "
+            f"{used:g} px used"
+        ]
+
+
+IGNORED = {
+    "dof": "Depth of Field (camera 'Camera')",
+    "motion_blur": "Motion Blur",
+    "use_pass_z": "The Z pass",
+    "use_pass_normal": "The Normal pass",
+    "use_pass_cryptomatte_object": "The Cryptomatte Object pass",
+    "use_pass_cryptomatte_material": "The Cryptomatte Material pass",
+    "use_pass_cryptomatte_asset": "The Cryptomatte Asset pass",
+}
+
+
+def _switch_on(scene, what: str) -> None:
+    if what == "dof":
+        scene.camera.data.dof.use_dof = True
+    elif what == "motion_blur":
+        scene.render.use_motion_blur = True
+    else:
+        setattr(bpy.context.view_layer, what, True)
+
+
+def test_unsupported_settings_are_named_once_per_render(addon, factory_scene):
+    """Issue 22 item 16: depth of field, motion blur and the Z, Normal and Cryptomatte
+    passes changed nothing (byte-identical images) and said nothing. Each one switched on
+    is now a warning of its own, once per render, for the operator and for F12."""
+    factory_scene.symray.lighting = "UNLIT"
+    assert [w for w in _prepared(addon, factory_scene).warnings if "not supported" in w] == []
+    for what, name in IGNORED.items():  # one more each time
+        _switch_on(factory_scene, what)
+        warnings = [w for w in _prepared(addon, factory_scene).warnings if "not supported" in w]
+        assert sum(w.startswith(name) for w in warnings) == 1, warnings
+    warnings = _prepared(addon, factory_scene).warnings
+    ignored = [w for w in warnings if "not supported by SymRay yet" in w]
+    assert len(ignored) == len(IGNORED)  # all on: one each, nothing twice
+    for name in IGNORED.values():
+        assert sum(w.startswith(name) for w in ignored) == 1, ignored
+
+
+def test_the_engine_reports_the_unsupported_settings(addon, factory_scene, capfd):
+    """F12 reports each of them as a warning (Blender prints reports in background mode),
+    once per frame."""
+    factory_scene.symray.lighting = "UNLIT"
+    factory_scene.symray.quality = "PREVIEW"
+    for what in IGNORED:
+        _switch_on(factory_scene, what)
+    capfd.readouterr()
+    assert bpy.ops.render.render() == {"FINISHED"}
+    printed = capfd.readouterr().out.splitlines()
+    for name in IGNORED.values():
+        assert sum(line.startswith(f"Warning: {name}") for line in printed) == 1, printed

@@ -326,6 +326,34 @@ def test_disk_refusals():
         Tracer(scene, TraceOptions())
 
 
+@pytest.mark.parametrize("spin", [1.0, -1.0])
+def test_an_extremal_hole_refuses_the_disk_by_name(spin):
+    """|a/M| = 1: the prograde ISCO meets the horizon (r = M); a disk there is refused with a
+    message naming the spin and why (it was a bare ZeroDivisionError at the first disk
+    hit); just below, the Novikov–Thorne closed form still matches the Page–Thorne
+    quadrature and a render has every disk pixel's g finite."""
+    message = r"spin a/M must lie in \(-1, 1\) with an accretion disk, got -?1: at ±1 the disk's"
+    with pytest.raises(ValueError, match=message):
+        core.Scene(model=hm.kerr(rg=1.0, a=0.5 * spin, chart="kerr_schild"),
+                   disk=core.AccretionDisk(r_out=8.0))  # fmt: skip
+    with pytest.raises(ValueError, match=message):
+        diskmod.novikov_thorne_flux(np.array([2.0]), 0.5, 0.5 * spin, 1.0)
+    M, a = 1.0, 0.9999 * spin  # the near-extremal spin the message suggests
+    r_in = diskmod.isco(M, a)
+    rs = r_in * np.array([1.05, 1.4, 2.0, 5.0])
+    ratio = diskmod.novikov_thorne_flux(rs, M, a, r_in) / [
+        page_thorne_flux(r, M, abs(a), r_in) for r in rs
+    ]
+    np.testing.assert_allclose(ratio, ratio[0], rtol=1e-6)  # 1.7e-8 measured
+    scene = core.Scene(model=hm.kerr(rg=1.0, a=0.5 * 0.9999 * spin, chart="kerr_schild"),
+                       disk=core.AccretionDisk(r_out=8.0), background=(0.0, 0.0, 0.0))  # fmt: skip
+    out = core.render(scene, camera_at(20.0, 16, 8), tolerance=1e-6, workers=1,
+                      parallel="threads")  # fmt: skip
+    hit = out.passes["ending"] == ENDING["hit"]
+    assert hit.sum() > 40 and np.all(np.isfinite(out.passes["redshift"][hit]))
+    assert out.summary["failed"] == 0
+
+
 def test_a_disk_hit_without_a_finite_g_is_flagged_failed():
     """A ray whose g cannot be computed (here: a NaN momentum) is counted failed and gets no
     disk colour, never a plausible one."""
@@ -411,3 +439,62 @@ def test_adaptive_sampling_traces_the_disk():
     # 99 % within 2.3e-4 measured; the worst (15 %) where g changes steeply across a pixel
     # (the shadow's edge, higher-order images): the rays there are 0.5 px accurate only
     assert np.quantile(ratio, 0.99) < 1e-3
+
+
+def test_kerr_split_redshift_agrees_with_dopri5_to_float32():
+    """a/M = 0.9 at 80 deg with a disk to 8 rg, 24x16: g of the default method (the explicit
+    split, tolerance 1e-8) is dopri5's at 1e-11 within 1e-8 relative, so the redshift pass
+    (float32) agrees to one float32 unit (the split's long steps put the disk's crossing off
+    by ~1e-5 on the step's cubic Hermite path: g off by up to 8e-6)."""
+    scene = core.Scene(
+        model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"), disk=core.AccretionDisk(r_out=8.0)
+    )
+    cam = camera_at(20.0, 24, 16)
+    tracer, _, _, split = trace(scene, cam)
+    assert tracer.method.name == "blanes_moan_s10"
+    ref = trace(scene, cam, method="dopri5", tolerance=1e-11)[3]
+    on = np.isfinite(ref.redshift)
+    assert on.sum() > 150 and np.array_equal(np.isfinite(split.redshift), on)
+    assert np.max(np.abs(split.redshift[on] / ref.redshift[on] - 1)) < 1e-8
+    g, g_ref = (x.redshift[on].astype(np.float32) for x in (split, ref))  # the pass's type
+    assert np.max(np.abs(g / g_ref - 1)) <= np.finfo(np.float32).eps
+
+
+# --- a camera in the disk's plane ---------------------------------------------------------
+
+
+def _in_plane_view(z, look, opacity):
+    """A 16 x 12 camera at (0, -5, z), inside the disk (r_out 8), looking up, down or
+    along the plane (towards the hole); (render, ray directions' z)."""
+    scene = core.Scene(
+        model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"),
+        disk=core.AccretionDisk(r_out=8.0, opacity=opacity),
+        background="procedural",
+    )
+    target, up = {"up": ((0, -5, 1), (0, 1, 0)), "down": ((0, -5, -1), (0, 1, 0)),
+                  "along": ((0, 0, 0), (0, 0, 1))}[look]  # fmt: skip
+    cam = core.Camera.perspective(position=(0, -5, z), look_at=np.add(target, (0, 0, z)),
+                                  up=up, fov_deg=60, width=16, height=12)  # fmt: skip
+    out = core.render(scene, cam, tolerance=1e-6, workers=1, parallel="threads")
+    return out, cam.rays()[1][:, 2].reshape(12, 16)
+
+
+@pytest.mark.parametrize("opacity", [1.0, 0.6])
+def test_a_camera_in_the_disk_plane_sees_what_a_camera_beside_it_sees(opacity):
+    """A camera exactly in the disk's plane (z = 0) inside its outer radius: a ray leaving
+    the plane does not cross the disk where it starts (every pixel was disk, even looking
+    straight up). Each ray sees what it sees from z = 1e-9 on its side of the plane (the
+    limit): up and down away from the disk, along the plane the halves of the two."""
+    for look in ("up", "down", "along"):
+        at, dz = _in_plane_view(0.0, look, opacity)
+        above, _ = _in_plane_view(1e-9, look, opacity)
+        below, _ = _in_plane_view(-1e-9, look, opacity)
+        assert np.all(dz != 0)
+        side = (dz > 0)[..., None]
+        expected = np.where(side, above.rgba, below.rgba)
+        np.testing.assert_allclose(at.rgba, expected, atol=1e-6)
+        ending = np.where(side[..., 0], above.passes["ending"], below.passes["ending"])
+        np.testing.assert_array_equal(at.passes["ending"], ending)
+        if look != "along":  # looking away from the plane: no disk at all, only sky
+            assert np.all(at.passes["ending"] == ENDING["escaped"])
+            assert np.all(np.isnan(at.passes["redshift"]))

@@ -90,14 +90,43 @@ def test_exr_round_trip(tmp_path):
 
 
 def test_exr_validation_and_missing_package(tmp_path, monkeypatch):
-    pytest.importorskip("OpenEXR")
+    """Writing needs numpy alone (Blender does not bundle OpenEXR); reading needs OpenEXR."""
     with pytest.raises(ValueError):
         write_exr(tmp_path / "x.exr", {"R": np.zeros((2, 2)), "G": np.zeros((3, 2))})
     with pytest.raises(ValueError):
         write_exr(tmp_path / "x.exr", {})
+    with pytest.raises(ValueError, match="compression"):
+        write_exr(tmp_path / "x.exr", {"R": np.zeros((2, 2))}, compression="piz")
     monkeypatch.setitem(sys.modules, "OpenEXR", None)
+    path = write_exr(tmp_path / "x.exr", {"R": np.zeros((2, 2))})
+    assert open(path, "rb").read(4) == b"\x76\x2f\x31\x01"  # the EXR magic number
     with pytest.raises(ImportError, match="OpenEXR"):
-        write_exr(tmp_path / "x.exr", {"R": np.zeros((2, 2))})
+        read_exr(path)
+
+
+@pytest.mark.parametrize("compression", ["none", "zips", "zip"])
+@pytest.mark.parametrize("shape", [(1, 1), (17, 33), (40, 3)])
+def test_exr_written_here_reads_back_through_openexr(tmp_path, compression, shape):
+    """The numpy encoder against the OpenEXR library's reader: every compression, block
+    sizes that do not divide the height, NaN and infinities kept, names as given."""
+    pytest.importorskip("OpenEXR")
+    chans = {
+        "R": RNG.normal(size=shape).astype(np.float32) * 1e30,
+        "SymRay Error.X": np.where(RNG.random(shape) < 0.5, np.nan, 1.0).astype(np.float32),
+        "Z": np.full(shape, np.inf, np.float32),
+        "half": RNG.normal(size=shape).astype(np.float16),
+        "count": RNG.integers(0, 2**32 - 1, shape, dtype=np.uint32),
+    }
+    back = read_exr(write_exr(tmp_path / "x.exr", chans, compression=compression))
+    assert set(back) == set(chans)
+    for name, arr in chans.items():
+        assert back[name].dtype == arr.dtype
+        np.testing.assert_array_equal(back[name], arr)
+
+
+def test_exr_zip_compresses(tmp_path):
+    flat = {"R": np.ones((64, 64), np.float32)}
+    assert len(imageio.exr_bytes(flat)) < len(imageio.exr_bytes(flat, compression="none")) / 20
 
 
 def _old_file(tmp_path, name):
@@ -160,3 +189,63 @@ def test_bad_png_input_shapes(tmp_path):
     (tmp_path / "n.png").write_bytes(b"not a png")
     with pytest.raises(ValueError):
         read_png(tmp_path / "n.png")
+
+
+@pytest.mark.parametrize("stage", ["write", "replace"])
+def test_a_pair_is_written_whole_or_not_at_all(tmp_path, monkeypatch, stage):
+    """Issue 22 item 11: the second file failing leaves both previous files as they were,
+    and the message names the file that failed."""
+    first, second = _old_file(tmp_path, "a.exr"), tmp_path / "a.passes.exr"
+    second.write_bytes(b"previous passes")
+    real_replace = os.replace
+
+    def broken_replace(src, dst):
+        if str(dst).endswith("passes.exr"):
+            raise OSError(5, "Input/output error")
+        return real_replace(src, dst)
+
+    real_writer = imageio._bytes_writer
+
+    def disk_full_on_passes(data):
+        def write(tmp):
+            if ".a.passes.exr." not in tmp:
+                return real_writer(data)(tmp)
+            with open(tmp, "wb") as f:
+                f.write(data[: len(data) // 2])
+            raise OSError(28, "No space left on device")
+
+        return write
+
+    if stage == "replace":
+        monkeypatch.setattr(imageio.os, "replace", broken_replace)
+    else:
+        monkeypatch.setattr(imageio, "_bytes_writer", disk_full_on_passes)
+    files = [(first, {"R": np.ones((2, 2))}), (second, {"G": np.ones((2, 2))})]
+    with pytest.raises(ImageWriteError) as info:
+        imageio.write_exr_files(files)
+    reason = "Input/output error" if stage == "replace" else "No space left on device"
+    assert str(info.value) == f"cannot write image {str(second)!r}: {reason}; no file was changed"
+    assert first.read_bytes() == b"previous contents"
+    assert second.read_bytes() == b"previous passes"
+    assert sorted(os.listdir(tmp_path)) == ["a.exr", "a.passes.exr"]
+    monkeypatch.undo()
+    assert imageio.write_exr_files(files) == [str(first), str(second)]
+    assert first.read_bytes()[:4] == second.read_bytes()[:4] == b"\x76\x2f\x31\x01"
+
+
+def test_a_pair_without_previous_files_leaves_none_on_failure(tmp_path, monkeypatch):
+    real_replace = os.replace
+
+    def broken_replace(src, dst):
+        if str(dst).endswith("passes.exr"):
+            raise OSError(5, "Input/output error")
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(imageio.os, "replace", broken_replace)
+    files = [
+        (tmp_path / "a.exr", {"R": np.ones((2, 2))}),
+        (tmp_path / "a.passes.exr", {"G": np.ones((2, 2))}),
+    ]
+    with pytest.raises(ImageWriteError, match="a.passes.exr"):
+        imageio.write_exr_files(files)
+    assert os.listdir(tmp_path) == []

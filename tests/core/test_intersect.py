@@ -310,3 +310,22 @@ def test_volume_validation():
         Volume((0, 0, 0), (1, 0, 1), _field, _emission)
     with pytest.raises(ValueError):
         Volume((0, 0, 0), (1, 1, 1), _field)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_vertices_and_bounds_are_refused(bad):
+    """A mesh with one non-finite vertex is refused by name, never built with NaN bounds
+    (which would make every segment miss everything); so is a group member whose bounds
+    are NaN (an intersector made elsewhere)."""
+    verts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [bad, 2, 0]], float)
+    with pytest.raises(ValueError, match="vertices must be finite"):
+        TriangleMesh(verts, [[0, 1, 2], [1, 2, 3]])
+
+    class Broken:
+        bounds = (np.array([0.0, np.nan, 0.0]), np.ones(3))
+
+        def intersect(self, a, b):
+            return Hits.miss(len(a))
+
+    with pytest.raises(ValueError, match="object 1 has NaN bounds"):
+        Group([Sphere((0, 0, 0), 1.0), Broken()])

@@ -4,8 +4,8 @@ of the general splittings, and images against dopri5 on Kerr–Schild.
 
 References are independent of the hand-written model: the expression form of Kerr in BL
 (core.hamiltonians.kerr, dual numbers over its text), the Kerr–Schild model, text forms of
-the split's two parts integrated by scipy's DOP853 at rtol 1e-13, and dopri5 renders at
-1e-11 in Kerr–Schild.
+the split's two parts integrated by scipy's DOP853 at rtol 1e-13, dopri5 renders at
+1e-11 in Kerr–Schild, and dopri5 on the Boyer–Lindquist text metric from the same photons.
 """
 
 import math
@@ -226,9 +226,9 @@ def test_splittings_refuse_kerr_without_the_split():
 
 
 def test_default_method_falls_back_where_the_split_cannot_start():
-    """A Kerr–Schild camera on the polar axis, or between r+ and BL's capture radius: the
-    default method is then gauss4 in Kerr–Schild (the split is refused there when asked
-    for by name); elsewhere it is the split's."""
+    """A Kerr–Schild camera on the polar axis: the default method is then gauss4 in
+    Kerr–Schild (the split is refused there when asked for by name); elsewhere, between r+
+    and BL's capture radius too, it is the split's."""
     from core.render import tracer_for_camera
 
     scene = core.Scene(model=hm.kerr(RG, A, chart="kerr_schild"))
@@ -238,11 +238,72 @@ def test_default_method_falls_back_where_the_split_cannot_start():
         ((0.0, -30.0, 2.0), "blanes_moan_s10"),
         ((0.0, 0.0, 30.0), "gauss4"),
         ((0.0, 0.0, 0.5 * (MODEL.horizon + r_c)), "gauss4"),
+        (_equatorial(0.5 * (MODEL.horizon + r_c)), "blanes_moan_s10"),
     ):
         tracer = tracer_for_camera(scene, TraceOptions(), 30.0, position)
         assert tracer.method.name == expect, position
     with pytest.raises(core.CoordinateAxisError, match="gauss4"):
         check_camera(Tracer(scene, TraceOptions(method="blanes_moan_s10"), 30.0), (0.0, 0.0, 30.0))
+
+
+def _equatorial(r):
+    """A Kerr–Schild point (0, -sqrt(r^2 + a^2), 0) at BL radius r in the equatorial plane."""
+    return (0.0, -math.sqrt(r * r + A * A), 0.0)
+
+
+def _bl_endings(camera, scene):
+    """Escaped (0) or captured (1) of each pixel's photon, followed by dopri5 at 1e-11 on the
+    Boyer–Lindquist text metric (core.hamiltonians.kerr) from the camera's momenta (the
+    Kerr–Schild observer's, through the split's chart: test_camera_momenta_are_the_kerr_schild_
+    ones): captured at its 1.01 r+, escaped moving out beyond 20 rg (past every photon orbit,
+    no turning point), 4 (undecided) otherwise."""
+    tracer = Tracer(scene, TraceOptions(), 30.0)
+    origins, dirs = camera.rays()
+    X = ((origins - scene.center) @ tracer.rotation).T
+    Q, P = spacetime_momenta(MODEL, CHART, CHART.to_coords(X), (dirs @ tracer.rotation).T)
+    sh = np.sinh(Q[1])
+    q0 = np.stack([Q[0], M + B * np.cosh(Q[1]), Q[2], Q[3]]).T
+    p0 = np.stack([P[0], P[1] / (B * sh), P[2], P[3]]).T
+    bl = hm.kerr(RG, A, chart="boyer_lindquist")
+    with np.errstate(all="ignore"):
+        res = core.integrate(bl, q0, p0, 0.05, 20_000, "dopri5", tol=1e-11, max_steps=10**5)
+    escaped = ~res.captured & (res.q[:, 1] > 20.0) & (res.p[:, 1] > 0)
+    return np.where(res.captured, 1, np.where(escaped, 0, 4))
+
+
+def test_camera_just_outside_the_horizon_sees_out():
+    """a/M = 0.9, a camera at 1.02 r+ (below BL's capture radius, in the ergoregion)
+    looking out, 32x24: the default method is the split, and every pixel escapes or is
+    captured as its photon does on the Boyer–Lindquist metric by dopri5 (280 of 768
+    escape); no ray failed."""
+    r_cam = 1.02 * MODEL.horizon
+    assert r_cam < MODEL.r_capture
+    scene = core.Scene(model=hm.kerr(RG, A, chart="kerr_schild"))
+    position = _equatorial(r_cam)
+    camera = core.Camera.perspective(position=position, look_at=(0, -30, 0), up=(0, 0, 1),
+                                     fov_deg=90, width=32, height=24)  # fmt: skip
+    result = core.render(scene, camera, passes=("ending",), workers=1)
+    assert result.summary["method"] == "blanes_moan_s10"
+    ending = result.passes["ending"].reshape(-1)
+    ref = _bl_endings(camera, scene)
+    assert not np.any(ref == 4)
+    assert np.array_equal(ending, ref), np.flatnonzero(ending != ref)
+    assert np.sum(ending == core.ENDING["escaped"]) == 280
+
+
+def test_split_refuses_a_camera_only_inside_the_horizon():
+    """The split's camera check: a camera at 1.001 r+ is outside (no error), one at 0.98 r+
+    inside ("inside the black hole's horizon"); a render from there raises it too."""
+    scene = core.Scene(model=hm.kerr(RG, A, chart="kerr_schild"))
+    split = Tracer(scene, TraceOptions(method="blanes_moan_s10"), 30.0)
+    check_camera(split, _equatorial(1.001 * MODEL.horizon))
+    inside = _equatorial(0.98 * MODEL.horizon)
+    with pytest.raises(core.InsideHorizonError, match="inside the black hole's horizon"):
+        check_camera(split, inside)
+    camera = core.Camera.perspective(position=inside, look_at=(0, -30, 0), up=(0, 0, 1),
+                                     fov_deg=90, width=4, height=3)  # fmt: skip
+    with pytest.raises(core.InsideHorizonError, match="inside the black hole's horizon"):
+        core.render(scene, camera, passes=("ending",), workers=1)
 
 
 def test_split_keeps_a_bound_orbit_on_its_level_set():
