@@ -59,7 +59,7 @@ if str(ROOT) not in sys.path:
 
 import core  # noqa: E402
 from core import hamiltonians as hm  # noqa: E402
-from core.integrators import METHODS, PoincareTransformed, get_method  # noqa: E402
+from core.integrators import METHODS, PoincareTransformed  # noqa: E402
 from core.trace import ERROR_CONSTANTS, TraceOptions, Tracer  # noqa: E402
 
 CAMERA = dict(position=(0.0, -30.0, 2.0), look_at=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0), fov_deg=40.0)
@@ -174,8 +174,10 @@ def pixel_angle(width: int, height: int) -> float:
     return math.radians(CAMERA["fov_deg"]) / max(width, height)
 
 
-def kerr_scene():
-    return core.Scene(model=hm.kerr(rg=1.0, a=SPIN, chart="kerr_schild"), background="procedural")
+def kerr_scene(spin: float = SPIN):
+    """Kerr a = ``spin`` rg (Kerr–Schild; Schwarzschild's own model at 0)."""
+    model = hm.kerr(rg=1.0, a=spin, chart="kerr_schild") if spin else hm.schwarzschild(1.0)
+    return core.Scene(model=model, background="procedural")
 
 
 def cpu_seconds() -> float:
@@ -361,7 +363,7 @@ def magnification(scene, options, origins, directions, reference, pixel, axes, d
 
 
 def bench_calibrate(
-    n: int = 1500, names: tuple[str, ...] | None = None, scale: float = 1.0
+    n: int = 1500, names: tuple[str, ...] | None = None, scale: float = 1.0, spin: float = SPIN
 ) -> None:
     """C in err = C h^order for each method, err the largest equivalent direction error.
 
@@ -371,8 +373,8 @@ def bench_calibrate(
     (their forward error too); this measure is not, and sets core.trace's step rule.
     """
     print(
-        f"\n[calibrate] error constants, Kerr a/M = 0.9 (Kerr–Schild), {n} rays from 30 rg, "
-        "region 3000 rg (far-field error negligible)"
+        f"\n[calibrate] error constants, Kerr a/M = {2 * spin:g} (Kerr–Schild; 0: "
+        f"Schwarzschild), {n} rays from 30 rg, region 3000 rg (far-field error negligible)"
     )
     cam = core.Camera.perspective(width=512, height=512, **CAMERA)
     pixel = pixel_angle(512, 512)
@@ -380,15 +382,14 @@ def bench_calibrate(
     rows = rng.choice(cam.n_pixels, n, replace=False)
     origins, directions = cam.rays()
     origins, directions = origins[rows], directions[rows]
-    scene = kerr_scene()
+    scene = kerr_scene(spin)
     ref_opts = TraceOptions(method="rk4", step=0.003, region_radius=3000.0, max_steps=10**6)
     ref = Tracer(scene, ref_opts).trace(origins, directions)
     axes = (cam.frame.right, cam.frame.up)
     mag = magnification(scene, ref_opts, origins, directions, ref, pixel, axes)
     line("magnification median / max", f"{np.median(mag):.2f} / {mag.max():.0f}")
     for name in names or tuple(METHODS):
-        method = get_method(name)
-        p = method.order
+        p = Tracer(scene, TraceOptions(method=name, step=1.0)).order  # on the traced form
         h_big = scale * {1: 0.004, 2: 0.03}.get(p, 0.2)
         for h in (h_big, 0.5 * h_big):
             rays = Tracer(
@@ -605,6 +606,11 @@ def main() -> None:
     parser.add_argument("--method", default=None, help="render method (default: render's)")
     parser.add_argument("--size", type=int, default=512, help="image section's size")
     parser.add_argument("--scaling-size", type=int, default=512)
+    parser.add_argument(
+        "--spin", type=float, default=SPIN, help="calibrate: a in rg (0: Schwarzschild)"
+    )
+    parser.add_argument("--methods", default="", help="calibrate: comma-separated methods")
+    parser.add_argument("--scale", type=float, default=1.0, help="calibrate: step scale")
     parser.add_argument("--hd-child", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--baseline", default=None, help="checkout of af19e2b (quality)")
     args = parser.parse_args()
@@ -638,7 +644,8 @@ def main() -> None:
         elif section == "quality":
             bench_quality(args.full, args.baseline)
         elif section == "calibrate":
-            bench_calibrate()
+            names = tuple(filter(None, args.methods.split(","))) or None
+            bench_calibrate(names=names, scale=args.scale, spin=args.spin)
         elif section == "hd":
             bench_hd(args.method)
         else:

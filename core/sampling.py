@@ -242,7 +242,7 @@ class TileSampler:
         return (
             rays,
             seen_direction(rays, origins),
-            richardson_error(rays, coarse, origins, self.tracer.method.order),
+            richardson_error(rays, coarse, origins, self.tracer.order),
         )
 
     def _trace_nodes(self, nodes: _Nodes, jj: np.ndarray, ii: np.ndarray, origin, cancel):
@@ -294,7 +294,7 @@ class TileSampler:
             rays, seen, _ = self._trace_points(xy, cancel, companion=False, step=step)
             error = _richardson(
                 seen, rays.ending, nodes.direction[jj, ii], nodes.ending[jj, ii],
-                self.tracer.method.order,
+                self.tracer.order,
             )  # fmt: skip
             self.error_rays += jj.size
             self._store(nodes, jj, ii, rays, seen, error)

@@ -95,7 +95,8 @@ Pattern = tuple[tuple[str, float], ...]
 class Method:
     """Base of the one-step rules (what the drivers and the tracer rely on).
 
-    Every method has a ``name``, an ``order``, ``symplectic``, ``explicit`` (no implicit
+    Every method has a ``name``, an ``order`` (nominal: ``order_on(system)`` is the order
+    on a given system), ``symplectic``, ``explicit`` (no implicit
     solve for any H) and ``error_constant`` (C in err = C h^order around a mass, see
     core.tracing.steps; None where it was not calibrated), and
 
@@ -117,6 +118,17 @@ class Method:
     follows_time_scale: bool = True
     """Whether it follows rays of a Poincaré-transformed K = g (H - H0) (Tao's binding of
     two copies does not: the renderer refuses it for black holes)."""
+
+    def order_on(self, system: Any) -> int:
+        """The order this method reaches on ``system`` (the nominal ``order`` unless the
+        system's form lowers it: Splitting)."""
+        return self.order
+
+    def error_constant_on(self, model: Any) -> float | None:
+        """C in err = C h^order_on(model) around a mass: the model's own measured constant
+        for this method (``Hamiltonian.error_constants``), else the method's own."""
+        own = getattr(model, "error_constants", {}).get(self.name)
+        return self.error_constant if own is None else own
 
     def __init__(self, **options: Any) -> None:
         self.options = dict(options)

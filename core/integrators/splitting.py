@@ -23,8 +23,11 @@ Coefficients:
   methods S_6 (order 4, 6 stages) and S_10 (order 6, 10 stages) for a *general* split
   A + B. blanes_moan6 is order 6 only where [V, [V, [V, T]]] = 0 (T quadratic in p),
   order 4 on a split whose kinetic part is not (Kerr's square-root Hamiltonian,
-  core/models/kerr_split.py: measured 3.98); blanes_moan4's order 4 holds for any split
-  (a symmetric method's order-4 conditions do not depend on it).
+  core/models/kerr_split.py: measured 3.98; Schwarzschild's logarithmic one: 4.00);
+  blanes_moan4's order 4 holds for any split (a symmetric method's order-4 conditions do
+  not depend on it). A split says which it is (``SplitSystem.nystrom``); a method's
+  ``order_on(split)`` is the order it reaches there, which the renderer's step rule and
+  error estimate use.
 """
 
 from __future__ import annotations
@@ -47,6 +50,10 @@ class SplitSystem(System):
     Besides the System members (value and gradient of K, for the other methods), it gives
     the exact flow of each part over a time t, in place.
     """
+
+    nystrom: bool = False
+    """Whether the split is of Runge–Kutta–Nyström type (T quadratic in p, V free of p:
+    [V, [V, [V, T]]] = 0), where the SRKN splittings reach their nominal order."""
 
     def kick(self, Q: np.ndarray, P: np.ndarray, t: Any) -> None:
         """Exact flow of the position part V over t (q fixed)."""
@@ -129,6 +136,7 @@ class Splitting(Method):
         kicks: tuple[float, ...],
         drifts: tuple[float, ...],
         error_constant: float | None = None,
+        general_order: int | None = None,
     ) -> None:
         super().__init__()
         if len(kicks) != len(drifts) + 1:
@@ -138,6 +146,13 @@ class Splitting(Method):
         self.name, self.order = name, order
         self.kicks, self.drifts = tuple(kicks), tuple(drifts)
         self.error_constant = error_constant
+        self.general_order = order if general_order is None else general_order
+        """Order on a split not of Runge–Kutta–Nyström type (``SplitSystem.nystrom``)."""
+
+    def order_on(self, system: Any) -> int:
+        """``order`` on a Runge–Kutta–Nyström split (T quadratic in p: ``nystrom``), else
+        ``general_order`` (a separable H's own split counts as general)."""
+        return self.order if getattr(system, "nystrom", False) else self.general_order
 
     @property
     def stages(self) -> int:
@@ -207,8 +222,10 @@ def _gradient_drift(H: Any):
 # Error constants: calibrated like the others (core.tracing.steps), on the ray tracing's own
 # use of the splittings: Schwarzschild in its isotropic optical form (the logarithmic split,
 # core/models/schwarzschild_optical.py), a/M = 0 seen from 30 rg; measured C: leapfrog
-# 5.3e-3, blanes_moan4 3.3e-5, blanes_moan6 1.3e-5 (gauss4 8.7e-4 and rk4 9.4e-3 there),
-# times 1.5 (benchmarks/bench_perf.py --only calibrate).
+# 5.3e-3, blanes_moan4 3.3e-5 (gauss4 8.7e-4 and rk4 9.4e-3 there), times 1.5
+# (benchmarks/bench_perf.py --only calibrate). blanes_moan6's is C at its nominal order 6,
+# for Runge–Kutta–Nyström splits; the splits of Schwarzschild and Kerr, where it is order 4,
+# have their own (their models' error_constants).
 
 
 def leapfrog() -> Splitting:
@@ -222,8 +239,9 @@ def blanes_moan4() -> Splitting:
 
 
 def blanes_moan6() -> Splitting:
-    """Blanes & Moan (2002) SRKN_11^b, order 6, 11 force evaluations per step."""
-    return Splitting("blanes_moan6", 6, *_bm6(), error_constant=2e-5)
+    """Blanes & Moan (2002) SRKN_11^b, order 6 (4 on a general split), 11 force
+    evaluations per step."""
+    return Splitting("blanes_moan6", 6, *_bm6(), error_constant=2e-5, general_order=4)
 
 
 # Error constants of the general splittings: measured on the split they are for, Kerr's

@@ -23,6 +23,8 @@ from ..integrators.splitting import SplitSystem
 class OpticalSplit(SplitSystem):
     """K = |p|²/2 − H0 w(q) of a medium (see the module), with exact kick and drift flows."""
 
+    nystrom = True  # T = |p|²/2; V = -p_s w(q) in the clocked form, p_s conserved
+
     def __init__(self, medium, H0, clocked: bool = False) -> None:
         self.medium = medium
         self.H0 = np.asarray(H0, dtype=np.float64)

@@ -86,6 +86,7 @@ def default_step(
     scaled: bool = False,
     constant: float | None = None,
     largest: float | None = None,
+    order: int | None = None,
 ) -> float:
     """Fictitious-time step for ``method`` to reach ``tolerance`` (radians).
 
@@ -93,11 +94,13 @@ def default_step(
     constant, so that the integration error stays below tolerance / 2 (the far field gets
     FAR_FIELD_SHARE of it, see core.tracing.regions); ``constant`` replaces the method's own where
     the model measured its own for it (``Hamiltonian.error_constants``), and ``largest``
-    the splittings' largest step where the model sets one (``max_split_step``). Otherwise
+    the splittings' largest step where the model sets one (``max_split_step``), and
+    ``order`` the method's nominal order (``Method.order_on``: its order on the system
+    traced). Otherwise
     (media, user models, methods without a constant): h = 0.5 length tol^(1/order).
     """
     tol = min(max(float(tolerance), 1e-14), 1e-1)
-    order = max(int(method.order), 1)
+    order = max(int(method.order if order is None else order), 1)
     if constant is None:
         constant = method.error_constant
     if not scaled:

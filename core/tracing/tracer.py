@@ -85,8 +85,12 @@ class Tracer:
             return
         self.method = integrators.get_method(options.method or default_method(scene.model))
         self.model = model = tracing_model(scene.model, self.method)
+        system = model
         if isinstance(self.method, integrators.Splitting):  # refused without a split
-            integrators.splitting.split_flows(model.split_parts(), self.method.name)
+            system = model.split_parts()
+            integrators.splitting.split_flows(system, self.method.name)
+        self.order = self.method.order_on(system)
+        """The method's order on what it integrates here (Richardson, the step rule)."""
         self.chart = chart_for(model)
         self.spacetime = self.chart.time_index is not None
         self.mass = model.mass
@@ -109,8 +113,9 @@ class Tracer:
                 options.tolerance,
                 self.region.length_scale(model),
                 scaled=self.region.scaled(model),
-                constant=model.error_constants.get(self.method.name),
+                constant=self.method.error_constant_on(model),
                 largest=model.max_split_step,
+                order=self.order,
             )
         )
 

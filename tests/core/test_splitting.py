@@ -326,3 +326,49 @@ def test_default_method_per_model():
     assert default_method(hm.kerr(1.0, 0.5, chart="kerr_schild")) == "gauss4"  # extremal
     assert default_method(hm.kerr(1.0, 0.3)) == "gauss4"  # Boyer–Lindquist chart
     assert default_method(hm.kerr(1.0, 0.0)) == "blanes_moan6"  # that is Schwarzschild
+
+
+def _split_and_ray(form: str):
+    """(split, Q, P, duration) of one ray: Schwarzschild's logarithmic split from 20 rg past
+    the hole, or a medium's optical split in a smooth index field (Kerr's square-root
+    split: tests/core/test_kerr_split.py)."""
+    if form == "medium":
+        model = hm.medium("1 + 0.2*sin(x) + 0.1*y*y")
+        Q, D = np.array([[0.3], [-0.5], [0.2]]), np.array([[0.6], [1.0], [0.05]])
+        _, P = core.observer.medium_momenta(model, Q, D)
+        return model.split_parts(0.5), Q, P, 3.0
+    if form == "schwarzschild":
+        from core.models.schwarzschild_optical import SchwarzschildOptical
+
+        model = SchwarzschildOptical(1.0)
+        Q, D = np.array([[-3.0], [-20.0], [0.5]]), np.array([[0.12], [1.0], [0.0]])
+        _, P = core.observer.medium_momenta(model, Q, D)
+        return model.split_parts(0.5), Q, P, 4.0
+    raise ValueError(form)
+
+
+@pytest.mark.parametrize("form, nystrom", [("medium", True), ("schwarzschild", False)])
+@pytest.mark.parametrize("name", ["blanes_moan4", "blanes_moan6", "blanes_moan_s10"])
+def test_a_splittings_order_on_each_split_is_the_observed_one(form, nystrom, name):
+    """``order_on(split)`` is the order observed on that split (fitted slope within 0.3,
+    against the same ray at 4000 steps of blanes_moan_s10): blanes_moan6 reaches its 6 on a
+    Runge–Kutta–Nyström split (a medium's |p|²/2) and 4 on Schwarzschild's logarithmic
+    split; the others keep their order everywhere."""
+    split, Q, P, duration = _split_and_ray(form)
+    assert split.nystrom is nystrom
+    method = METHODS[name]
+
+    def run(m, n):
+        state = m.init(split, Q, P)
+        for _ in range(n):
+            state, ok = m.step(split, state, duration / n)
+        assert ok.all()
+        return np.concatenate(m.qp(state))
+
+    reference = run(METHODS["blanes_moan_s10"], 4000)
+    steps = np.array((8, 12, 16, 24) if form == "medium" else (20, 28, 40, 56))
+    errors = [np.abs(run(method, n) - reference).max() for n in steps]
+    slope = np.polyfit(np.log(duration / steps), np.log(errors), 1)[0]
+    expected = 4 if name == "blanes_moan4" or (name == "blanes_moan6" and not nystrom) else 6
+    assert method.order_on(split) == expected
+    assert slope == pytest.approx(expected, abs=0.3), errors
