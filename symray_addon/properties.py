@@ -5,6 +5,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
+from ..core.integrators import METHODS
 from . import disk_properties, presets, validation
 
 PASSES = (("error_px", "Error", "pass_error"), ("steps", "Steps", "pass_steps"),
@@ -33,56 +34,51 @@ MODEL_ITEMS = [
     ("CUSTOM", "Hamiltonian", "Any Hamiltonian H(x, y, z, p_x, p_y, p_z)"),
 ]
 
-METHOD_ITEMS = [
-    ("symplectic_euler", "Symplectic Euler", "1st order, seed Eq. 11"),
-    ("stormer_verlet", "Störmer–Verlet", "2nd order, symmetric"),
-    ("implicit_midpoint", "Implicit Midpoint", "2nd order, implicit"),
-    ("gauss4", "Gauss–Legendre 4", "4th order, implicit (2-stage Gauss–Legendre)"),
-    ("yoshida4", "Yoshida 4", "4th order composition (triple jump)"),
-    ("yoshida6", "Yoshida 6", "6th order composition"),
-    ("yoshida8", "Yoshida 8", "8th order composition"),
-    ("suzuki4", "Suzuki 4", "4th order fractal composition"),
-    ("suzuki6", "Suzuki 6", "6th order fractal composition"),
-    (
-        "tao2",
-        "Tao 2",
-        "2nd order, explicit for non-separable H (extended phase space); "
-        "media and metrics only: it cannot trace black holes",
-    ),
-    (
-        "tao4",
-        "Tao 4",
-        "4th order, explicit for non-separable H (extended phase space); "
-        "media and metrics only: it cannot trace black holes",
-    ),
-    ("rk4", "Runge–Kutta 4", "Non-symplectic reference, 4th order"),
-    ("dopri5", "Dormand–Prince 5", "Non-symplectic reference, adaptive"),
-    # appended (Blender stores an enum by its position: the items above keep theirs)
-    (
-        "leapfrog",
-        "Leapfrog",
-        "2nd order, explicit splitting (needs a model with a split: Schwarzschild, Kerr, media)",
-    ),
-    ("blanes_moan4", "Blanes–Moan 4", "4th order, explicit splitting (Schwarzschild, media)"),
-    ("blanes_moan6", "Blanes–Moan 6", "6th order, explicit splitting (Schwarzschild, media)"),
-    (
-        "AUTO",
-        "Automatic",
-        "The measured cheapest for the model: Blanes–Moan 6 for Schwarzschild, "
-        "Blanes–Moan S10 for Kerr below extremal, Blanes–Moan 4 for media (explicit "
-        "symplectic splittings), Gauss–Legendre 4 otherwise",
-    ),
-    (
-        "blanes_moan_s6",
-        "Blanes–Moan S6",
-        "4th order, explicit splitting for any split (Kerr, Schwarzschild, media)",
-    ),
-    (
-        "blanes_moan_s10",
-        "Blanes–Moan S10",
-        "6th order, explicit splitting for any split (Kerr, Schwarzschild, media)",
-    ),
-]
+METHOD_TEXT = {
+    "symplectic_euler": (0, "Symplectic Euler", "1st order, seed Eq. 11"),
+    "stormer_verlet": (1, "Störmer–Verlet", "2nd order, symmetric"),
+    "implicit_midpoint": (2, "Implicit Midpoint", "2nd order, implicit"),
+    "gauss4": (3, "Gauss–Legendre 4", "4th order, implicit (2-stage Gauss–Legendre)"),
+    "yoshida4": (4, "Yoshida 4", "4th order composition (triple jump)"),
+    "yoshida6": (5, "Yoshida 6", "6th order composition"),
+    "yoshida8": (6, "Yoshida 8", "8th order composition"),
+    "suzuki4": (7, "Suzuki 4", "4th order fractal composition"),
+    "suzuki6": (8, "Suzuki 6", "6th order fractal composition"),
+    "tao2": (9, "Tao 2", "2nd order, explicit for non-separable H (extended phase space); "
+             "media and metrics only: it cannot trace black holes"),
+    "tao4": (10, "Tao 4", "4th order, explicit for non-separable H (extended phase space); "
+             "media and metrics only: it cannot trace black holes"),
+    "rk4": (11, "Runge–Kutta 4", "Non-symplectic reference, 4th order"),
+    "dopri5": (12, "Dormand–Prince 5", "Non-symplectic reference, adaptive"),
+    "leapfrog": (13, "Leapfrog", "2nd order, explicit splitting (needs a model with a split: "
+                 "Schwarzschild, Kerr, media)"),
+    "blanes_moan4": (14, "Blanes–Moan 4", "4th order, explicit splitting (Schwarzschild, "
+                     "Kerr, media)"),
+    "blanes_moan6": (15, "Blanes–Moan 6", "Explicit splitting: 6th order for media, 4th on "
+                     "Schwarzschild's and Kerr's splits"),
+    "AUTO": (16, "Automatic", "The measured cheapest for the model: Blanes–Moan 6 for "
+             "Schwarzschild, Blanes–Moan S10 for Kerr below extremal, Blanes–Moan 4 for media "
+             "(explicit symplectic splittings), Gauss–Legendre 4 otherwise"),
+    "blanes_moan_s6": (17, "Blanes–Moan S6", "4th order, explicit splitting for any split "
+                       "(Kerr, Schwarzschild, media)"),
+    "blanes_moan_s10": (18, "Blanes–Moan S10", "6th order, explicit splitting for any split "
+                        "(Kerr, Schwarzschild, media)"),
+}  # fmt: skip
+"""Method name -> (number, label, description). The number is what a .blend stores (it was
+each item's position when the list was kept by hand): a new method takes the next free
+number, and no number is ever reused."""
+
+
+def _method_items() -> list[tuple[str, str, str, str, int]]:
+    """The Method enum: Automatic, then every method of core.METHODS, each with its number."""
+    names = ("AUTO", *METHODS)
+    missing = [name for name in names if name not in METHOD_TEXT]
+    if missing:
+        raise RuntimeError(f"methods without a label in METHOD_TEXT: {missing}")
+    return [(name, *METHOD_TEXT[name][1:], "NONE", METHOD_TEXT[name][0]) for name in names]
+
+
+METHOD_ITEMS = _method_items()
 
 INDEX_FORM_ITEMS = [
     ("PHYSICAL", "Physical", "H = |p|² / 2n²: rays obey the ray equation of optics"),

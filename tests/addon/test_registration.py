@@ -9,7 +9,7 @@ import pytest
 
 MODELS = {"FLAT", "SCHWARZSCHILD", "KERR", "MEDIUM", "METRIC", "CUSTOM"}
 METHOD_ORDER = (
-    # the order Blender stores the enum in (by position): the first 13 never move
+    # the numbers a .blend stores the Method enum by (once its items' positions): fixed
     ("symplectic_euler", "stormer_verlet", "implicit_midpoint", "gauss4", "yoshida4")
     + ("yoshida6", "yoshida8", "suzuki4", "suzuki6", "tao2", "tao4", "rk4", "dopri5")
     + ("leapfrog", "blanes_moan4", "blanes_moan6", "AUTO", "blanes_moan_s6", "blanes_moan_s10")
@@ -62,12 +62,21 @@ def test_disable_enable_survives(addon, scene):
     assert "SYMRAY" in bpy.types.RENDER_PT_format.COMPAT_ENGINES
 
 
-def test_contract_properties(scene):
+def test_contract_properties(addon, scene):
     settings = scene.symray
     rna = settings.bl_rna.properties
     assert {item.identifier for item in rna["model"].enum_items} == MODELS
-    # Blender stores an enum by position: items are only ever appended (old .blend files)
-    assert tuple(item.identifier for item in rna["method"].enum_items) == METHOD_ORDER
+    # Blender stores an enum by its items' numbers: each method keeps the number it had
+    # (old .blend files), and every method of the core is offered, with Automatic first
+    items = rna["method"].enum_items
+    assert {item.identifier: item.value for item in items} == {
+        name: number for number, name in enumerate(METHOD_ORDER)
+    }
+    assert items[0].identifier == "AUTO" and [item.identifier for item in items[1:]] == list(
+        addon.module("core.integrators").METHODS
+    )
+    settings["method"] = METHOD_ORDER.index("blanes_moan6")  # as a .blend stores it
+    assert settings.method == "blanes_moan6"
     assert rna["center"].fixed_type.identifier == "Object"
     assert settings.center is None
     assert settings.image_name == "SymRay Result"
