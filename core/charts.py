@@ -8,12 +8,9 @@ positions (3, N), directions (3, N).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
-
-if TYPE_CHECKING:
-    from .models import Hamiltonian
 
 
 class CartesianChart:
@@ -264,8 +261,9 @@ class IsotropicChart:
 Chart = CartesianChart | SpheroidalChart | IsotropicChart | KerrBLChart
 
 
-def chart_for(model: Hamiltonian) -> Chart:
-    """The chart a model's coordinates are written in."""
+def chart_for(model: Any) -> Chart:
+    """The chart a model (a core.models.Hamiltonian: its ``chart``, ``kind``, ``mass``,
+    ``a``) has its coordinates written in."""
     if model.chart == "kerr_bl":
         return KerrBLChart(model.mass, model.a)
     if model.chart == "isotropic":

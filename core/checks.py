@@ -136,12 +136,9 @@ def check_tolerance(tolerance: Any, name: str = "tolerance") -> float:
 
 
 def check_render_method(method: Any, time_scaled: bool) -> None:
-    """ValueError if ``method`` (a name, e.g. the add-on's, or a method object) cannot render
-    a model with a Poincaré time scale (``time_scaled``): its ``follows_time_scale``."""
-    from .integrators import METHODS  # (the integrators use these checks too)
-
-    if isinstance(method, str):
-        method = METHODS.get(method)  # other names (the add-on's "AUTO"): nothing to refuse
+    """ValueError if ``method`` (a method object; None: the default, nothing to refuse)
+    cannot render a model with a Poincaré time scale (``time_scaled``): its
+    ``follows_time_scale``."""
     if time_scaled and method is not None and not method.follows_time_scale:
         raise ValueError(time_scale_refusal(method.name))
 

@@ -244,7 +244,9 @@ def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
         lambda: checks.check_int("Samples", settings.samples, *SAMPLES),
         lambda: checks.check_int("Max Steps", settings.max_steps),
         lambda: checks.check_int("Workers", settings.workers, 0),
-        lambda: checks.check_render_method(settings.method, model in TIME_SCALED_MODELS),
+        lambda: checks.check_render_method(
+            METHODS.get(settings.method), model in TIME_SCALED_MODELS
+        ),  # "AUTO" is no method: the model's default, nothing to refuse
         lambda: _check_split(settings.method, model, settings.spin),
     ]
     if settings.lighting != "UNLIT":

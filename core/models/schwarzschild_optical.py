@@ -27,7 +27,6 @@ from types import MappingProxyType
 
 import numpy as np
 
-from ..charts import IsotropicChart  # noqa: F401  (the chart of this model)
 from ..integrators.splitting import SplitSystem
 from .medium import Medium
 
