@@ -28,6 +28,7 @@ from .geometry import Intersector
 from .imageio import FAILED_COLOR
 from .integrators import Splitting
 from .observer import ObserverError, check_camera
+from .passes import ALL_PASSES, BY_NAME, STORED, traced_passes
 from .sampling import (
     CLEARANCE,
     COMPANION_RATIO,
@@ -46,10 +47,7 @@ from .tracing.steps import DEFAULT_METHOD
 
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
-ALL_PASSES = ("error", "error_px", "steps", "ending", "direction", "redshift")
-"""The passes, in their one order. ``direction`` (h, w, 3): what each pixel's centre sees
-(the escape direction, or the unit vector to the hit point; NaN where captured or failed)."""
-DEFAULT_PASSES = ("error", "error_px", "steps", "ending", "redshift")
+DEFAULT_PASSES = tuple(name for name in ALL_PASSES if name != "direction")
 """The passes core.render computes unless asked otherwise."""
 _MIN_CHUNK = 2048
 TRACE_SHARE = 0.5
@@ -129,7 +127,7 @@ def render(
     # with tolerance_px the companion run always goes: its estimate picks the rays to redo
     with_error = "error" in passes or "error_px" in passes or tolerance_px is not None
     with_error = with_error and tracer.curved
-    image = _Buffers(n, with_error, camera.width, "direction" in passes)
+    image = _Buffers(n, with_error, camera.width, "direction" in passes, pixel_angle)
     kind, count = workers_module.choose(parallel, workers, n, cores)
     sampled = samples > 1 or (tolerance_px is not None and tracer.curved)
     if sampled:
@@ -165,8 +163,6 @@ def render(
     result = image.result(camera, passes, time.perf_counter() - start_time, was_cancelled, tracer)
     result.summary["parallel"] = f"{count} {kind}" if kind != "inline" else "inline"
     result.summary["pixel_angle"] = pixel_angle
-    if "error_px" in result.passes:  # its own copy: divided in place (no full-frame temporary)
-        result.passes["error_px"] /= np.float32(pixel_angle)
     _summarise_px(result.summary, pixel_angle)
     return result
 
@@ -333,28 +329,36 @@ class _Buffers:
     the caller, that grew with the image).
     """
 
-    def __init__(self, n: int, with_error: bool, width: int, with_direction: bool):
+    def __init__(
+        self, n: int, with_error: bool, width: int, with_direction: bool, pixel_angle: float
+    ):
         self.n = n
+        self.pixel_angle = pixel_angle
         self.with_error = with_error
         self.with_direction = with_direction
         self.width = width
         self.rays = 0
         self.error_rays = 0
         self.energy_max: float | None = None  # over pixels with a finite error, not captured
-        self.allocated = False
+        self.passes: dict[str, np.ndarray] = {}
+        """The stored passes (core.passes.STORED) by name, (n,) or (n, channels)."""
 
     def allocate(self) -> None:
         """The full-frame buffers (once; the first store or the result does it)."""
-        if self.allocated:
+        if self.passes:
             return
-        n = self.n
-        self.rgba = np.zeros((n, 4), dtype=np.float32)
-        self.error = np.zeros(n, dtype=np.float32)
-        self.steps = np.zeros(n, dtype=np.int32)
-        self.ending = np.full(n, -1, dtype=np.int8)
-        self.redshift = np.full(n, np.nan, dtype=np.float32)
-        self.direction = np.full((n if self.with_direction else 0, 3), np.nan, dtype=np.float32)
-        self.allocated = True
+        self.rgba = np.zeros((self.n, 4), dtype=np.float32)
+        for kind in STORED:
+            wanted = kind.name != "direction" or self.with_direction
+            self.passes[kind.name] = kind.empty(self.n if wanted else 0)
+
+    @property
+    def error(self) -> np.ndarray:
+        return self.passes["error"]
+
+    @property
+    def ending(self) -> np.ndarray:
+        return self.passes["ending"]
 
     def _energy(self, idx, energy) -> None:
         """Fold the energy errors of stored pixels ``idx`` into ``energy_max``."""
@@ -366,6 +370,12 @@ class _Buffers:
                 top = float(np.maximum(self.energy_max, top))
             self.energy_max = top
 
+    def _put(self, idx, values: dict) -> None:
+        """Store the passes ``values`` (by name) of the pixels ``idx``."""
+        for name, data in values.items():
+            if name != "direction" or self.with_direction:
+                self.passes[name][idx] = data
+
     def store(self, span, chunk, background: Background) -> int:
         """Store a finished chunk; -> the number of pixels it filled."""
         self.allocate()
@@ -374,14 +384,9 @@ class _Buffers:
         a, b = span
         rays, seen, error = chunk
         self.rgba[a:b] = shade(rays, background)
-        if self.with_direction:
-            self.direction[a:b] = seen
-        self.steps[a:b] = rays.steps
-        self.ending[a:b] = rays.ending
-        self.redshift[a:b] = rays.redshift
+        self._put(slice(a, b), traced_passes(rays, seen, error))
         self.rays += b - a
         if error is not None:
-            self.error[a:b] = error
             self.error_rays += b - a
         failed = rays.ending == ENDING["failed"]
         self.error[a:b][failed] = np.inf
@@ -396,12 +401,7 @@ class _Buffers:
     def _store_tile(self, tile: Tile, part: TileResult) -> int:
         idx = self._rows(tile)
         self.rgba[idx] = part.rgba
-        self.steps[idx] = part.steps
-        self.ending[idx] = part.ending
-        self.error[idx] = part.error
-        if self.with_direction:
-            self.direction[idx] = part.direction
-        self.redshift[idx] = part.redshift
+        self._put(idx, part.passes)
         self._energy(idx, part.energy)
         self.rays += part.rays
         self.error_rays += part.error_rays
@@ -409,37 +409,38 @@ class _Buffers:
 
     def part(self, span, chunk, passes) -> tuple[tuple[int, int, int, int], RenderResult]:
         """A finished chunk as (x0, y0, x1, y1) and its pixels (for progressive display):
-        a tile, or the rows a span of flat indices covers (whole rows, as stored so far)."""
+        a tile, or the rows a span of flat indices covers (whole rows, as stored so far),
+        with every pass asked for."""
         if isinstance(chunk[0], Tile):
             tile = chunk[0]
         else:
             first, last = span[0] // self.width, -(-span[1] // self.width)
             tile = Tile(0, first, self.width, last)
         idx = self._rows(tile)
-        out = RenderResult(self.rgba[idx])
-        for name, data in (("error", self.error), ("steps", self.steps), ("ending", self.ending)):
-            if name in passes:
-                out.passes[name] = data[idx]
-        return (tile.x0, tile.y0, tile.x1, tile.y1), out
+        return (tile.x0, tile.y0, tile.x1, tile.y1), self._image(idx, idx.shape, passes)
+
+    def _image(self, idx, shape: tuple, passes, cancelled: bool = False) -> RenderResult:
+        """The pixels ``idx`` as an image of ``shape`` (h, w) with ``passes``: the stored
+        ones as views where idx is a slice, the derived ones (error_px: the error over the
+        pixel angle) as arrays of their own."""
+        out = RenderResult(self.rgba[idx].reshape(*shape, 4), cancelled=cancelled)
+        for name in passes:
+            kind = BY_NAME[name]
+            data = self.passes[kind.derived_from or name][idx]
+            if kind.derived_from and isinstance(idx, slice):  # a view: its own copy
+                data = data.copy()
+            if name == "error_px":  # in place: no second full-frame temporary
+                data /= np.float32(self.pixel_angle)
+            if name == "direction":  # nothing is seen where a ray was captured or failed
+                ending = self.ending[idx]
+                data[(ending == ENDING["captured"]) | (ending == ENDING["failed"])] = np.nan
+            out.passes[name] = data.reshape(shape if kind.channels == 1 else (*shape, 3))
+        return out
 
     def result(self, camera, passes, seconds, cancelled, tracer) -> RenderResult:
         self.allocate()
         h, w = camera.height, camera.width
-        out = RenderResult(self.rgba.reshape(h, w, 4), cancelled=cancelled)
-        if "error" in passes:
-            out.passes["error"] = self.error.reshape(h, w)
-        if "steps" in passes:
-            out.passes["steps"] = self.steps.reshape(h, w)
-        if "ending" in passes:
-            out.passes["ending"] = self.ending.reshape(h, w)
-        if "redshift" in passes:
-            out.passes["redshift"] = self.redshift.reshape(h, w)
-        if "error_px" in passes:
-            out.passes["error_px"] = self.error.reshape(h, w).copy()
-        if "direction" in passes:
-            dead = (self.ending == ENDING["captured"]) | (self.ending == ENDING["failed"])
-            self.direction[dead] = np.nan
-            out.passes["direction"] = self.direction.reshape(h, w, 3)
+        out = self._image(slice(None), (h, w), passes, cancelled)
         out.summary = self.summary(seconds, tracer)
         return out
 
@@ -457,7 +458,7 @@ class _Buffers:
             "rays": self.rays,
             "pixels": int(np.count_nonzero(traced)),
             "error_rays": self.error_rays,
-            "steps": int(self.steps.sum()),
+            "steps": int(self.passes["steps"].sum()),
             "failed": counts["failed"],
             # errs is a copy: the median may sort it in place (no second full-frame one)
             "error_median": float(np.median(errs, overwrite_input=True)) if errs.size else None,

@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import Hits
+from .passes import BY_NAME
 from .sky import Background
 from .tracing import ENDING, RayResults, Tracer
 from .tracing.scene import DISK_ID
@@ -153,12 +154,10 @@ class TileResult:
     """What a tile adds to the image: per-pixel colour and passes, and its ray counts."""
 
     rgba: np.ndarray  # (h, w, 4) float32
-    error: np.ndarray  # (h, w) radians, +inf where failed
-    steps: np.ndarray  # (h, w) int32
-    ending: np.ndarray  # (h, w) int8
+    passes: dict[str, np.ndarray]
+    """The stored passes (core.passes.STORED) by name, (h, w) or (h, w, channels), each of
+    its pass's type: the pixel centre's (error: +inf where failed)."""
     energy: np.ndarray  # (h, w) |H - H0|
-    direction: np.ndarray  # (h, w, 3) float32: what each pixel's centre sees (seen_direction)
-    redshift: np.ndarray  # (h, w) float32: the centre's g on the accretion disk, else NaN
     rays: int
     error_rays: int
 
@@ -396,10 +395,12 @@ class TileSampler:
             differs = _contrast(rgba, ending)
             busy = np.any(np.stack(differs), axis=0)
             colour[busy] = self._supersample(nodes, blocks, busy, differs, origin, cancel)
+        passes = {"error": error[inner], "steps": steps, "ending": ending[inner],
+                  "direction": direction[inner], "redshift": redshift[inner]}  # fmt: skip
         return TileResult(
-            colour.astype(np.float32), error[inner].astype(np.float32), steps,
-            ending[inner], energy, direction[inner].astype(np.float32),
-            redshift[inner].astype(np.float32), self.rays, self.error_rays,
+            colour.astype(np.float32),
+            {name: data.astype(BY_NAME[name].dtype, copy=False) for name, data in passes.items()},
+            energy, self.rays, self.error_rays,
         )  # fmt: skip
 
     def _evaluate(self, nodes: _Nodes, blocks: _Blocks, y, x) -> _Points:

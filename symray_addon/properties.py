@@ -5,15 +5,14 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
+from ..core import passes as core_passes
 from ..core.integrators import METHODS
 from . import disk_properties, presets, validation
 
-PASSES = (("error_px", "Error", "pass_error"), ("steps", "Steps", "pass_steps"),
-          ("ending", "Ending", "pass_ending"),
-          ("redshift", "Redshift", "pass_redshift"))  # fmt: skip
-"""(core pass, label, toggle) of the passes the add-on writes, in their one order: 'SymRay
-<label>' render passes and the operator's passes EXR layers. 'SymRay Error' is the
-core's ``error_px`` (pixels of the camera)."""
+PASSES = tuple((p.name, p.label, p.toggle) for p in core_passes.PASSES if p.label)
+"""(core pass, label, toggle) of the passes the add-on writes, in their one order (the
+core's table, core.passes): 'SymRay <label>' render passes and the operator's passes EXR
+layers. 'SymRay Error' is the core's ``error_px`` (pixels of the camera)."""
 
 QUALITY_ITEMS = [
     ("PREVIEW", "Preview", "Every pixel within 1 px, one ray per pixel at most: quick look"),
@@ -343,32 +342,6 @@ class SymRaySettings(bpy.types.PropertyGroup):
         description="Worker processes or threads (0 = automatic: one process per "
         "thread Blender renders with, or two threads)",
     )
-    pass_error: bpy.props.BoolProperty(  # type: ignore[valid-type]
-        name="Error",
-        default=True,
-        update=_update_passes,
-        description="Per-pixel error estimate in pixels (integration, far field, hit point "
-        "and interpolation): 'SymRay Error' pass",
-    )
-    pass_steps: bpy.props.BoolProperty(  # type: ignore[valid-type]
-        name="Steps",
-        default=True,
-        update=_update_passes,
-        description="Integration steps per pixel: 'SymRay Steps' pass",
-    )
-    pass_ending: bpy.props.BoolProperty(  # type: ignore[valid-type]
-        name="Ending",
-        default=False,
-        update=_update_passes,
-        description="How each ray ended (core.ENDING code): 'SymRay Ending' pass",
-    )
-    pass_redshift: bpy.props.BoolProperty(  # type: ignore[valid-type]
-        name="Redshift",
-        default=False,
-        update=_update_passes,
-        description="g = observed / emitted frequency where a ray ends on the accretion "
-        "disk, NaN elsewhere: 'SymRay Redshift' pass",
-    )
     disk: bpy.props.PointerProperty(  # type: ignore[valid-type]
         type=disk_properties.SymRayDiskSettings,
         description="The accretion disk around the black hole",
@@ -445,6 +418,23 @@ def _revalidate_on_load(_dummy: object = None) -> None:
         settings = getattr(scene, "symray", None)
         if settings is not None:
             validate_expressions(settings)
+
+
+def _add_pass_toggles(cls: type) -> None:
+    """A ``pass_<label>`` switch in ``cls`` for each pass of the core's table the add-on
+    writes (its name, default and description from there)."""
+    for kind in core_passes.PASSES:
+        if kind.label is None:
+            continue
+        cls.__annotations__[kind.toggle] = bpy.props.BoolProperty(
+            name=kind.label,
+            default=kind.shown,
+            update=_update_passes,
+            description=f"{kind.description[0].upper()}{kind.description[1:]}: '{kind.layer}' pass",
+        )
+
+
+_add_pass_toggles(SymRaySettings)
 
 
 def register() -> None:

@@ -195,3 +195,20 @@ def test_compositor_sees_passes(scene, helpers):
     assert outputs() == {"SymRay Error", "SymRay Steps", "SymRay Ending"}
     settings.pass_error = False
     assert outputs() == {"SymRay Steps", "SymRay Ending"}
+
+
+def test_the_passes_follow_the_core_table(addon, scene):
+    """The add-on's passes are the core table's labelled ones (core.passes.PASSES): each has
+    its scene.symray toggle (named, default and description from the table), its render pass
+    and its passes-EXR layer, in the table's order."""
+    table = [p for p in addon.module("core.passes").PASSES if p.label]
+    assert [p.name for p in table] == ["error_px", "steps", "ending", "redshift"]
+    rna = scene.symray.bl_rna.properties
+    for kind in table:
+        assert rna[kind.toggle].name == kind.label
+        assert rna[kind.toggle].default == kind.shown
+        assert kind.layer in rna[kind.toggle].description
+    engine = addon.module("symray_addon.engine")
+    assert engine.PASSES == tuple((p.name, p.layer, p.toggle) for p in table)
+    layers = addon.module("symray_addon.output").PASS_LAYERS
+    assert layers == {p.name: f"{p.layer}.X" for p in table}

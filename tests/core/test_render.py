@@ -243,3 +243,31 @@ def test_error_pass_is_honest_against_a_reference_render(method):
     share = np.mean((ratio > 1 / 3) & (ratio < 3))
     assert escaped.sum() > 150
     assert share >= 0.9, f"only {share:.0%} within 3x; median ratio {np.median(ratio):.2f}"
+
+
+@pytest.mark.parametrize("options", [{}, {"tolerance_px": 0.5, "samples": 4}])
+def test_progressive_tiles_carry_every_pass_of_the_final_image(options):
+    """``on_tile`` hands each finished tile (or span of rows) with every pass asked for, of
+    the pass table's type and shape, equal to the final image's there (it gave 3 of 6)."""
+    from core.passes import ALL_PASSES, BY_NAME
+
+    cam = core.Camera.perspective((0, -30, 2), (0, 0, 0), (0, 0, 1), 40, 80, 60)  # 3 chunks
+    scene = core.Scene(
+        model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"),
+        objects=[core.Sphere(center=(0, 8, 0), radius=1.5, color=(1, 0, 0, 1))],
+        disk=core.AccretionDisk(r_out=6.0),
+    )
+    parts = []
+    out = core.render(scene, cam, passes=ALL_PASSES, workers=1,
+                      on_tile=lambda box, part: parts.append((box, part)), **options)  # fmt: skip
+    assert len(parts) > 1
+    covered = np.zeros((cam.height, cam.width), int)
+    for (x0, y0, x1, y1), part in parts:
+        assert sorted(part.passes) == sorted(ALL_PASSES)
+        np.testing.assert_array_equal(part.rgba, out.rgba[y0:y1, x0:x1])
+        for name, data in part.passes.items():
+            assert data.dtype == BY_NAME[name].dtype
+            np.testing.assert_array_equal(data, out.passes[name][y0:y1, x0:x1])
+        covered[y0:y1, x0:x1] += 1
+    assert covered.min() >= 1
+    assert np.isfinite(out.passes["redshift"]).any() and np.isnan(out.passes["direction"]).any()

@@ -1,0 +1,89 @@
+"""The passes of a render, declared once: what each holds, its type, and where it goes.
+
+core.render's frame buffers, the adaptive sampler's tiles, the add-on's render passes and its
+passes EXR are all built from PASSES. Adding a pass means a row here and the code that
+computes it (``traced_passes`` for rays through pixel centres, core.sampling for tiles).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Pass:
+    """One per-pixel output beside the colour."""
+
+    name: str
+    """The key in ``RenderResult.passes``."""
+    dtype: Any
+    """numpy type of its values."""
+    fill: float
+    """A pixel's value before anything is stored there (not rendered: cancelled)."""
+    description: str
+    channels: int = 1
+    """Values per pixel: 1 (an (h, w) array) or 3 (an (h, w, 3) array)."""
+    derived_from: str | None = None
+    """The stored pass it is computed from at the end (error_px: error in pixels); None:
+    stored itself, chunk by chunk."""
+    label: str | None = None
+    """The add-on's name for it ("SymRay <label>" render pass and passes-EXR layer, toggle
+    ``pass_<label>``); None: a core-only pass."""
+    shown: bool = False
+    """Whether the add-on's toggle is on in a new scene."""
+
+    @property
+    def layer(self) -> str | None:
+        """Blender's render pass name (and the passes EXR's layer), e.g. 'SymRay Error'."""
+        return None if self.label is None else f"SymRay {self.label}"
+
+    @property
+    def toggle(self) -> str | None:
+        """The add-on's switch for it in ``scene.symray``, e.g. 'pass_error'."""
+        return None if self.label is None else f"pass_{self.label.lower()}"
+
+    def empty(self, n: int) -> np.ndarray:
+        """Values of ``n`` pixels not rendered yet."""
+        shape = (n,) if self.channels == 1 else (n, self.channels)
+        return np.full(shape, self.fill, dtype=self.dtype)
+
+
+PASSES: tuple[Pass, ...] = (
+    Pass("error", np.float32, 0.0,
+         "estimated final-direction error (radians): the integration's (Richardson, from a "
+         "companion run at twice the step), the far field's and the interpolation's; +inf "
+         "where a ray failed"),
+    Pass("error_px", np.float32, 0.0,
+         "per-pixel error estimate in pixels of this camera (integration, far field, hit "
+         "point and interpolation)", derived_from="error", label="Error", shown=True),
+    Pass("steps", np.int32, 0, "integration steps per pixel", label="Steps", shown=True),
+    Pass("ending", np.int8, -1, "how each ray ended (core.ENDING code; -1: not rendered)",
+         label="Ending"),
+    Pass("direction", np.float32, math.nan,
+         "what each pixel's centre sees: the escape direction, or the unit vector to the hit "
+         "point (NaN where captured or failed)", channels=3),
+    Pass("redshift", np.float32, math.nan,
+         "g = observed / emitted frequency where a ray ends on the accretion disk (or first "
+         "crosses a translucent one), NaN elsewhere", label="Redshift"),
+)  # fmt: skip
+"""Every pass, in its one order."""
+
+BY_NAME = {p.name: p for p in PASSES}
+ALL_PASSES = tuple(p.name for p in PASSES)
+STORED = tuple(p for p in PASSES if p.derived_from is None)
+"""The passes held per pixel while a frame renders (the others are computed from them)."""
+
+
+def traced_passes(rays: Any, seen: np.ndarray | None, error: np.ndarray | None) -> dict:
+    """The stored passes of rays traced through pixel centres (a RayResults), by name:
+    ``seen`` the directions they see (or None), ``error`` their estimate (or None)."""
+    values = {"steps": rays.steps, "ending": rays.ending, "redshift": rays.redshift}
+    if seen is not None:
+        values["direction"] = seen
+    if error is not None:
+        values["error"] = error
+    return values
