@@ -325,7 +325,7 @@ class _Buffers:
     directions only for the ``direction`` pass. They are allocated at the first chunk
     stored, after the worker processes have forked: a worker forked with them would keep
     the original of every page the caller then writes (copy-on-write), a full-frame copy
-    of what was filled before the fork (issue 13: 17 bytes a pixel in the workers, 20 in
+    of what was filled before the fork (measured: 17 bytes a pixel in the workers, 20 in
     the caller, that grew with the image).
     """
 

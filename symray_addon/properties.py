@@ -19,7 +19,7 @@ QUALITY_ITEMS = [
     ("FINAL", "Final", "Every pixel within 0.25 px, up to 16 rays per pixel (anti-aliased)"),
     ("CUSTOM", "Custom", "Accuracy (pixels) and samples per pixel set below"),
     ("RADIANS", "Radians", "Tolerance in radians, one ray through every pixel's centre "
-     "(as before version 0.5; no adaptive sampling)"),
+     "(no adaptive sampling)"),
 ]  # fmt: skip
 QUALITY_PRESETS = {"PREVIEW": (1.0, 1), "FINAL": (0.25, 16)}
 """Quality -> (tolerance in pixels, samples per pixel)."""

@@ -1,4 +1,4 @@
-"""Explicit symplectic splitting methods for K = T(p) + V(q) (issue #14).
+"""Explicit symplectic splitting methods for K = T(p) + V(q).
 
 A model that can be written as two exactly solvable parts offers them through its split
 (``Hamiltonian.split_parts``): a :class:`SplitSystem`, with the exact flows

@@ -1,4 +1,4 @@
-"""Kerr light rays split explicitly, in Boyer–Lindquist coordinates (issue #14).
+"""Kerr light rays split explicitly, in Boyer–Lindquist coordinates.
 
 Null geodesics of Kerr in BL (t, r, theta, phi) with E = -p_t, L = p_phi (t, phi cyclic)
 have, in Mino time (K = Sigma H, Sigma = r^2 + a^2 cos^2 theta), the separated form

@@ -1,4 +1,4 @@
-"""The explicit split of an optical medium in Poincaré time (issue #14).
+"""The explicit split of an optical medium in Poincaré time.
 
 With the time transformation g(q) (ds = g dτ), K = g (H − H0) has the rays of H on the
 level set H = H0. For the physical optical Hamiltonian H = |p|² / (2 n²) and g = n², and

@@ -1,9 +1,9 @@
-"""Schwarzschild as an optical medium, split explicitly (issue #14).
+"""Schwarzschild as an optical medium, split explicitly.
 
 In isotropic coordinates (ρ = |x|, r = ρ (1 + M/2ρ)²) the Schwarzschild metric is
 conformally flat in space, and its light rays are those of the optical metric n² δ_ij with
 
-    n(ρ) = (1 + M/2ρ)³ / (1 − M/2ρ)                                   (issue #14)
+    n(ρ) = (1 + M/2ρ)³ / (1 − M/2ρ)
 
 in Cartesian coordinates: pole-free, no frame rotation per ray. With H = |p|²/(2n²) and
 the Poincaré g = n², K = A(p) − B(q), A = |p|²/2 − H0, B = H0 (n² − 1) (K = 0 on the rays).

@@ -137,7 +137,7 @@ ALL_ZERO = "0, 0, 0, 0; 0, 0, 0, 0; 0, 0, 0, 0; 0, 0, 0, 0"
     ],
 )
 def test_non_finite_settings_are_refused(scene, helpers, rendered, prop, value, model, match):
-    """Blender's properties let NaN through (af19e2b: tolerance NaN rendered unbent)."""
+    """Blender's properties let NaN through: a NaN tolerance is refused, not rendered unbent."""
     scene.symray.model = model
     setattr(scene.symray, prop, value)
     _fails(helpers, scene, rendered, match)
@@ -183,7 +183,7 @@ def test_the_ends_of_the_tolerance_range_are_accepted(addon, scene):
 @pytest.mark.parametrize("method", KERR_METHODS_REFUSED)
 @pytest.mark.parametrize("model", ["SCHWARZSCHILD", "KERR"])
 def test_tao_is_refused_for_black_holes(scene, helpers, rendered, method, model):
-    """af19e2b: an all-magenta image reported as a success."""
+    """An all-magenta image (every ray failed) is a failure, never reported as a success."""
     scene.symray.model = model
     scene.symray.method = method
     _fails(helpers, scene, rendered, f"method '{method}' cannot render a black hole")
@@ -204,7 +204,8 @@ def test_tao_is_accepted_for_a_medium(addon, scene):
     ],
 )
 def test_metric_problems_at_the_camera(scene, helpers, rendered, metric, match):
-    """af19e2b: 'inside the black hole's horizon' and numpy's bare 'Singular matrix'."""
+    """Each camera problem is named, never a false 'inside the black hole's horizon' or numpy's bare
+    'Singular matrix'."""
     scene.symray.model = "METRIC"
     scene.symray.metric = metric
     message = _fails(helpers, scene, rendered, match)

@@ -66,7 +66,7 @@ def test_textured_plane_colours_its_hits_by_the_checker_cells():
 
 def test_textured_board_beside_the_view_renders():
     """Segments whose bounds meet the board but miss it (the whole batch): the image is the
-    background, as without the board (af19e2b: ValueError from _shade)."""
+    background, as without the board (no ValueError from _shade)."""
     board = core.Plane(
         point=(30, 10, 0), normal=(0, -1, 0), u_axis=(1, 0, 0), extent=(4, 4), color=BOARD
     )
@@ -184,7 +184,7 @@ def test_models_and_scenes_refuse_non_finite_numbers(make, message):
     [hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"), hm.schwarzschild(1.0), hm.kerr(rg=1.0, a=0.3)],
 )
 def test_tao_is_refused_for_time_scaled_models(method, model):
-    """af19e2b: an all-magenta image with error_max 0."""
+    """An all-magenta image (every ray failed) has no error estimate, never error_max 0."""
     with pytest.raises(ValueError, match=f"method '{method}' cannot render a black hole"):
         core.render(core.Scene(model=model), small_camera(position=(1, -30, 2)), method=method)
     with pytest.raises(ValueError, match="cannot render"):
@@ -216,7 +216,7 @@ def test_tao_still_renders_a_medium_like_gauss4():
 
 
 def test_summary_without_estimate_is_none_not_zero():
-    """af19e2b: error_max = 0 where no ray had an estimate (every ray ran out of steps)."""
+    """No error estimate where no ray had one (every ray ran out of steps): None, never 0."""
     out = core.render(kerr_scene(), small_camera(), tolerance=1e-3, max_steps=1, workers=1)
     assert out.summary["endings"]["max_steps"] == out.summary["rays"]
     assert out.summary["error_median"] is None and out.summary["error_max"] is None
@@ -288,7 +288,7 @@ KS_USER = hm.metric(
     ],
 )
 def test_each_camera_problem_has_its_own_message(model, position, error, words):
-    """af19e2b: 'inside the black hole's horizon' for all of them, or numpy's bare
+    """Each is named, never 'inside the black hole's horizon' for all of them, or numpy's bare
     'Singular matrix'. Raised before any ray is traced."""
     calls = []
     up = (0, 1, 0) if position[:2] == (0, 0) else (0, 0, 1)
