@@ -280,17 +280,17 @@ def sphere_geodesic(Q: np.ndarray, P: np.ndarray, c) -> None:
     poles as well: no coordinate singularity in the flow; J_z = p_phi is kept). Written in
     the frame (e_rho, e_phi, z) at the old phi: n' = cos w n + sin w (J x n) / |J|."""
     st, ct = np.sin(Q[2]), np.cos(Q[2])
-    p_t = P[2]
+    p_theta = P[2]
     with np.errstate(divide="ignore", invalid="ignore"):
         spin = P[3] / st  # (J x n) . e_phi
-        size = np.sqrt(p_t * p_t + spin * spin)
+        size = np.sqrt(p_theta * p_theta + spin * spin)
         omega = c * size
         cw, sw = np.cos(omega), np.sin(omega) / np.where(size > 0, size, np.inf)
-    along_rho = cw * st + sw * p_t * ct  # n' . e_rho(phi)
+    along_rho = cw * st + sw * p_theta * ct  # n' . e_rho(phi)
     along_phi = sw * spin  # n' . e_phi(phi)
     rho = np.hypot(along_rho, along_phi)
-    Q[2] = np.arctan2(rho, cw * ct - sw * p_t * st)
+    Q[2] = np.arctan2(rho, cw * ct - sw * p_theta * st)
     Q[3] += np.arctan2(along_phi, along_rho)
     with np.errstate(divide="ignore", invalid="ignore"):
         # J . e_phi(phi'), with e_phi(phi') = cos d e_phi(phi) - sin d e_rho(phi)
-        P[2] = (p_t * along_rho + spin * ct * along_phi) / rho
+        P[2] = (p_theta * along_rho + spin * ct * along_phi) / rho

@@ -36,8 +36,8 @@ def ray_capture_test(model: Any) -> RayCapture | None:
 
 SPLITS = 3  # a failed step is retried as 2, then 4, then 8 shorter steps
 OFF_SHELL = 1e-3  # |H - H0| / (|H0| + |p|^2) after one step that has it retried in halves
-DRIFT, DRIFT_STEPS = 1e-2, 16
-"""Spacetimes: a ray whose |H - H0| stays above DRIFT p_t^2 for DRIFT_STEPS steps in a
+OFF_CONE, OFF_CONE_STEPS = 1e-2, 16
+"""Spacetimes: a ray whose |H - H0| stays above OFF_CONE p_t^2 for OFF_CONE_STEPS steps in a
 row has stopped being light (a bound massive orbit, m^2/E^2 ~ 2 |H|/p_t^2, can circle a
 near-extremal horizon until max_steps) and is flagged failed. |p|^2 cannot tell: near the
 horizon it grows without bound while p_t stays fixed; and a ray falling in may be that far
@@ -58,23 +58,23 @@ class Stepper:
         """One step of every ray -> (state, ok, |H - H0| of the state) per ray."""
         method = self.method
         new, ok = method.step(K, state, h)
-        drift = self.drift(K, new)
+        shell = self.shell_error(K, new)
         if splits == 0:
-            return new, ok, drift
-        ok &= ~self._off_shell(new, drift, K.H0)
+            return new, ok, shell
+        ok &= ~self._off_shell(new, shell, K.H0)
         if ok.all():
-            return new, ok, drift
+            return new, ok, shell
         bad = np.flatnonzero(~ok)
         K_bad = K.subset(bad)
         h = take(h, bad)
-        mid, ok_mid, drift_mid = self.step(
+        mid, ok_mid, shell_mid = self.step(
             K_bad, tuple(a[..., bad] for a in state), 0.5 * h, splits - 1
         )
         go = ok_mid.copy()
         if self.captured is not None:
             with np.errstate(all="ignore"):
                 go &= ~self.captured(*method.qp(mid))
-        end, ok_end, drift_end = mid, ok_mid, drift_mid
+        end, ok_end, shell_end = mid, ok_mid, shell_mid
         if go.any():
             g = np.flatnonzero(go)
             e2, o2, d2 = self.step(
@@ -82,24 +82,24 @@ class Stepper:
             )
             for a, b in zip(end, e2, strict=True):
                 a[..., g] = b
-            ok_end[g], drift_end[g] = o2, d2
+            ok_end[g], shell_end[g] = o2, d2
         for a, b in zip(new, end, strict=True):
             a[..., bad] = b
-        ok[bad], drift[bad] = ok_end, drift_end
-        return new, ok, drift
+        ok[bad], shell[bad] = ok_end, shell_end
+        return new, ok, shell
 
-    def drift(self, K: PoincareTransformed, state: State) -> np.ndarray:
+    def shell_error(self, K: PoincareTransformed, state: State) -> np.ndarray:
         """(M,) |H - H0| of each ray's state (NaN where a failed ray holds anything)."""
         Q, P = self.method.qp(state)
         with np.errstate(all="ignore"):
             return np.abs(self.model.value_soa(Q, P) - K.H0)
 
-    def _off_shell(self, state: State, drift: np.ndarray, H0: np.ndarray) -> np.ndarray:
+    def _off_shell(self, state: State, shell: np.ndarray, H0: np.ndarray) -> np.ndarray:
         """(M,) rays a step left far off the light cone, |H - H0| > OFF_SHELL (|H0| + |p|^2);
         rays inside the horizon are not judged."""
         Q, P = self.method.qp(state)
         with np.errstate(all="ignore"):
-            off = drift > OFF_SHELL * (np.abs(H0) + np.einsum("ij,ij->j", P, P))
+            off = shell > OFF_SHELL * (np.abs(H0) + np.einsum("ij,ij->j", P, P))
             if self.captured is not None:
                 off &= ~self.captured(Q, P)
         return off

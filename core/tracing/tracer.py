@@ -27,7 +27,7 @@ from .disklight import DiskLight
 from .regions import Region, region_for
 from .scene import DISK_ID, ENDING, Scene
 from .segments import RayResults, SceneGeometry
-from .stepping import DRIFT, DRIFT_STEPS, SPLITS, Stepper, ray_capture_test
+from .stepping import OFF_CONE, OFF_CONE_STEPS, SPLITS, Stepper, ray_capture_test
 from .steps import default_method, default_step, solver_tolerance
 
 CROSSING_SHARE, CROSSING_ITERATIONS = 1e-6, 4
@@ -231,19 +231,19 @@ class Tracer:
         state = method.init(K, Q, P)
         idx = rows.copy()
         X_prev = X
-        step = 0
+        taken = 0
         streak = np.zeros(idx.size, dtype=np.int64)  # steps in a row off the light cone
-        for step in range(1, self.options.max_steps + 1):
-            if cancel is not None and step % 32 == 0 and cancel():
-                step -= 1
+        for taken in range(1, self.options.max_steps + 1):
+            if cancel is not None and taken % 32 == 0 and cancel():
+                taken -= 1
                 break
             start = method.qp(state)
-            state, ok, drift = self.stepper.step(K, state, h, SPLITS)
+            state, ok, shell = self.stepper.step(K, state, h, SPLITS)
             Q, P = method.qp(state)
             if self.spacetime:
                 with np.errstate(invalid="ignore"):
-                    streak = np.where(drift > DRIFT * P[0] * P[0], streak + 1, 0)
-                ok &= streak < DRIFT_STEPS
+                    streak = np.where(shell > OFF_CONE * P[0] * P[0], streak + 1, 0)
+                ok &= streak < OFF_CONE_STEPS
             S = Q[off:]
             X = chart.to_cartesian(S)
             ok &= np.isfinite(X).all(axis=0)
@@ -275,7 +275,7 @@ class Tracer:
                 )
                 ended |= leaving
             if ended.any():
-                out.steps[idx[ended]] = step
+                out.steps[idx[ended]] = taken
                 self._finish_energy(out, idx[ended], Q[:, ended], P[:, ended], H0[ended])
                 keep = np.flatnonzero(~ended)
                 if keep.size == 0:
@@ -286,7 +286,7 @@ class Tracer:
                 H0, streak, h = H0[keep], streak[keep], take(h, keep)
             X_prev = X
         out.ending[idx] = ENDING["max_steps"]
-        out.steps[idx] = step
+        out.steps[idx] = taken
         Q, P = method.qp(state)
         out.position[idx] = self._to_world(X_prev.T)
         self._finish_energy(out, idx, Q, P, H0)
