@@ -125,10 +125,10 @@ class Method:
         return self.order
 
     def error_constant_on(self, model: Any) -> float | None:
-        """C in err = C h^order_on(model) around a mass: the model's own measured constant
-        for this method (``Hamiltonian.error_constants``), else the method's own."""
-        own = getattr(model, "error_constants", {}).get(self.name)
-        return self.error_constant if own is None else own
+        """C in err = C h^order_on(model) around a mass, from the method alone: its own
+        ``error_constant`` (the renderer's measurements per model form take precedence:
+        core.tracing.steps.FORM_CALIBRATIONS)."""
+        return self.error_constant
 
     def __init__(self, **options: Any) -> None:
         self.options = dict(options)

@@ -225,7 +225,7 @@ def _gradient_drift(H: Any):
 # 5.3e-3, blanes_moan4 3.3e-5 (gauss4 8.7e-4 and rk4 9.4e-3 there), times 1.5
 # (benchmarks/bench_perf.py --only calibrate). blanes_moan6's is C at its nominal order 6,
 # for Runge–Kutta–Nyström splits; the splits of Schwarzschild and Kerr, where it is order 4,
-# have their own (their models' error_constants).
+# have their own (core.tracing.steps.FORM_CALIBRATIONS).
 
 
 def leapfrog() -> Splitting:

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Mapping, Sequence
-from types import MappingProxyType
 
 import numpy as np
 
@@ -135,16 +134,6 @@ class Hamiltonian(System):
     def scales_time(self) -> bool:
         """Whether the model has a Poincaré time scale g(q) other than 1."""
         return self._time_scale is not None
-
-    split_method: str | None = None
-    """The explicit splitting measured cheapest on this model's split (split_parts), for
-    the renderer's default method; None where the model offers no split."""
-    max_split_step: float | None = None
-    """Largest default step of the explicit splittings on this model's split; None: the
-    tracer's MAX_SPLIT_STEP (core.tracing.steps)."""
-    error_constants: Mapping[str, float] = MappingProxyType({})
-    """Error constants (C in err = C h^order, core.tracing.steps) measured on this model's
-    own form, by method name, in place of the methods' own; empty: the methods' own."""
 
     def for_backward_tracing(self, explicit_split: bool = False) -> Hamiltonian:
         """The same light rays in the chart the tracer follows them in (regular where rays

@@ -44,7 +44,6 @@ and from the tracer's Kerr–Schild frame.
 from __future__ import annotations
 
 import math
-from types import MappingProxyType
 
 import numpy as np
 
@@ -71,26 +70,6 @@ class KerrBoyerLindquist(Hamiltonian):
 
     kind = "spacetime"
     chart = "kerr_bl"
-    split_method = "blanes_moan_s10"
-    """Measured cheapest at equal image accuracy among the splittings (README)."""
-    max_split_step = 0.7
-    """The error constants below were measured at steps up to 0.6; at 1.0 (the tracer's
-    MAX_SPLIT_STEP) the step-doubling error pass (its companion at twice the step)
-    over-estimates 11 % of the pixels of tests/core/test_sampling.py's honesty frame by
-    more than 3x, at 0.7 3 %."""
-    error_constants = MappingProxyType(
-        {
-            "leapfrog": 1.2,
-            "blanes_moan4": 7e-3,
-            "blanes_moan6": 5.5e-4,
-            "blanes_moan_s6": 3e-3,
-            "blanes_moan_s10": 4e-4,
-        }
-    )
-    """Measured on this split like core.tracing.steps' constants (a/M = 0.9 from 30 rg, 800
-    rays, the largest equivalent direction error over h^order, times 1.5; bench_perf.py
-    --only calibrate). blanes_moan6 (Runge–Kutta–Nyström) is order 4 on it, not 6: its C is
-    at order 4 (1500 rays, h = 0.6 and 0.3: 3.2e-4 and 3.6e-4; --scale 3)."""
 
     def __init__(self, rg: float, a: float):
         super().__init__(

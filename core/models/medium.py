@@ -18,9 +18,6 @@ class Medium(ExpressionHamiltonian):
     """Light in a medium of refractive index n(x, y, z) (optical Hamiltonian)."""
 
     kind = "medium"
-    split_method = "blanes_moan4"
-    """Media keep an order-4 splitting: their step rule is by order (no calibrated error
-    constant), and hit points are chords (README, "Error against run time")."""
 
     def __init__(self, index: str, literal: bool, parameters=None, bounds=None):
         coords, momenta = ("x", "y", "z"), ("p_x", "p_y", "p_z")

@@ -23,7 +23,6 @@ to zero, so rays close in on the horizon without crossing it and are captured at
 from __future__ import annotations
 
 import math
-from types import MappingProxyType
 
 import numpy as np
 
@@ -35,13 +34,6 @@ class SchwarzschildOptical(Medium):
     """Schwarzschild light rays as the isotropic optical medium n(ρ) (see the module)."""
 
     chart = "isotropic"
-    split_method = "blanes_moan6"
-    """Measured cheapest at equal image accuracy (README, "Error against run time")."""
-    error_constants = MappingProxyType({"blanes_moan6": 7e-6})
-    """blanes_moan6 is order 4 on the logarithmic split (its kinetic part is not quadratic
-    in p): C at order 4, measured like core.tracing.steps' constants (a/M = 0 from 30 rg,
-    1500 rays, h = 0.6: 4.7e-6, times 1.5; bench_perf.py --only calibrate --spin 0
-    --scale 6)."""
 
     def __init__(self, rg: float):
         rg = float(rg)

@@ -8,6 +8,8 @@ image tolerance.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
@@ -18,10 +20,10 @@ DEFAULT_METHOD = "gauss4"
 extremal Kerr, user metrics and Hamiltonians): around a black hole Gauss–Legendre 4
 reaches a given escape accuracy at about a third of yoshida4's cost (smaller error
 constant, so fewer, longer steps; see ERROR_CONSTANTS and benchmarks/bench_perf.py).
-Where the model (or its form for the tracer) offers an explicit split, its
-``split_method`` (default_method): Schwarzschild blanes_moan6, media blanes_moan4, Kerr
-with |a| < M blanes_moan_s10 (README, "Error against run time"); core.render falls back
-to this one where the split cannot start rays at the camera."""
+Where the model (or its form for the tracer) offers an explicit split, the splitting
+FORM_CALIBRATIONS names for it (default_method): Schwarzschild blanes_moan6, media
+blanes_moan4, Kerr with |a| < M blanes_moan_s10 (README, "Error against run time");
+core.render falls back to this one where the split cannot start rays at the camera."""
 SOLVE_SHARE = 1e-4
 """Implicit stage equations are solved to tolerance x SOLVE_SHARE, within [1e-14, 1e-8]
 (solver_tolerance). Measured on the Kerr frame (3000 rays; tolerances 1e-4, 1e-6, 1e-8):
@@ -65,13 +67,82 @@ near the horizon by themselves; measured: blanes_moan4 at 0.8 keeps 99 % of a 64
 Schwarzschild frame within 0.04 px)."""
 
 
+@dataclass(frozen=True)
+class FormCalibration:
+    """What was measured on one form a model is traced in (its split, for the splittings)."""
+
+    method: str | None = None
+    """The splitting measured cheapest at equal image accuracy on this form's split."""
+    largest_step: float | None = None
+    """The splittings' largest default step on it; None: MAX_SPLIT_STEP."""
+    error_constants: Mapping[str, float] = field(default_factory=dict)
+    """C in err = C h^order_on, measured on this form, by method name (in place of the
+    methods' own, ERROR_CONSTANTS)."""
+
+
+FORM_CALIBRATIONS: Mapping[str, FormCalibration] = MappingProxyType(
+    {
+        "KerrBoyerLindquist": FormCalibration(
+            method="blanes_moan_s10",
+            largest_step=0.7,
+            error_constants=MappingProxyType(
+                {
+                    "leapfrog": 1.2,
+                    "blanes_moan4": 7e-3,
+                    "blanes_moan6": 5.5e-4,
+                    "blanes_moan_s6": 3e-3,
+                    "blanes_moan_s10": 4e-4,
+                }
+            ),
+        ),
+        "SchwarzschildOptical": FormCalibration(
+            method="blanes_moan6", error_constants=MappingProxyType({"blanes_moan6": 7e-6})
+        ),
+        "Medium": FormCalibration(method="blanes_moan4"),
+    }
+)
+"""The renderer's calibrations per (model form, method), by the class of the form a model
+is traced in (the nearest class of its MRO listed here):
+
+- Kerr in Boyer–Lindquist (its square-root split, core/models/kerr_split.py): blanes_moan_s10
+  measured cheapest (README, "Error against run time"). Constants measured on this split
+  like ERROR_CONSTANTS (a/M = 0.9 from 30 rg, 800 rays, the largest equivalent direction
+  error over h^order, times 1.5; bench_perf.py --only calibrate); blanes_moan6 is order 4
+  on it: its C is at order 4 (1500 rays, h = 0.6 and 0.3: 3.2e-4 and 3.6e-4; --scale 3).
+  Largest step 0.7: the constants were measured at steps up to 0.6; at 1.0 (MAX_SPLIT_STEP)
+  the step-doubling error pass over-estimates 11 % of the pixels of
+  tests/core/test_sampling.py's honesty frame by more than 3x, at 0.7 3 %.
+- Schwarzschild as its isotropic optical medium (the logarithmic split): blanes_moan6
+  measured cheapest; it is order 4 there, C at order 4 (a/M = 0 from 30 rg, 1500 rays,
+  h = 0.6: 4.7e-6, times 1.5; --spin 0 --scale 6).
+- Media: an order-4 splitting, their step rule by order (no calibrated constant), hit points
+  chords (README, "Error against run time")."""
+
+
+def form_calibration(traced: Any) -> FormCalibration:
+    """The calibration of the form ``traced`` (a model as the tracer follows it); an empty
+    one where nothing was measured."""
+    for cls in type(traced).__mro__:
+        if cls.__name__ in FORM_CALIBRATIONS:
+            return FORM_CALIBRATIONS[cls.__name__]
+    return FormCalibration()
+
+
+def error_constant(method: Any, traced: Any) -> float | None:
+    """C of ``method`` on the form ``traced``: measured there (FORM_CALIBRATIONS), else the
+    method's own (``Method.error_constant_on``)."""
+    measured = form_calibration(traced).error_constants.get(method.name)
+    return method.error_constant_on(traced) if measured is None else measured
+
+
 def default_method(model: Any) -> str:
     """The default method for a model: the splitting measured cheapest on the split of its
-    tracing form (``split_method``: Schwarzschild, media), else DEFAULT_METHOD."""
+    tracing form (FORM_CALIBRATIONS: Schwarzschild, media, Kerr below extremal), else
+    DEFAULT_METHOD."""
     if model is None:
         return DEFAULT_METHOD
     traced = model.for_backward_tracing(explicit_split=True)
-    return traced.split_method or DEFAULT_METHOD
+    return form_calibration(traced).method or DEFAULT_METHOD
 
 
 def solver_tolerance(tolerance: float) -> float:
@@ -92,9 +163,9 @@ def default_step(
 
     Around a mass (``scaled``: g(q) grows with the distance) from the method's error
     constant, so that the integration error stays below tolerance / 2 (the far field gets
-    FAR_FIELD_SHARE of it, see core.tracing.regions); ``constant`` replaces the method's own where
-    the model measured its own for it (``Hamiltonian.error_constants``), and ``largest``
-    the splittings' largest step where the model sets one (``max_split_step``), and
+    FAR_FIELD_SHARE of it, see core.tracing.regions); ``constant`` replaces the method's own
+    where one was measured on the traced form (``error_constant``), ``largest`` the
+    splittings' largest step where the form sets one (FORM_CALIBRATIONS), and
     ``order`` the method's nominal order (``Method.order_on``: its order on the system
     traced). Otherwise
     (media, user models, methods without a constant): h = 0.5 length tol^(1/order).

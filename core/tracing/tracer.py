@@ -28,7 +28,13 @@ from .regions import Region, region_for
 from .scene import DISK_ID, ENDING, Scene
 from .segments import RayResults, SceneGeometry
 from .stepping import OFF_CONE, OFF_CONE_STEPS, SPLITS, Stepper, ray_capture_test
-from .steps import default_method, default_step, solver_tolerance
+from .steps import (
+    default_method,
+    default_step,
+    error_constant,
+    form_calibration,
+    solver_tolerance,
+)
 
 CROSSING_SHARE, CROSSING_ITERATIONS = 1e-6, 4
 """The disk's crossing is found to |z| <= CROSSING_SHARE x tolerance x |X| (a share of the
@@ -113,8 +119,8 @@ class Tracer:
                 options.tolerance,
                 self.region.length_scale(model),
                 scaled=self.region.scaled(model),
-                constant=self.method.error_constant_on(model),
-                largest=model.max_split_step,
+                constant=error_constant(self.method, model),
+                largest=form_calibration(model).largest_step,
                 order=self.order,
             )
         )
