@@ -32,8 +32,6 @@ import numpy as np
 
 from .. import blackbody, checks
 
-_HOLE_CHARTS = ("kerr_schild", "spherical", "isotropic", "kerr_bl")
-"""Charts of the Schwarzschild and Kerr models (and the tracer's forms of them)."""
 PROFILES = ("novikov_thorne", "power_law")
 """Temperature profiles: Novikov–Thorne, or T_in (r / r_in)^(-3/4)."""
 
@@ -132,13 +130,13 @@ class AccretionDisk:
     def bind(self, model: Any) -> AccretionDisk:
         """This disk around ``model`` (Schwarzschild or Kerr): mass, spin and r_in filled in
         and checked (ValueError naming the parameter and its range)."""
-        rg = float(getattr(model, "rg", 0.0) or 0.0)
-        if not (rg > 0 and getattr(model, "chart", None) in _HOLE_CHARTS):
+        orbits = model.kerr_orbits() if hasattr(model, "kerr_orbits") else None
+        if orbits is None:
             raise ValueError(
-                "an accretion disk needs a black hole: a Schwarzschild or Kerr model "
-                f"(rg > 0), got {type(model).__name__}"
+                "an accretion disk needs a black hole whose orbits it knows: a Schwarzschild "
+                f"or Kerr model (rg > 0), got {type(model).__name__}"
             )
-        mass, spin = 0.5 * rg, float(model.a)
+        mass, spin = (float(v) for v in orbits)
         check_spin(spin / mass)
         inner = isco(mass, spin)
         r_in = inner if self.r_in is None else float(self.r_in)

@@ -135,6 +135,13 @@ class Hamiltonian(System):
         """Whether the model has a Poincaré time scale g(q) other than 1."""
         return self._time_scale is not None
 
+    def kerr_orbits(self) -> tuple[float, float] | None:
+        """(M, a) where light and gas orbit as around a Kerr hole of mass M and spin length a
+        (Schwarzschild: a = 0), in the equatorial plane of this model's frame: an accretion
+        disk's innermost stable orbit and Keplerian speed (core.geometry.disk) follow from
+        them. None: no disk can orbit here (flat space, media, other metrics)."""
+        return None
+
     def for_backward_tracing(self, explicit_split: bool = False) -> Hamiltonian:
         """The same light rays in the chart the tracer follows them in (regular where rays
         followed into the past go); the model itself unless a better chart exists. With

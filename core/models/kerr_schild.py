@@ -76,6 +76,10 @@ class KerrSchild(Hamiltonian):
             keys |= set(d.d)
         return {self.coords[k] for k in keys} | set(self.momenta)
 
+    def kerr_orbits(self) -> tuple[float, float]:
+        """(M, a): Kerr's own metric (see Hamiltonian.kerr_orbits)."""
+        return self.mass, self.a
+
     def for_backward_tracing(self, explicit_split: bool = False) -> Hamiltonian:
         """The outgoing chart: rays followed into the past cross the past horizon smoothly.
         With ``explicit_split`` (and |a| < M): Kerr in Boyer–Lindquist with its explicit

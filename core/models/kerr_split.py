@@ -145,6 +145,10 @@ class KerrBoyerLindquist(Hamiltonian):
             dp = np.stack([dV[2], P[1], P[2], dp_phi]) / sigma
         return H, dq, dp
 
+    def kerr_orbits(self) -> tuple[float, float]:
+        """(M, a): Kerr's own metric (see Hamiltonian.kerr_orbits)."""
+        return self.mass, self.a
+
     def radius_at(self, X: np.ndarray) -> np.ndarray:
         """BL (= Kerr–Schild) r at local Cartesian positions X (3, N)."""
         x, y, z = X

@@ -78,6 +78,10 @@ class SchwarzschildOptical(Medium):
         """The logarithmic split's steps scale with the distance from the mass."""
         return True
 
+    def kerr_orbits(self) -> tuple[float, float]:
+        """(M, 0): Schwarzschild's metric (see Hamiltonian.kerr_orbits)."""
+        return self.mass, 0.0
+
     def radius_at(self, X: np.ndarray) -> np.ndarray:
         """Schwarzschild r (the world's radius) at local Cartesian positions X (3, N)."""
         return np.sqrt(np.einsum("ij,ij->j", X, X))

@@ -56,7 +56,7 @@ class SphericalSpacetime(MetricHamiltonian):
 
     chart = "spherical"
 
-    def __init__(self, inverse, rg, a, time_scale, definitions=(), horizon=0.0):
+    def __init__(self, inverse, rg, a, time_scale, definitions=(), horizon=0.0, kerr=False):
         coords = ("t", "r", "theta", "phi")
         super().__init__(
             inverse,
@@ -68,13 +68,21 @@ class SphericalSpacetime(MetricHamiltonian):
         )
         self.rg, self.a = rg, a
         self.horizon = horizon
+        self.kerr = kerr
+        """Whether the metric is Kerr's of (rg, a) (Schwarzschild's at a = 0): only then
+        may the tracer follow it in Kerr's other forms, and a disk orbit it."""
+
+    def kerr_orbits(self) -> tuple[float, float] | None:
+        """(M, a) for Kerr's metric around a mass (see Hamiltonian.kerr_orbits)."""
+        return (self.mass, self.a) if self.kerr and self.rg > 0 else None
 
     def for_backward_tracing(self, explicit_split: bool = False) -> Hamiltonian:
         """Schwarzschild (a = 0, rg > 0): Kerr–Schild with a = 0, outgoing, which has the
         same r, theta, phi but no coordinate pole and no horizon singularity (the picture is
         the same); for an explicit splitting, the isotropic optical medium, which has a
-        split (the same picture again). Otherwise the model itself."""
-        if self.a == 0.0 and self.rg > 0:
+        split (the same picture again). Otherwise (another metric written in these
+        coordinates, Kerr in them) the model itself."""
+        if self.kerr and self.a == 0.0 and self.rg > 0:
             if explicit_split:
                 return SchwarzschildOptical(self.rg)
             return KerrSchild(self.rg, 0.0, kerr_horizon(self.rg, 0.0), outgoing=True)
@@ -127,7 +135,7 @@ def schwarzschild(rg: float = 1.0) -> SphericalSpacetime:
         ["0", "0", "1/r**2", "0"],
         ["0", "0", "0", "1/(r**2*sin(theta)**2)"],
     ]
-    return SphericalSpacetime(inv, rg, 0.0, time_scale="r - rg", horizon=rg)
+    return SphericalSpacetime(inv, rg, 0.0, time_scale="r - rg", horizon=rg, kerr=True)
 
 
 def kerr(
@@ -156,7 +164,13 @@ def kerr(
             ["-rg*a*r/sd", "0", "0", "(delta - a**2*s2)/(sd*s2)"],
         ]
         return SphericalSpacetime(
-            inv, rg, a, time_scale="(r**2 - rg*r + a**2)/r", definitions=defs, horizon=horizon
+            inv,
+            rg,
+            a,
+            time_scale="(r**2 - rg*r + a**2)/r",
+            definitions=defs,
+            horizon=horizon,
+            kerr=True,
         )
     if chart == "kerr_schild":
         return KerrSchild(rg, a, horizon, outgoing)

@@ -94,3 +94,26 @@ def test_duck_typed_hamiltonians_get_the_optional_defaults():
 def test_get_method_refuses_non_methods():
     with pytest.raises(TypeError, match="not an integration method"):
         core.get_method(object())
+
+
+def test_only_kerrs_own_metric_is_traced_in_kerrs_other_forms():
+    """A metric in (t, r, theta, phi) with a = 0 and rg > 0 that is not Schwarzschild's (here
+    Reissner–Nordström's, Q = 0.3) is traced as written, and no disk orbits it; Schwarzschild
+    and Kerr themselves go to their other forms and carry their orbits (M, a)."""
+    from core.models.spacetimes import SphericalSpacetime
+
+    f = "(1 - rg/r + 0.09/r**2)"
+    inverse = [[f"-1/{f}", "0", "0", "0"], ["0", f, "0", "0"], ["0", "0", "1/r**2", "0"],
+               ["0", "0", "0", "1/(r**2*sin(theta)**2)"]]  # fmt: skip
+    charged = SphericalSpacetime(inverse, 1.0, 0.0, time_scale="r - rg", horizon=0.9)
+    assert charged.for_backward_tracing() is charged
+    assert charged.for_backward_tracing(explicit_split=True) is charged
+    assert charged.kerr_orbits() is None
+    with pytest.raises(ValueError, match="accretion disk needs a black hole"):
+        core.Scene(model=charged, disk=core.AccretionDisk(r_out=10.0))
+    schwarzschild = hm.schwarzschild(1.0)
+    assert type(schwarzschild.for_backward_tracing()).__name__ == "KerrSchild"
+    assert type(schwarzschild.for_backward_tracing(True)).__name__ == "SchwarzschildOptical"
+    for model in (schwarzschild, hm.kerr(1.0, 0.3), hm.kerr(1.0, 0.3, chart="kerr_schild")):
+        assert model.kerr_orbits() == (0.5, model.a)
+        assert model.for_backward_tracing(True).kerr_orbits() == (0.5, model.a)
