@@ -3,7 +3,8 @@
 Every model is a :class:`Hamiltonian` (base.py), which is also an integration
 :class:`~core.integrators.System`. One kind per module: ``expression`` (H as text),
 ``metric`` (H = 1/2 g^ij p_i p_j), ``spacetimes`` (Minkowski, Schwarzschild, Kerr),
-``kerr_schild`` (Kerr in Kerr–Schild form, evaluated by hand) and ``medium`` (optics).
+``kerr_schild`` (Kerr in Kerr–Schild form, evaluated by hand), ``reissner_nordstrom`` (a
+charged hole) and ``medium`` (optics).
 ``core.hamiltonians`` is the public name of this package's contents.
 
 Signature (-, +, +, +) throughout; photons have H = 1/2 g^ij p_i p_j = 0.
@@ -16,6 +17,7 @@ from .kerr_schild import KerrSchild
 from .kerr_split import KerrBoyerLindquist
 from .medium import Medium, medium
 from .metric import MetricHamiltonian, metric
+from .reissner_nordstrom import ReissnerNordstrom, reissner_nordstrom
 from .spacetimes import (
     Minkowski,
     SphericalSpacetime,
@@ -35,6 +37,7 @@ __all__ = [
     "Medium",
     "MetricHamiltonian",
     "Minkowski",
+    "ReissnerNordstrom",
     "SphericalSpacetime",
     "blocked",
     "from_expression",
@@ -43,5 +46,6 @@ __all__ = [
     "medium",
     "metric",
     "minkowski",
+    "reissner_nordstrom",
     "schwarzschild",
 ]
