@@ -262,20 +262,6 @@ Chart = CartesianChart | SpheroidalChart | IsotropicChart | KerrBLChart
 
 
 def chart_for(model: Any) -> Chart:
-    """The chart a model (a core.models.Hamiltonian: its ``chart``, ``kind``, ``mass``,
-    ``a``) has its coordinates written in."""
-    if model.chart == "kerr_bl":
-        return KerrBLChart(model.mass, model.a)
-    if model.chart == "isotropic":
-        return IsotropicChart(model.mass)
-    if model.chart == "spherical":
-        return SpheroidalChart(model.a)
-    if model.kind == "spacetime":
-        if model.dim != 4:
-            raise ValueError(f"a spacetime model needs 4 coordinates (t, x, y, z), got {model.dim}")
-        return CartesianChart(time_index=0)
-    if model.dim != 3:
-        raise ValueError(
-            f"to render, a model needs coordinates (x, y, z) or (t, x, y, z); got {model.coords}"
-        )
-    return CartesianChart(time_index=None)
+    """The chart a model (a core.models.Hamiltonian) has its coordinates written in: its
+    own ``chart``."""
+    return model.chart

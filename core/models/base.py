@@ -14,6 +14,7 @@ import numpy as np
 
 from .. import checks
 from .. import expressions as ex
+from ..charts import CartesianChart, Chart
 from ..dual import Dual
 from ..integrators.system import System
 
@@ -73,9 +74,6 @@ class Hamiltonian(System):
 
     kind = "custom"
     """"spacetime" (coordinate 0 is time), "medium" (x, y, z optics) or "custom"."""
-    chart: str | None = None
-    """The coordinates: "cartesian", "spherical" (Boyer–Lindquist-like, spin ``a``) or
-    "kerr_schild"; None: Cartesian (t, x, y, z) for a spacetime, (x, y, z) otherwise."""
     flat = False
     """True where nothing bends light: the tracer draws straight rays, no integration."""
     rg = 0.0
@@ -134,6 +132,23 @@ class Hamiltonian(System):
     def scales_time(self) -> bool:
         """Whether the model has a Poincaré time scale g(q) other than 1."""
         return self._time_scale is not None
+
+    @property
+    def chart(self) -> Chart:
+        """The chart its coordinates are written in (core.charts): Cartesian (t, x, y, z) for
+        a spacetime, (x, y, z) otherwise, unless a model writes them in another."""
+        if self.kind == "spacetime":
+            if self.dim != 4:
+                raise ValueError(
+                    f"a spacetime model needs 4 coordinates (t, x, y, z), got {self.dim}"
+                )
+            return CartesianChart(time_index=0)
+        if self.dim != 3:
+            raise ValueError(
+                "to render, a model needs coordinates (x, y, z) or (t, x, y, z); got "
+                f"{self.coords}"
+            )
+        return CartesianChart(time_index=None)
 
     def kerr_orbits(self) -> tuple[float, float] | None:
         """(M, a) where light and gas orbit as around a Kerr hole of mass M and spin length a

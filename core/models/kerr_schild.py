@@ -25,7 +25,6 @@ class KerrSchild(Hamiltonian):
     """
 
     kind = "spacetime"
-    chart = "kerr_schild"
 
     def __init__(self, rg: float, a: float, horizon: float, outgoing: bool = False):
         super().__init__(

@@ -47,6 +47,7 @@ import math
 
 import numpy as np
 
+from ..charts import KerrBLChart
 from ..integrators.splitting import SplitSystem
 from .base import Hamiltonian
 
@@ -69,7 +70,11 @@ class KerrBoyerLindquist(Hamiltonian):
     offering the explicit split Λ (split_parts)."""
 
     kind = "spacetime"
-    chart = "kerr_bl"
+
+    @property
+    def chart(self) -> KerrBLChart:
+        """(t, s, theta, phi), r = M + b cosh s, on the Kerr–Schild frame (core.charts)."""
+        return KerrBLChart(self.mass, self.a)
 
     def __init__(self, rg: float, a: float):
         super().__init__(

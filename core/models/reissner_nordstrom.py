@@ -28,7 +28,6 @@ class ReissnerNordstrom(ExpressionHamiltonian):
     """A charged black hole of Schwarzschild radius rg and charge Q (|Q| < rg/2)."""
 
     kind = "spacetime"
-    chart = "kerr_schild"
 
     def __init__(self, rg: float, charge: float):
         rg = checks.check_positive("rg (Schwarzschild radius)", rg)

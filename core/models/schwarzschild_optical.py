@@ -26,6 +26,7 @@ import math
 
 import numpy as np
 
+from ..charts import IsotropicChart
 from ..integrators.splitting import SplitSystem
 from .medium import Medium
 
@@ -33,7 +34,10 @@ from .medium import Medium
 class SchwarzschildOptical(Medium):
     """Schwarzschild light rays as the isotropic optical medium n(ρ) (see the module)."""
 
-    chart = "isotropic"
+    @property
+    def chart(self) -> IsotropicChart:
+        """Isotropic Cartesian (x, y, z) of Schwarzschild's mass (core.charts)."""
+        return IsotropicChart(self.mass)
 
     def __init__(self, rg: float):
         rg = float(rg)

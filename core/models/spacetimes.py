@@ -44,7 +44,6 @@ def kerr_horizon(rg: float, a: float) -> float:
 class Minkowski(MetricHamiltonian):
     """Flat spacetime in Cartesian (t, x, y, z) (seed Eq. 13): light is not bent."""
 
-    chart = "cartesian"
     flat = True
 
     def __init__(self) -> None:
@@ -54,7 +53,10 @@ class Minkowski(MetricHamiltonian):
 class SphericalSpacetime(MetricHamiltonian):
     """A metric in (t, r, theta, phi) Boyer–Lindquist-like coordinates around a mass."""
 
-    chart = "spherical"
+    @property
+    def chart(self) -> SpheroidalChart:
+        """Boyer–Lindquist-like (t, r, theta, phi) of spin length a (spherical at a = 0)."""
+        return SpheroidalChart(self.a)
 
     def __init__(self, inverse, rg, a, time_scale, definitions=(), horizon=0.0, kerr=False):
         coords = ("t", "r", "theta", "phi")

@@ -51,7 +51,7 @@ def test_models_are_systems_with_the_tracer_interface():
         assert isinstance(m.for_backward_tracing(), hm.Hamiltonian)
     # Schwarzschild's form for the explicit splittings is its isotropic optical medium
     optical = hm.schwarzschild().for_backward_tracing(explicit_split=True)
-    assert optical.chart == "isotropic" and optical.split_parts() is not None
+    assert optical.chart.name == "isotropic" and optical.split_parts() is not None
     assert type(hm.minkowski()) is hm.Minkowski and hm.minkowski().flat
     assert not hm.schwarzschild().flat
     ks = hm.kerr(1.0, 0.4, chart="kerr_schild")
