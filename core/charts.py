@@ -17,6 +17,8 @@ class CartesianChart:
     """q = (x, y, z) [or (t, x, y, z) with a leading time]: the identity map."""
 
     name = "cartesian"
+    polar_axis = False
+    """Whether theta = Q[2] is a polar angle, singular on the axis (sin theta = 0)."""
 
     def __init__(self, time_index: int | None):
         self.time_index = time_index
@@ -54,6 +56,7 @@ class SpheroidalChart:
     """
 
     name = "spherical"
+    polar_axis = True
     offset = 1
     time_index = 0
 
@@ -128,6 +131,7 @@ class KerrBLChart:
     """
 
     name = "kerr_bl"
+    polar_axis = True
     offset = 1
     time_index = 0
 
@@ -217,6 +221,7 @@ class IsotropicChart:
     """
 
     name = "isotropic"
+    polar_axis = False
     offset = 0
     time_index = None
 

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .charts import KerrBLChart
+
 
 class ObserverError(ValueError):
     """No observer frame can be set up where the rays start (the camera); subclasses say why."""
@@ -173,7 +175,7 @@ def _diagnose(model, chart, Q: np.ndarray, ginv: np.ndarray, bad: np.ndarray) ->
     on a spherical chart's axis, inside the horizon, g^ij singular, of the wrong
     signature, or (a valid metric) no observer at rest there. Only runs on failure."""
     Q, ginv = Q[:, bad], ginv[bad]
-    if chart.name in ("spherical", "kerr_bl") and np.any(np.abs(np.sin(Q[2])) < _AXIS):
+    if chart.polar_axis and np.any(np.abs(np.sin(Q[2])) < _AXIS):
         return CoordinateAxisError(
             "the camera is on the polar axis (theta = 0 or pi) of the model's spherical / "
             "Boyer–Lindquist coordinates, where they are singular: move it off the axis "
@@ -181,7 +183,7 @@ def _diagnose(model, chart, Q: np.ndarray, ginv: np.ndarray, bad: np.ndarray) ->
             + (
                 " with an implicit method such as gauss4 (Kerr's explicit split is traced"
                 " in Boyer–Lindquist)"
-                if chart.name == "kerr_bl"
+                if isinstance(chart, KerrBLChart)
                 else ""
             )
         )
