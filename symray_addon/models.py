@@ -18,6 +18,7 @@ from ..core import AccretionDisk, Scene, expressions
 from ..core import hamiltonians as hm
 from ..core.render import check_scene_camera
 from . import validation
+from .capabilities import capabilities
 
 
 @dataclass(frozen=True)
@@ -115,15 +116,11 @@ def check_observer(model: Any | None, where: Placement, camera_position: np.ndar
         )
 
 
-OBSERVER_MODELS = frozenset({"SCHWARZSCHILD", "KERR", "METRIC"})
-"""Models whose rays start in an observer's frame at the camera (spacetimes)."""
-
-
 def check_camera(settings: Any, model: Any, where: Placement, camera_position: Any) -> None:
     """ValueError (a core.ObserverError) if rays of ``model`` cannot start at the camera:
     inside a horizon, on a coordinate axis, where the metric is singular or of the wrong
     signature."""
-    if settings.model not in OBSERVER_MODELS:
+    if not capabilities(settings.model).observer:
         return
     check_observer(model, where, camera_position)
     scene = Scene(model=model, center=where.center, rotation=where.rotation)
@@ -135,7 +132,7 @@ def camera_problem(
 ) -> str:
     """The message check_camera raises, "" if none (or if the settings themselves are
     invalid: their own messages say so). Cached: the panel asks at every redraw."""
-    if settings.model not in OBSERVER_MODELS or validation.settings_problems(settings):
+    if not capabilities(settings.model).observer or validation.settings_problems(settings):
         return ""
     center = None if center_matrix is None else tuple(map(tuple, center_matrix))
     return _camera_problem(

@@ -8,6 +8,7 @@ import textwrap
 import bpy
 
 from . import models, presets, properties, validation
+from .capabilities import capabilities
 from .operator import SYMRAY_OT_bake_lighting, SYMRAY_OT_render
 
 WRAP = 60
@@ -179,7 +180,7 @@ class RENDER_PT_symray_disk(SymRayPanelMixin, bpy.types.Panel):
     @classmethod
     def poll(cls, context: bpy.types.Context) -> bool:
         """Shown for the black-hole models."""
-        return super().poll(context) and context.scene.symray.model in validation.DISK_MODELS
+        return super().poll(context) and capabilities(context.scene.symray.model).disk
 
     def draw_header(self, context: bpy.types.Context) -> None:
         """The on/off switch in the header."""

@@ -24,6 +24,7 @@ from typing import Any
 from ..core import checks, expressions
 from ..core.geometry.disk import check_spin, isco
 from ..core.integrators import METHODS, Splitting
+from .capabilities import capabilities
 
 INDEX_NAMES: tuple[str, ...] = ("x", "y", "z")
 """Names a refractive index n(x, y, z) may use (the centre object's local frame)."""
@@ -34,11 +35,6 @@ HAMILTONIAN_MOMENTA: tuple[str, ...] = ("p_x", "p_y", "p_z")
 HAMILTONIAN_NAMES: tuple[str, ...] = HAMILTONIAN_COORDS + HAMILTONIAN_MOMENTA
 """Names a user Hamiltonian H(x, y, z, p_x, p_y, p_z) may use."""
 METRIC_SIZE = 4
-TIME_SCALED_MODELS = frozenset({"SCHWARZSCHILD", "KERR"})
-"""Models the renderer integrates with a Poincaré time scale g(q) (Tao's methods fail there)."""
-SPLIT_MODELS = frozenset({"SCHWARZSCHILD", "MEDIUM", "KERR"})
-"""Models whose tracing form offers an explicit split (the splitting methods need one);
-Kerr only below extremal (|a/M| < 1: its Boyer–Lindquist split)."""
 
 
 ACCURACY_PX = (1e-6, 100.0)
@@ -225,7 +221,7 @@ def _check_split(method: str, model: str, spin: Any = 0.0) -> None:
     """ValueError if an explicit splitting is chosen for a model that offers no split."""
     if not isinstance(METHODS.get(method), Splitting):
         return
-    if model not in SPLIT_MODELS or (model == "KERR" and abs(float(spin)) >= 1.0):
+    if not capabilities(model, spin).split:
         raise ValueError(
             f"method '{method}' is an explicit splitting: only Schwarzschild, Kerr below "
             "extremal (|a/M| < 1) and media offer the split it needs; choose Automatic or "
@@ -236,6 +232,7 @@ def _check_split(method: str, model: str, spin: Any = 0.0) -> None:
 def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
     """The checks of every numeric setting (and the method) that the model uses."""
     model = settings.model
+    traits = capabilities(model, settings.spin)
     found = [
         lambda: checks.check_tolerance(typed_float(settings.tolerance), "Tolerance"),
         lambda: checks.check_range(
@@ -245,7 +242,7 @@ def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
         lambda: checks.check_int("Max Steps", settings.max_steps),
         lambda: checks.check_int("Workers", settings.workers, 0),
         lambda: checks.check_render_method(
-            METHODS.get(settings.method), model in TIME_SCALED_MODELS
+            METHODS.get(settings.method), traits.time_scaled
         ),  # "AUTO" is no method: the model's default, nothing to refuse
         lambda: _check_split(settings.method, model, settings.spin),
     ]
@@ -253,7 +250,7 @@ def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
         found.append(lambda: checks.check_positive("Texel Size", settings.bake_texel_size))
         found.append(lambda: checks.check_int("Max Resolution", settings.bake_max_resolution, 8))
         found.append(lambda: checks.check_int("Bake Samples", settings.bake_samples))
-    if model in TIME_SCALED_MODELS:
+    if traits.mass:
         found.append(lambda: checks.check_positive("Schwarzschild Radius", settings.rg))
     if model == "MEDIUM" and settings.use_medium_bounds:
         found.append(lambda: checks.check_vector("Box Min", settings.medium_min))
@@ -276,16 +273,12 @@ def settings_problems(settings: Any) -> list[str]:
     return problems + disk_problems(settings)
 
 
-DISK_MODELS = frozenset({"SCHWARZSCHILD", "KERR"})
-"""Models an accretion disk can orbit."""
-
-
 def disk_problems(settings: Any) -> list[str]:
     """Messages for disk settings a render would refuse (names as in the panel)."""
     disk = settings.disk
     if not disk.enabled:
         return []
-    if settings.model not in DISK_MODELS:
+    if not capabilities(settings.model).disk:
         return ["Accretion Disk needs a Schwarzschild or Kerr model"]
     problems = []
     for check in _disk_checks(settings):

@@ -115,3 +115,31 @@ def test_splitting_methods_need_a_model_with_a_split(scene, addon):
     for model in ("SCHWARZSCHILD", "MEDIUM", "KERR"):
         s.model = model
         assert not any("explicit splitting" in p for p in validation.settings_problems(s))
+
+
+@pytest.mark.parametrize(
+    "model, observer, mass, time_scaled, split, disk",
+    [("FLAT", False, False, False, False, False),
+     ("SCHWARZSCHILD", True, True, True, True, True),
+     ("KERR", True, True, True, True, True),
+     ("MEDIUM", False, False, False, True, False),
+     ("METRIC", True, False, False, False, False),
+     ("CUSTOM", False, False, False, False, False)],
+)  # fmt: skip
+def test_the_panels_models_capabilities_come_from_the_core(
+    addon, model, observer, mass, time_scaled, split, disk
+):
+    """What each panel model can do is asked of the core model it stands for (no list kept
+    by hand): rays from an observer's frame (spacetimes), a mass, Poincaré time, an
+    explicit split, disk orbits; Kerr at |a/M| = 1 has no split."""
+    capabilities = addon.module("symray_addon.capabilities").capabilities
+    traits = capabilities(model, 0.5)
+    assert (traits.observer, traits.mass, traits.time_scaled, traits.split, traits.disk) == (
+        observer,
+        mass,
+        time_scaled,
+        split,
+        disk,
+    )
+    if model == "KERR":
+        assert not capabilities(model, 1.0).split and capabilities(model, -0.99).split
