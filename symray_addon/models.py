@@ -99,30 +99,12 @@ def build_model(settings: Any, metric_source: str) -> Any | None:
     raise ValueError(f"Unknown SymRay model '{model}'")
 
 
-def check_observer(model: Any | None, where: Placement, camera_position: np.ndarray) -> None:
-    """ValueError if the camera sits inside (or on) a black hole's horizon.
-
-    The horizon radius r+ and the radial coordinate it is measured in (Kerr–Schild or
-    Boyer–Lindquist r) are the core model's (``horizon``, ``radius_at``)."""
-    if model is None or model.horizon <= 0.0:
-        return
-    r_plus = float(model.horizon)
-    local = where.rotation.T @ (np.asarray(camera_position, dtype=np.float64) - where.center)
-    r = float(model.radius_at(local.reshape(3, 1))[0])
-    if r <= r_plus * (1.0 + 1e-9):
-        raise ValueError(
-            f"The camera is inside the black hole's horizon (r = {r:.4g} <= "
-            f"r+ = {r_plus:.4g}): move it further from the centre object"
-        )
-
-
 def check_camera(settings: Any, model: Any, where: Placement, camera_position: Any) -> None:
     """ValueError (a core.ObserverError) if rays of ``model`` cannot start at the camera:
     inside a horizon, on a coordinate axis, where the metric is singular or of the wrong
     signature."""
     if not capabilities(settings.model).observer:
         return
-    check_observer(model, where, camera_position)
     scene = Scene(model=model, center=where.center, rotation=where.rotation)
     check_scene_camera(scene, camera_position, validation.typed_float(settings.tolerance))
 
