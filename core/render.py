@@ -312,7 +312,7 @@ def _trace_chunk(tracer: Tracer, origins, directions, with_error: bool, cancel, 
     seen = seen_direction(rays, origins)
     if not with_error:
         return rays, seen, None
-    assert tracer.step is not None  # with_error: the scene is curved
+    assert tracer.step is not None and tracer.order is not None  # with_error: curved
     coarse = tracer.trace(origins, directions, step=COMPANION_RATIO * tracer.step, cancel=cancel)
     error = richardson_error(rays, coarse, origins, tracer.order)
     return rays, seen, error + np.where(rays.ending == ENDING["escaped"], far_field, 0.0)

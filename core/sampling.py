@@ -238,6 +238,7 @@ class TileSampler:
         )  # one batch: the companion shares the main run's per-step overhead
         rays, coarse = both.take(slice(0, n)), both.take(slice(n, None))
         self.error_rays += n
+        assert self.tracer.order is not None  # a companion run: the scene is curved
         return (
             rays,
             seen_direction(rays, origins),
@@ -291,6 +292,7 @@ class TileSampler:
             step /= COMPANION_RATIO
             xy = self._image_xy(jj, ii)
             rays, seen, _ = self._trace_points(xy, cancel, companion=False, step=step)
+            assert self.tracer.order is not None  # a companion run: the scene is curved
             error = _richardson(
                 seen, rays.ending, nodes.direction[jj, ii], nodes.ending[jj, ii],
                 self.tracer.order,

@@ -145,8 +145,7 @@ class Hamiltonian(System):
             return CartesianChart(time_index=0)
         if self.dim != 3:
             raise ValueError(
-                "to render, a model needs coordinates (x, y, z) or (t, x, y, z); got "
-                f"{self.coords}"
+                f"to render, a model needs coordinates (x, y, z) or (t, x, y, z); got {self.coords}"
             )
         return CartesianChart(time_index=None)
 

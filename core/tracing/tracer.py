@@ -27,7 +27,7 @@ from .disklight import DiskLight
 from .regions import Region, region_for
 from .scene import DISK_ID, ENDING, Scene
 from .segments import RayResults, SceneGeometry
-from .stepping import OFF_CONE, OFF_CONE_STEPS, SPLITS, Stepper, ray_capture_test
+from .stepping import OFF_CONE, OFF_CONE_STEPS, SPLITS, RayCapture, Stepper, ray_capture_test
 from .steps import (
     default_method,
     default_step,
@@ -71,11 +71,62 @@ def tracing_model(model: Any, method: Any = None) -> Any:
     return model.for_backward_tracing(explicit_split=isinstance(method, integrators.Splitting))
 
 
-class Tracer:
-    """Traces batches of world-space rays through one scene with fixed options."""
+@dataclass(frozen=True)
+class TracePlan:
+    """What a tracer decides once for a scene and its options (``plan_trace``): the form rays
+    are followed in and how. A flat scene's plan says so (``curved`` False, the rest None)."""
 
-    step: float | None = None
+    curved: bool
+    model: Any
+    """The form rays are followed in (``tracing_model``); None in flat space."""
+    method: Any = None
+    """The integration method (with its solve tolerance), None where rays go straight."""
+    order: int | None = None
+    """The method's order on what it integrates here (Richardson, the step rule)."""
+    chart: Any = None
     region: Region | None = None
+    step: float | None = None
+    captured: RayCapture | None = None
+
+
+def plan_trace(scene: Scene, options: TraceOptions, extent: float = 1.0) -> TracePlan:
+    """The one place a trace is planned: method (the model's default unless named), the
+    form and chart it follows rays in, the method's order there, the region around the mass
+    (reaching past the disk), the capture test and the step (the options' or the rule's)."""
+    if not scene.curved:
+        return TracePlan(curved=False, model=tracing_model(scene.model))
+    method = integrators.get_method(options.method or default_method(scene.model))
+    model = tracing_model(scene.model, method)
+    system = model
+    if isinstance(method, integrators.Splitting):  # refused without a split
+        system = model.split_parts()
+        integrators.splitting.split_flows(system, method.name)
+    order = method.order_on(system)
+    if not isinstance(options.method, integrators.Method) and method.accepts("tol"):
+        method = method.with_options(tol=solver_tolerance(options.tolerance))
+    radius = scene.region_radius or options.region_radius
+    if scene.disk is not None:  # the disk's hits need the rays' momenta: inside
+        extent = max(extent, scene.disk.cartesian_radii()[1])
+    region = region_for(model, options.tolerance, extent, radius)
+    step = options.step or default_step(
+        method,
+        options.tolerance,
+        region.length_scale(model),
+        scaled=region.scaled(model),
+        constant=error_constant(method, model),
+        largest=form_calibration(model).largest_step,
+        order=order,
+    )
+    return TracePlan(
+        curved=True, model=model, method=method, order=order, chart=chart_for(model),
+        region=region, step=step, captured=ray_capture_test(model),
+    )  # fmt: skip
+
+
+class Tracer:
+    """Traces batches of world-space rays through one scene with fixed options (its plan:
+    ``plan_trace``)."""
+
     disk: DiskLight | None = None
     _watch: tuple[np.ndarray, np.ndarray] | None = None  # world box (Tracer.watch_geometry)
     _watch_local: tuple[np.ndarray, np.ndarray] | None = None
@@ -85,45 +136,18 @@ class Tracer:
         self.options = options
         self.rotation = scene.frame()
         self.geometry = SceneGeometry(scene.intersector(), list(scene.volumes))
-        self.curved = scene.curved
+        self.plan = plan = plan_trace(scene, options, extent)
+        self.curved, self.model = plan.curved, plan.model
+        self.method, self.order, self.chart = plan.method, plan.order, plan.chart
+        self.region, self.step, self.captured = plan.region, plan.step, plan.captured
         if not self.curved:
-            self.model = tracing_model(scene.model)
             return
-        self.method = integrators.get_method(options.method or default_method(scene.model))
-        self.model = model = tracing_model(scene.model, self.method)
-        system = model
-        if isinstance(self.method, integrators.Splitting):  # refused without a split
-            system = model.split_parts()
-            integrators.splitting.split_flows(system, self.method.name)
-        self.order = self.method.order_on(system)
-        """The method's order on what it integrates here (Richardson, the step rule)."""
-        self.chart = chart_for(model)
         self.spacetime = self.chart.time_index is not None
-        self.mass = model.mass
-        if not isinstance(options.method, integrators.Method) and self.method.accepts("tol"):
-            self.method = self.method.with_options(tol=solver_tolerance(options.tolerance))
-        radius = scene.region_radius or options.region_radius
-        if scene.disk is not None:  # the disk's hits need the rays' momenta: inside
-            extent = max(extent, scene.disk.cartesian_radii()[1])
-        self.region = region_for(model, options.tolerance, extent, radius)
+        self.mass = self.model.mass
         if scene.disk is not None:
             self.disk = self._disk_light(scene)
-        self.captured = ray_capture_test(model)
-        self.stepper = Stepper(self.method, model, self.captured)
+        self.stepper = Stepper(self.method, self.model, self.captured)
         self._near = self.geometry.local_box(self._to_local)
-        self.step = (
-            options.step
-            if options.step
-            else default_step(
-                self.method,
-                options.tolerance,
-                self.region.length_scale(model),
-                scaled=self.region.scaled(model),
-                constant=error_constant(self.method, model),
-                largest=form_calibration(model).largest_step,
-                order=self.order,
-            )
-        )
 
     def _disk_light(self, scene: Scene) -> DiskLight:
         """The disk's light; ValueError if the disk reaches past the model's region (an

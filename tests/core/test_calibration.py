@@ -62,3 +62,24 @@ def test_the_tracer_takes_the_forms_constant_and_largest_step():
     assert tight.step == pytest.approx((0.5e-9 / constant) ** (1 / 6))
     gauss = Tracer(kerr, TraceOptions(method="gauss4", tolerance=1e-9))
     assert error_constant(gauss.method, gauss.model) == METHODS["gauss4"].error_constant
+
+
+def test_a_trace_is_planned_once_in_a_frozen_plan():
+    """plan_trace decides the method, form, order, chart, region, step and capture test;
+    the tracer holds exactly that plan (frozen), and a flat scene's plan says so with every
+    other field None (no attribute left unset)."""
+    import dataclasses
+
+    from core.tracing.tracer import TracePlan, plan_trace
+
+    flat = Tracer(Scene(model=None), TraceOptions())
+    assert flat.plan == TracePlan(curved=False, model=None)
+    assert (flat.method, flat.order, flat.step, flat.region, flat.chart) == (None,) * 5
+    kerr = Scene(model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"))
+    plan = plan_trace(kerr, TraceOptions(tolerance=1e-6), 10.0)
+    tracer = Tracer(kerr, TraceOptions(tolerance=1e-6), 10.0)
+    assert plan.method.name == tracer.method.name == "blanes_moan_s10"
+    assert (plan.order, plan.step, plan.chart.name) == (tracer.order, tracer.step, "kerr_bl")
+    assert plan.region.radius == tracer.region.radius and plan.captured is not None
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        plan.step = 1.0
