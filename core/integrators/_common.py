@@ -77,6 +77,18 @@ def flow(H: System, Z: np.ndarray) -> np.ndarray:
     return out
 
 
+def gradient_kick(H: Any, Q: np.ndarray, P: np.ndarray, t: Any) -> None:
+    """The exact flow of a separable H's V(q) over t, in place: p -= t dV/dq."""
+    dq, _ = H.gradient_soa(Q, P, wrt="q")
+    P -= t * dq
+
+
+def gradient_drift(H: Any, Q: np.ndarray, P: np.ndarray, t: Any) -> None:
+    """The exact flow of a separable H's T(p) over t, in place: q += t dT/dp."""
+    _, dp = H.gradient_soa(Q, P, wrt="p")
+    Q += t * dp
+
+
 def quiet(fn):
     """Run fn with floating-point warnings off: failing rays are reported through `ok`."""
 

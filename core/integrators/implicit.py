@@ -19,6 +19,8 @@ from ._common import (
     as_soa,
     finite_rays,
     flow,
+    gradient_drift,
+    gradient_kick,
     quiet,
     restrict,
     take,
@@ -47,12 +49,7 @@ class _KickDrift(_Implicit):
     def apply(self, kind: str, H: Any, state: State, ch: Any) -> None:
         """Advance state in place by the exact flow `kind` over the step ch."""
         Q, P = state
-        if kind == "K":
-            dq, _ = H.gradient_soa(Q, P, wrt="q")
-            P -= ch * dq
-        else:
-            _, dp = H.gradient_soa(Q, P, wrt="p")
-            Q += ch * dp
+        (gradient_kick if kind == "K" else gradient_drift)(H, Q, P, ch)
 
 
 def run_splitting(

@@ -32,11 +32,20 @@ Coefficients:
 
 from __future__ import annotations
 
+import functools
 from typing import Any
 
 import numpy as np
 
-from ._common import Method, State, as_soa, finite_rays, quiet
+from ._common import (
+    Method,
+    State,
+    as_soa,
+    finite_rays,
+    gradient_drift,
+    gradient_kick,
+    quiet,
+)
 from .system import System
 
 
@@ -204,19 +213,11 @@ def split_flows(H: Any, method: str) -> tuple[Any, Any]:
 
 
 def _gradient_kick(H: Any):
-    def kick(Q: np.ndarray, P: np.ndarray, t: Any) -> None:
-        dq, _ = H.gradient_soa(Q, P, wrt="q")
-        P -= t * dq
-
-    return kick
+    return functools.partial(gradient_kick, H)
 
 
 def _gradient_drift(H: Any):
-    def drift(Q: np.ndarray, P: np.ndarray, t: Any) -> None:
-        _, dp = H.gradient_soa(Q, P, wrt="p")
-        Q += t * dp
-
-    return drift
+    return functools.partial(gradient_drift, H)
 
 
 # Error constants: calibrated like the others (core.tracing.steps), on the ray tracing's own
