@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 
 from ..checks import check_integrate_options
-from ._common import Method, restrict
+from ._common import Method
+from .batch import Batch, run_batch
 from .poincare import Clocked, PoincareTransformed
 from .registry import get_method
 from .splitting import Splitting
@@ -43,10 +44,11 @@ class IntegrationResult:
 
 
 class _Run:
-    """Book-keeping of a batch: the active rays' state, and frozen outputs of ended rays.
+    """Book-keeping of ``integrate``: the rays still going (a Batch: their state, the system
+    and per-ray arrays) and the frozen outputs of the rays that ended.
 
     mode: "fixed" (s = steps * h), "clock" (s is the last coordinate of the clocked state)
-    or "adaptive" (s tracked per ray in live["s"]).
+    or "adaptive" (s tracked per ray in arrays["s"]).
     """
 
     def __init__(
@@ -62,10 +64,9 @@ class _Run:
         h: Any,
     ) -> None:
         N = Q.shape[1]
-        self.method, self.H, self.Henergy, self.n, self.mode = method, H, Henergy, n, mode
+        self.method, self.n, self.mode = method, n, mode
         self.capture = capture_test(Henergy)
-        self.state = method.init(H, Q, P)
-        self.act = np.arange(N)
+        self.per_ray_h = bool(np.ndim(h))
         self.out = {
             "q": Q[:n].copy(),
             "p": P[:n].copy(),
@@ -75,102 +76,134 @@ class _Run:
             "failed": np.zeros(N, dtype=bool),
             "captured": np.zeros(N, dtype=bool),
         }
-        self.live = {
+        arrays = {
+            "act": np.arange(N),
             "s": np.zeros(N),
             "err": np.zeros(N),
             "E0": E0,
             "steps": np.zeros(N, dtype=np.int64),
             "h": np.broadcast_to(np.asarray(h, dtype=np.float64), (N,)).copy(),
         }
-        self.h = self.live["h"] if np.ndim(h) else float(h)  # the fixed step
+        self.fixed_h = None if self.per_ray_h else float(h)
+        self.batch = Batch(method, method.init(H, Q, P), {"H": H, "energy": Henergy}, arrays)
         self.record_list: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
-    def s_now(self) -> np.ndarray:
-        """(M,) parameter of the active rays."""
+    @property
+    def live(self) -> dict[str, Any]:
+        """Per-ray arrays of the rays still going."""
+        return self.batch.arrays
+
+    @property
+    def h(self) -> Any:
+        """The fixed step: one for all rays, or per ray."""
+        return self.live["h"] if self.per_ray_h else self.fixed_h
+
+    def s_now(self, state: Any = None) -> np.ndarray:
+        """(M,) parameter of the rays still going (at ``state``, default the current one)."""
         if self.mode == "clock":
-            return self.method.qp(self.state)[0][-1]
+            return self.method.qp(self.batch.state if state is None else state)[0][-1]
         if self.mode == "fixed":
             return self.live["steps"] * self.live["h"]
         return self.live["s"]
 
-    def retire(self, mask: np.ndarray, failed: bool, captured: bool = False) -> None:
-        """Freeze the active rays `mask` (bool, (M,)) at their current state."""
-        ids = self.act[mask]
-        Q, P = self.method.qp(self.state)
+    def freeze(self, mask: np.ndarray, failed: bool, captured: bool = False, state=None) -> None:
+        """Record the outputs of the rays ``mask`` ((M,) bool) at ``state`` (default the
+        current one); the batch drops them afterwards."""
+        state = self.batch.state if state is None else state
+        ids = self.live["act"][mask]
+        Q, P = self.method.qp(state)
         out = self.out
         out["q"][:, ids] = Q[: self.n, mask]
         out["p"][:, ids] = P[: self.n, mask]
-        out["s"][ids] = self.s_now()[mask]
+        out["s"][ids] = self.s_now(state)[mask]
         out["err"][ids] = self.live["err"][mask]
         out["steps"][ids] = self.live["steps"][mask]
         out["failed"][ids] = failed
         out["captured"][ids] = captured
-        keep = ~mask
-        self.state = tuple(a[..., keep] for a in self.state)
-        self.live = {k: v[keep] for k, v in self.live.items()}
-        if np.ndim(self.h):
-            self.h = self.live["h"]
-        self.act = self.act[keep]
-        self.H = restrict(self.H, keep)
-        self.Henergy = restrict(self.Henergy, keep)
 
-    def check_energy(self) -> None:
-        """Update max |H - H0|; rays whose H is no longer finite are failed."""
-        if self.act.size == 0:
-            return
-        Q, P = self.method.qp(self.state)
+    def retire(self, mask: np.ndarray, failed: bool) -> None:
+        """Freeze the rays ``mask`` and drop them (outside the loop)."""
+        self.freeze(mask, failed)
+        self.batch.drop(mask)
+
+    def energy_events(self, going: np.ndarray) -> np.ndarray:
+        """Update max |H - H0| of the rays ``going``; -> those whose H is no longer finite
+        (frozen as failed)."""
+        Q, P = self.method.qp(self.batch.state)
         with np.errstate(all="ignore"):
-            e = np.abs(self.Henergy.value_soa(Q[: self.n], P[: self.n]) - self.live["E0"])
-        np.fmax(self.live["err"], e, out=self.live["err"])
-        bad = ~np.isfinite(e)
+            e = np.abs(
+                self.batch.systems["energy"].value_soa(Q[: self.n], P[: self.n]) - self.live["E0"]
+            )
+        err = self.live["err"]
+        err[going] = np.fmax(err[going], e[going])
+        bad = going & ~np.isfinite(e)
         if bad.any():
-            self.retire(bad, failed=True)
+            self.freeze(bad, failed=True)
+        return bad
 
-    def record(self) -> None:
-        """Append the current state of all rays to the trajectory."""
-        Q, P = self.method.qp(self.state)
+    def capture_events(self, going: np.ndarray) -> np.ndarray:
+        """The rays ``going`` that crossed the model's capture surface (frozen as captured,
+        not failed, with their energy error brought up to date)."""
+        if self.capture is None:
+            return np.zeros_like(going)
+        inside = self._inside() & going
+        if not inside.any():
+            return inside
+        bad = self.energy_events(going)
+        inside = self._inside() & going & ~bad
+        self.freeze(inside, failed=False, captured=True)
+        return inside | bad
+
+    def _inside(self) -> np.ndarray:
+        assert self.capture is not None
+        with np.errstate(all="ignore"):
+            return np.asarray(self.capture(self.method.qp(self.batch.state)[0][: self.n]))
+
+    def record(self, going: np.ndarray | None = None) -> None:
+        """Append every ray's state to the trajectory (ended rays: as frozen)."""
+        going = np.ones(self.batch.size, dtype=bool) if going is None else going
+        Q, P = self.method.qp(self.batch.state)
+        act = self.live["act"][going]
         q, p, s = self.out["q"].copy(), self.out["p"].copy(), self.out["s"].copy()
-        q[:, self.act] = Q[: self.n]
-        p[:, self.act] = P[: self.n]
-        s[self.act] = self.s_now()
+        q[:, act] = Q[: self.n, going]
+        p[:, act] = P[: self.n, going]
+        s[act] = self.s_now()[going]
         self.record_list.append((s, q, p))
 
-    def check_capture(self) -> None:
-        """Freeze rays that have crossed the model's capture surface (captured, not failed)."""
-        if self.capture is None or self.act.size == 0:
-            return
-        with np.errstate(all="ignore"):
-            inside = self.capture(self.method.qp(self.state)[0][: self.n])
-        if inside.any():
-            self.check_energy()
-            inside = self.capture(self.method.qp(self.state)[0][: self.n])
-            self.retire(inside, failed=False, captured=True)
+    def check_energy(self) -> None:
+        """energy_events over every ray still going, those failing dropped (outside the loop)."""
+        if self.batch.size:
+            bad = self.energy_events(np.ones(self.batch.size, dtype=bool))
+            if bad.any():
+                self.batch.drop(bad)
 
     def finish(self) -> None:
-        """Freeze the rays still active (not failed)."""
-        if self.act.size:
-            self.retire(np.ones(self.act.size, dtype=bool), failed=False)
+        """Freeze the rays still going (not failed)."""
+        if self.batch.size:
+            self.retire(np.ones(self.batch.size, dtype=bool), failed=False)
 
 
 def _run_fixed(run: _Run, steps: int, energy_every: int, record_every: int) -> None:
     """`steps` fixed steps run.h (float or per ray)."""
-    checked = True
-    for k in range(1, steps + 1):
-        new, ok = run.method.step(run.H, run.state, run.h)
-        if not ok.all():
-            run.retire(~ok, failed=True)
-            new = tuple(a[..., ok] for a in new)
-        run.state = new
-        run.live["steps"] += 1
-        run.check_capture()
-        checked = bool(energy_every) and k % energy_every == 0
-        if checked:
-            run.check_energy()
+
+    def step(batch: Batch):
+        new, ok = batch.method.step(batch.systems["H"], batch.state, run.h)
+        return new, ok, None
+
+    def events(batch: Batch, k: int, start, ok: np.ndarray, _extra) -> np.ndarray:
+        failed = ~ok
+        if failed.any():  # frozen where they were before the step that failed
+            run.freeze(failed, failed=True, state=start)
+        run.live["steps"] += ok
+        ended = failed | run.capture_events(ok)
+        if energy_every and k % energy_every == 0:
+            ended |= run.energy_events(~ended)
         if record_every and k % record_every == 0:
-            run.record()
-        if run.act.size == 0:
-            break
-    if not checked:
+            run.record(~ended)
+        return ended
+
+    taken = run_batch(run.batch, step, events, steps)
+    if not (energy_every and taken % energy_every == 0):
         run.check_energy()
 
 
@@ -184,33 +217,44 @@ def _run_adaptive(
     live["sign"] = np.where(s_end < 0, -1.0, 1.0)
     live["h"] = np.abs(live["h"])
     live["h_min"] = 1e-13 * np.abs(s_end)
-    for k in range(1, max_steps + 1):
-        live = run.live
+
+    def step(batch: Batch):
+        live = batch.arrays
         s, rest = live["s"], np.abs(live["s_end"] - live["s"])
         hh = np.minimum(live["h"], rest)
-        new, err, ok = method.attempt(run.H, run.state, hh * live["sign"])
+        new, err, ok = method.attempt(batch.systems["H"], batch.state, hh * live["sign"])
         acc = ok & (err <= 1.0)
         arrived = acc & (hh >= rest)
-        run.state = tuple(np.where(acc, a1, a0) for a1, a0 in zip(new, run.state, strict=True))
+        state = tuple(np.where(acc, a1, a0) for a1, a0 in zip(new, batch.state, strict=True))
         live["s"] = np.where(arrived, live["s_end"], np.where(acc, s + hh * live["sign"], s))
         live["steps"] += acc
         live["h"] = hh * method.factor(err)
         live["arrived"] = arrived
-        run.check_capture()
+        return state, np.ones(arrived.size, dtype=bool), None
+
+    def events(batch: Batch, k: int, start, ok: np.ndarray, _extra) -> np.ndarray:
+        ended = run.capture_events(ok)
         if energy_every and k % energy_every == 0:
-            run.check_energy()
+            ended |= run.energy_events(~ended)
         if record_every and k % record_every == 0:
-            run.record()
-        if run.live["arrived"].any():
-            run.check_energy()  # the final state of the rays that arrive
-            run.retire(run.live["arrived"], failed=False)
-        tiny = run.live["h"] < run.live["h_min"]
+            run.record(~ended)
+        arrived = batch.arrays["arrived"] & ~ended
+        if arrived.any():
+            ended |= run.energy_events(~ended)  # the final state of the rays that arrive
+            arrived &= ~ended
+            run.freeze(arrived, failed=False)
+            ended |= arrived
+        tiny = (batch.arrays["h"] < batch.arrays["h_min"]) & ~ended
         if tiny.any():
-            run.retire(tiny, failed=True)
-        if run.act.size == 0:
-            return
-    run.check_energy()
-    run.retire(np.ones(run.act.size, dtype=bool), failed=True)  # out of steps
+            run.freeze(tiny, failed=True)
+            ended |= tiny
+        return ended
+
+    run_batch(run.batch, step, events, max_steps)
+    if run.batch.size:
+        run.check_energy()
+        if run.batch.size:
+            run.retire(np.ones(run.batch.size, dtype=bool), failed=True)  # out of steps
 
 
 def capture_test(H: Any) -> CaptureTest | None:

@@ -20,7 +20,7 @@ import numpy as np
 from .. import checks, integrators
 from ..charts import chart_for
 from ..geometry import segment_meets_box
-from ..integrators._common import take
+from ..integrators.batch import Batch, run_batch
 from ..observer import medium_momenta, spacetime_momenta
 from . import dense
 from .disklight import DiskLight
@@ -248,8 +248,7 @@ class Tracer:
         coordinates are computed only for the rays that need them: segments near geometry
         (a local box around the objects and volumes), and rays that end.
         """
-        assert self.region is not None
-        model, chart, off = self.model, self.chart, self.chart.offset
+        model, chart = self.model, self.chart
         S = chart.to_coords(X)
         if self.spacetime:
             Q, P = spacetime_momenta(model, chart, S, D)
@@ -257,69 +256,78 @@ class Tracer:
             Q, P = medium_momenta(model, S, D)
         H0 = model.value_soa(Q, P)
         K = model.split_parts(H0) or integrators.PoincareTransformed(model, H0)
-        method = self.method
-        state = method.init(K, Q, P)
-        idx = rows.copy()
-        X_prev = X
-        taken = 0
-        streak = np.zeros(idx.size, dtype=np.int64)  # steps in a row off the light cone
-        for taken in range(1, self.options.max_steps + 1):
-            if cancel is not None and taken % 32 == 0 and cancel():
-                taken -= 1
-                break
-            start = method.qp(state)
-            state, ok, shell = self.stepper.step(K, state, h, SPLITS)
-            Q, P = method.qp(state)
-            if self.spacetime:
-                with np.errstate(invalid="ignore"):
-                    streak = np.where(shell > OFF_CONE * P[0] * P[0], streak + 1, 0)
-                ok &= streak < OFF_CONE_STEPS
-            S = Q[off:]
-            X = chart.to_cartesian(S)
-            ok &= np.isfinite(X).all(axis=0)
-            ended = ~ok
-            if not ok.all():
-                out.ending[idx[ended]] = ENDING["failed"]
-                out.position[idx[ended]] = self._to_world(X_prev[:, ended].T)
-            self._watch_steps(idx, X, camera, out)
-            if self._near is not None:  # surfaces and volumes along this step's segment
-                step_ends = _StepEnds(self, K, start, (Q, P), h, camera)
-                ended |= self._segments(idx, X_prev, X, ok, out, step_ends, camera)
-            if self.captured is not None:
-                captured = ~ended & self.captured(Q, P)
-                if captured.any():
-                    out.ending[idx[captured]] = ENDING["captured"]
-                    out.position[idx[captured]] = self._to_world(X[:, captured].T)
-                    ended |= captured
-            leaving = ~ended & self.region.left_soa(X, X_prev)
-            if leaving.any():
-                local = X[:, leaving].T
-                self._escape(
-                    idx[leaving],
-                    S[:, leaving],
-                    Q[:, leaving],
-                    P[:, leaving],
-                    local,
-                    self._to_world(local),
-                    out,
-                )
-                ended |= leaving
-            if ended.any():
-                out.steps[idx[ended]] = taken
-                self._finish_energy(out, idx[ended], Q[:, ended], P[:, ended], H0[ended])
-                keep = np.flatnonzero(~ended)
-                if keep.size == 0:
-                    return
-                idx, X, camera = idx[keep], X[:, keep], camera[:, keep]
-                state = tuple(a[..., keep] for a in state)
-                K = K.subset(keep)
-                H0, streak, h = H0[keep], streak[keep], take(h, keep)
-            X_prev = X
+        batch = Batch(
+            self.method,
+            self.method.init(K, Q, P),
+            {"K": K},
+            {"idx": rows.copy(), "X": X, "camera": camera, "H0": H0, "h": h,
+             "streak": np.zeros(rows.size, dtype=np.int64)},  # steps in a row off the cone
+        )  # fmt: skip
+
+        def step(batch: Batch):
+            return self.stepper.step(batch.systems["K"], batch.state, batch.arrays["h"], SPLITS)
+
+        def events(batch: Batch, taken: int, start, ok, shell) -> np.ndarray:
+            return self._step_events(batch, taken, start, ok, shell, out)
+
+        taken = run_batch(batch, step, events, self.options.max_steps, cancel)
+        if batch.size == 0:
+            return
+        idx, X_last = batch.arrays["idx"], batch.arrays["X"]
         out.ending[idx] = ENDING["max_steps"]
         out.steps[idx] = taken
-        Q, P = method.qp(state)
-        out.position[idx] = self._to_world(X_prev.T)
-        self._finish_energy(out, idx, Q, P, H0)
+        Q, P = self.method.qp(batch.state)
+        out.position[idx] = self._to_world(X_last.T)
+        self._finish_energy(out, idx, Q, P, batch.arrays["H0"])
+
+    def _step_events(self, batch: Batch, taken: int, start, ok, shell, out: RayResults):
+        """After a step: which rays failed, hit something, were captured or left the
+        region ((M,) bool), each recorded in ``out``; the batch's X becomes the step's end."""
+        chart, arrays = self.chart, batch.arrays
+        idx, X_prev, camera = arrays["idx"], arrays["X"], arrays["camera"]
+        start = self.method.qp(start)
+        Q, P = self.method.qp(batch.state)
+        if self.spacetime:
+            with np.errstate(invalid="ignore"):
+                streak = np.where(shell > OFF_CONE * P[0] * P[0], arrays["streak"] + 1, 0)
+            arrays["streak"] = streak
+            ok &= streak < OFF_CONE_STEPS
+        S = Q[chart.offset :]
+        X = chart.to_cartesian(S)
+        ok &= np.isfinite(X).all(axis=0)
+        ended = ~ok
+        if not ok.all():
+            out.ending[idx[ended]] = ENDING["failed"]
+            out.position[idx[ended]] = self._to_world(X_prev[:, ended].T)
+        self._watch_steps(idx, X, camera, out)
+        if self._near is not None:  # surfaces and volumes along this step's segment
+            step_ends = _StepEnds(self, batch.systems["K"], start, (Q, P), arrays["h"], camera)
+            ended |= self._segments(idx, X_prev, X, ok, out, step_ends, camera)
+        if self.captured is not None:
+            captured = ~ended & self.captured(Q, P)
+            if captured.any():
+                out.ending[idx[captured]] = ENDING["captured"]
+                out.position[idx[captured]] = self._to_world(X[:, captured].T)
+                ended |= captured
+        assert self.region is not None
+        leaving = ~ended & self.region.left_soa(X, X_prev)
+        if leaving.any():
+            local = X[:, leaving].T
+            self._escape(
+                idx[leaving],
+                S[:, leaving],
+                Q[:, leaving],
+                P[:, leaving],
+                local,
+                self._to_world(local),
+                out,
+            )
+            ended |= leaving
+        if ended.any():
+            out.steps[idx[ended]] = taken
+            self._finish_energy(out, idx[ended], Q[:, ended], P[:, ended], arrays["H0"][ended])
+        arrays["X"] = X
+        return ended
 
     def _segments(
         self, idx, X_prev, X, ok, out: RayResults, step_ends: _StepEnds, camera
