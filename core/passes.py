@@ -1,4 +1,5 @@
-"""The passes of a render, declared once: what each holds, its type, and where it goes.
+"""The passes of a render, declared once: what each holds, its type, whether adaptive
+sampling interpolates it, and where it goes.
 
 core.render's frame buffers, the adaptive sampler's tiles, the add-on's render passes and its
 passes EXR are all built from PASSES. Adding a pass means a row here and the code that
@@ -27,6 +28,10 @@ class Pass:
     description: str
     channels: int = 1
     """Values per pixel: 1 (an (h, w) array) or 3 (an (h, w, 3) array)."""
+    interpolated: bool = True
+    """Whether an adaptive render (core.sampling) fills it at the pixels it interpolates
+    rather than traces; False: there it keeps ``fill`` (only a traced pixel centre has
+    one)."""
     derived_from: str | None = None
     """The stored pass it is computed from at the end (error_px: error in pixels); None:
     stored itself, chunk by chunk."""
@@ -60,7 +65,8 @@ PASSES: tuple[Pass, ...] = (
     Pass("error_px", np.float32, 0.0,
          "per-pixel error estimate in pixels of this camera (integration, far field, hit "
          "point and interpolation)", derived_from="error", label="Error", shown=True),
-    Pass("steps", np.int32, 0, "integration steps per pixel", label="Steps", shown=True),
+    Pass("steps", np.int32, 0, "integration steps per pixel", interpolated=False,
+         label="Steps", shown=True),
     Pass("ending", np.int8, -1, "how each ray ended (core.ENDING code; -1: not rendered)",
          label="Ending"),
     Pass("direction", np.float32, math.nan,
@@ -68,7 +74,7 @@ PASSES: tuple[Pass, ...] = (
          "point (NaN where captured or failed)", channels=3),
     Pass("redshift", np.float32, math.nan,
          "g = observed / emitted frequency where a ray ends on the accretion disk (or first "
-         "crosses a translucent one), NaN elsewhere", label="Redshift"),
+         "crosses a translucent one), NaN elsewhere", interpolated=False, label="Redshift"),
 )  # fmt: skip
 """Every pass, in its one order."""
 

@@ -271,3 +271,28 @@ def test_progressive_tiles_carry_every_pass_of_the_final_image(options):
         covered[y0:y1, x0:x1] += 1
     assert covered.min() >= 1
     assert np.isfinite(out.passes["redshift"]).any() and np.isnan(out.passes["direction"]).any()
+
+
+def test_the_pass_table_says_which_passes_are_interpolated():
+    """An adaptive Kerr frame with a disk: at the pixels it interpolates (no step of their
+    own: the camera is inside the region, so every traced ray steps), the passes the table
+    marks interpolated hold values (ending, a positive error, a seen direction), and the
+    others their fill (steps 0, redshift NaN)."""
+    from core.passes import ALL_PASSES, BY_NAME, STORED
+
+    cam = core.Camera.perspective((0, -30, 6), (0, 0, 0), (0, 0, 1), 40, 64, 48)
+    scene = core.Scene(
+        model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"),
+        disk=core.AccretionDisk(r_out=8.0),
+        background="procedural",
+    )
+    out = core.render(scene, cam, tolerance_px=1.0, passes=ALL_PASSES, workers=1)
+    between = out.passes["steps"] == 0
+    assert 100 < between.sum() < between.size and np.isfinite(out.passes["redshift"]).any()
+    assert {p.name for p in STORED if not p.interpolated} == {"steps", "redshift"}
+    assert np.all(out.passes["steps"][between] == BY_NAME["steps"].fill)
+    assert np.all(np.isnan(out.passes["redshift"][between]))
+    assert np.all(out.passes["ending"][between] >= 0)
+    assert np.all(out.passes["error"][between] > 0)
+    seen = out.passes["ending"][between] != core.ENDING["captured"]
+    assert np.all(np.isfinite(out.passes["direction"][between][seen]))
