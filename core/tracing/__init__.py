@@ -1,10 +1,10 @@
 """Tracing rays through a scene: one subject per module.
 
-``scene`` (Scene, ENDING), ``tracer`` (Tracer, TraceOptions: the batch loop), ``regions``
-(where the model bends light: sphere or box), ``stepping`` (one step with retries in
-halves), ``steps`` (the step rule, error constants, solve tolerance) and ``segments``
-(hits and volume light along straight segments). ``core.trace`` is the public name of
-these.
+``scene`` (Scene, ENDING), ``tracer`` (TracePlan, Tracer, TraceOptions: the plan and the
+per-step events of the batch loop), ``regions`` (where the model bends light: sphere or
+box), ``stepping`` (one step with retries in halves), ``steps`` (the step rule, the
+renderer's calibrations per model form, solve tolerance) and ``segments`` (hits and volume
+light along straight segments). ``core.trace`` is the public name of these.
 """
 
 from .regions import BoxRegion, Region, SphereRegion, region_for
@@ -16,14 +16,18 @@ from .steps import (
     ERROR_CONSTANTS,
     FAR_FIELD_CONSTANT,
     FAR_FIELD_SHARE,
+    FORM_CALIBRATIONS,
     MAX_SPLIT_STEP,
     MAX_STEP,
     SOLVE_SHARE,
+    FormCalibration,
     default_method,
     default_step,
+    error_constant,
+    form_calibration,
     solver_tolerance,
 )
-from .tracer import TraceOptions, Tracer, tracing_model
+from .tracer import TraceOptions, TracePlan, Tracer, plan_trace, tracing_model
 
 __all__ = [
     "DEFAULT_METHOD",
@@ -31,10 +35,12 @@ __all__ = [
     "ERROR_CONSTANTS",
     "FAR_FIELD_CONSTANT",
     "FAR_FIELD_SHARE",
+    "FORM_CALIBRATIONS",
     "MAX_SPLIT_STEP",
     "MAX_STEP",
     "SOLVE_SHARE",
     "BoxRegion",
+    "FormCalibration",
     "RayResults",
     "Region",
     "Scene",
@@ -42,9 +48,13 @@ __all__ = [
     "SphereRegion",
     "Stepper",
     "TraceOptions",
+    "TracePlan",
     "Tracer",
     "default_method",
     "default_step",
+    "error_constant",
+    "form_calibration",
+    "plan_trace",
     "region_for",
     "solver_tolerance",
     "tracing_model",
