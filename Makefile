@@ -82,7 +82,7 @@ stress: venv
 
 # Performance figures of issue #6 next to their targets (benchmarks/bench_perf.py): quick in a
 # few minutes; `make bench-perf FULL=1` adds the 1920x1080 frames and the error constants;
-# PERF_ARGS="--baseline DIR" the speed-up over a checkout of af19e2b (issue 13).
+# PERF_ARGS="--baseline DIR" the speed-up over a checkout of the baseline (benchmarks/image_quality.py BASELINE).
 PERF_ARGS ?=
 
 bench-perf: venv

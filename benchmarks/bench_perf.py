@@ -27,7 +27,7 @@ Sections (``--only``):
 - ``quality``: issue #13's targets (benchmarks/image_quality.py): error-pass honesty on the
   Kerr board scene, anti-aliasing against 8x8 supersampling, Preview and Final frames
   (512x288; ``--full``: 1920x1080, targets <= 20 s and <= 5 min), and with ``--baseline
-  DIR`` (a checkout of af19e2b) the speed-up over it at equal measured accuracy (512x288;
+  DIR`` (a checkout of the baseline) the speed-up over it at equal measured accuracy (512x288;
   ``--full`` adds 1920x1080, one run each, without the accuracy reference).
 - ``calibrate`` (``--full``): the error constants behind the tolerance -> step rule
   (core.trace.ERROR_CONSTANTS) and the far-field constant.
@@ -593,7 +593,7 @@ def bench_quality(full: bool, baseline: str | None) -> None:
     image_quality.anti_aliasing(128)
     if baseline:
         image_quality.versus(baseline, 512, 288)
-        if full:  # af19e2b takes ~2.5 min a 1080p frame: one run each; a dopri5 1e-11
+        if full:  # the baseline takes ~2.5 min a 1080p frame: one run each; a dopri5 1e-11
             # reference would take ~15 min more: accuracy is measured at 512x288
             image_quality.versus(baseline, 1920, 1080, repeats=1, reference=False)
     image_quality.speed(*((1920, 1080) if full else (512, 288)))
@@ -612,7 +612,7 @@ def main() -> None:
     parser.add_argument("--methods", default="", help="calibrate: comma-separated methods")
     parser.add_argument("--scale", type=float, default=1.0, help="calibrate: step scale")
     parser.add_argument("--hd-child", action="store_true", help=argparse.SUPPRESS)
-    parser.add_argument("--baseline", default=None, help="checkout of af19e2b (quality)")
+    parser.add_argument("--baseline", default=None, help="the baseline's checkout (quality)")
     args = parser.parse_args()
     if args.hd_child:
         hd_child(args.method)

@@ -7,7 +7,7 @@ Renders with core.render (error pass on), then saves the time, the rays, and wha
 pixel's centre sees (escape direction, or the unit vector to the hit point; NaN where
 captured) as that render drew it: for an old checkout, from its tracer at the render's
 displayed step (before issue 13 the image showed a run at half the step); for this one,
-from the ``direction`` pass. Uses only names that exist in every version since af19e2b.
+from the ``direction`` pass. Uses only names that exist in every version since the baseline.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from core import hamiltonians as hm
 
 
 class _Textured:
-    """A constant-colour primitive recoloured by a texture where it is hit (af19e2b asked
+    """A constant-colour primitive recoloured by a texture where it is hit (the baseline asked
     textures about empty batches and failed there, fixed in issue 11; its figures wrapped
     textured primitives like this)."""
 

@@ -10,7 +10,7 @@
 - ``aa``: Schwarzschild + checker board at samples=16 (box filter) against 8x8
   supersampling box-filtered: mean and 99th-percentile absolute colour difference, and the
   cost relative to samples=1. Target: <= 0.02 mean, <= 0.1 p99, <= 3x the cost.
-- ``versus`` (with ``--baseline DIR``, a checkout of af19e2b): that commit's gauss4 at the
+- ``versus`` (with ``--baseline DIR``, a checkout of BASELINE): that commit's gauss4 at the
   radian tolerance of 0.25 px against this code's default at 0.25 px (and Final), error
   pass on in all, alternated in one run, each with the share of escaped pixels within
   0.25 px of a dopri5 1e-11 render. Target: >= 4x faster at equal measured accuracy.
@@ -37,6 +37,9 @@ import core
 from core import hamiltonians as hm
 from core.sampling import angle_between
 
+BASELINE = "af19e2b"
+"""The commit the adaptive image's speed-up is measured against (one ray a pixel, gauss4;
+docs/performance.md keeps what it was)."""
 OUT = os.path.join("out", "bench")
 
 
@@ -226,7 +229,7 @@ def versus(
         _frame(here, ref_path, size, "--method", "dopri5", "--tolerance", "1e-11")
     ref = dict(np.load(ref_path)) if reference else None  # without: no accuracy column
     runs = {
-        "af19e2b gauss4 0.25 px (radians)": (baseline, ("--method", "gauss4", "--tolerance",
+        f"{BASELINE} gauss4 0.25 px (radians)": (baseline, ("--method", "gauss4", "--tolerance",
                                                         f"{0.25 * pixel!r}")),
         "new default, 0.25 px, 1 sample": (here, ("--tolerance-px", "0.25")),
         "new default, Final (0.25 px, 16 samples)": (here, ("--tolerance-px", "0.25",
@@ -248,7 +251,7 @@ def versus(
         rows.append(row)
         print(f"{width}x{height} {name}: {best:.1f} s (best of {repeats}), "
               f"{100 * row['within_0.25px']:.2f} % of escaped pixels within 0.25 px, "
-              f"{row['rays']} rays, {row['speedup']:.2f}x af19e2b (target >= 4x)")  # fmt: skip
+              f"{row['rays']} rays, {row['speedup']:.2f}x {BASELINE} (target >= 4x)")  # fmt: skip
     return rows
 
 
@@ -259,7 +262,7 @@ def main() -> None:
     parser.add_argument("--only", default="honesty,aa,speed")
     parser.add_argument("--aa-size", type=int, default=128)
     parser.add_argument("--images", default=None, help="write the before/after figure here")
-    parser.add_argument("--baseline", default=None, help="a checkout of af19e2b (versus)")
+    parser.add_argument("--baseline", default=None, help=f"a checkout of {BASELINE} (versus)")
     args = parser.parse_args()
     only = set(args.only.split(","))
     if args.images:
