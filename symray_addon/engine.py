@@ -73,7 +73,9 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
             scene, depsgraph, use_border=True, camera_object=self.camera_override
         )
         for warning in job.warnings:
-            self.report({"WARNING"}, warning)
+            if warning not in _warned:  # once per render job: an animation's frames repeat them
+                _warned.add(warning)
+                self.report({"WARNING"}, warning)
         passes = enabled_passes(scene.symray)
         for _core_name, name in passes:
             self.add_pass(name, 1, "X")
@@ -153,6 +155,16 @@ EXTRA_PANELS = (
     "VIEWLAYER_PT_layer_passes",
 )
 EXCLUDED_PREFIXES = ("RENDER_PT_freestyle", "VIEWLAYER_PT_freestyle", "MATERIAL_PT_freestyle")
+_warned: set[str] = set()
+"""Warnings reported in this render job (a still, or every frame of an animation)."""
+
+
+@bpy.app.handlers.persistent
+def _new_render_job(*_args: Any) -> None:
+    """A render job starts (F12, or an animation before its first frame): warn afresh."""
+    _warned.clear()
+
+
 _added_to: list[type] = []
 
 
@@ -188,9 +200,13 @@ def register() -> None:
     """Register the SYMRAY render engine."""
     bpy.utils.register_class(SymRayRenderEngine)
     _add_compat_engine()
+    if _new_render_job not in bpy.app.handlers.render_init:
+        bpy.app.handlers.render_init.append(_new_render_job)
 
 
 def unregister() -> None:
     """Unregister the SYMRAY render engine."""
+    if _new_render_job in bpy.app.handlers.render_init:
+        bpy.app.handlers.render_init.remove(_new_render_job)
     _remove_compat_engine()
     bpy.utils.unregister_class(SymRayRenderEngine)

@@ -649,3 +649,49 @@ def test_the_engine_reports_the_unsupported_settings(addon, factory_scene, capfd
     printed = capfd.readouterr().out.splitlines()
     for name in IGNORED.values():
         assert sum(line.startswith(f"Warning: {name}") for line in printed) == 1, printed
+
+
+WARNED_JOBS_SCRIPT = """
+import sys
+import bpy
+
+bpy.ops.preferences.addon_enable(module=sys.argv[1])
+bpy.ops.wm.open_mainfile(filepath=sys.argv[2])
+assert bpy.ops.render.render(animation=True) == {"FINISHED"}
+print("SYMRAY-MARK stills")
+for _ in range(2):
+    assert bpy.ops.render.render(write_still=False) == {"FINISHED"}
+"""
+
+
+def test_a_warning_is_given_once_per_render_job(addon, factory_scene, tmp_path):
+    """A material node the unbaked reader ignores is named once in a 3-frame animation (not
+    once a frame), and again in each later still: once per render job."""
+    import os
+    import subprocess
+    import sys
+
+    scene = factory_scene
+    scene.symray.lighting = "UNLIT"
+    tree = bpy.data.objects["Cube"].active_material.node_tree
+    checker = tree.nodes.new("ShaderNodeTexChecker")
+    principled = next(n for n in tree.nodes if n.type == "BSDF_PRINCIPLED")
+    tree.links.new(checker.outputs["Color"], principled.inputs["Base Color"])
+    scene.render.resolution_x, scene.render.resolution_y = 16, 12
+    scene.frame_start, scene.frame_end = 1, 3
+    scene.render.filepath = str(tmp_path / "frame_####")
+    blend = tmp_path / "warned.blend"
+    bpy.ops.wm.save_as_mainfile(filepath=str(blend), copy=True)
+    run = subprocess.run(
+        [sys.executable, "-c", WARNED_JOBS_SCRIPT, addon.package, str(blend)],
+        capture_output=True, text=True, timeout=300, env=dict(os.environ),
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr[-2000:]
+    text = run.stdout + run.stderr
+    animation, stills = text.split("SYMRAY-MARK stills")
+    assert sorted(tmp_path.glob("frame_*.png")) and len(list(tmp_path.glob("frame_*"))) == 3
+
+    def warned(part: str) -> int:
+        return sum("Checker" in line and "arning" in line for line in part.splitlines())
+
+    assert (warned(animation), warned(stills)) == (1, 2), text[-3000:]
