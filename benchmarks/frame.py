@@ -6,7 +6,7 @@
 Renders with core.render (error pass on), then saves the time, the rays, and what each
 pixel's centre sees (escape direction, or the unit vector to the hit point; NaN where
 captured) as that render drew it: for an old checkout, from its tracer at the render's
-displayed step (before issue 13 the image showed a run at half the step); for this one,
+displayed step (an old checkout's image may show a run at half the step); for this one,
 from the ``direction`` pass. Uses only names that exist in every version since the baseline.
 """
 
@@ -22,9 +22,9 @@ from core import hamiltonians as hm
 
 
 class _Textured:
-    """A constant-colour primitive recoloured by a texture where it is hit (the baseline asked
-    textures about empty batches and failed there, fixed in issue 11; its figures wrapped
-    textured primitives like this)."""
+    """A constant-colour primitive recoloured by a texture where it is hit (an old checkout
+    asks textures about empty batches and fails there; its figures wrapped textured
+    primitives like this)."""
 
     def __init__(self, obj, texture) -> None:
         self.obj, self.texture, self.bounds = obj, texture, obj.bounds

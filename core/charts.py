@@ -18,6 +18,7 @@ class CartesianChart:
 
     name = "cartesian"
     polar_axis = False
+    axis_hint = ""
     """Whether theta = Q[2] is a polar angle, singular on the axis (sin theta = 0)."""
 
     def __init__(self, time_index: int | None):
@@ -57,6 +58,7 @@ class SpheroidalChart:
 
     name = "spherical"
     polar_axis = True
+    axis_hint = ""
     offset = 1
     time_index = 0
 
@@ -132,6 +134,11 @@ class KerrBLChart:
 
     name = "kerr_bl"
     polar_axis = True
+    axis_hint = (
+        " with an implicit method such as gauss4 (Kerr's explicit split is traced in"
+        " Boyer–Lindquist)"
+    )
+    """What to add to the polar-axis refusal's advice to use the Kerr–Schild chart."""
     offset = 1
     time_index = 0
 
@@ -222,6 +229,7 @@ class IsotropicChart:
 
     name = "isotropic"
     polar_axis = False
+    axis_hint = ""
     offset = 0
     time_index = None
 

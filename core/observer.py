@@ -12,8 +12,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .charts import KerrBLChart
-
 
 class ObserverError(ValueError):
     """No observer frame can be set up where the rays start (the camera); subclasses say why."""
@@ -179,13 +177,7 @@ def _diagnose(model, chart, Q: np.ndarray, ginv: np.ndarray, bad: np.ndarray) ->
         return CoordinateAxisError(
             "the camera is on the polar axis (theta = 0 or pi) of the model's spherical / "
             "Boyer–Lindquist coordinates, where they are singular: move it off the axis "
-            "(x = y = 0 in the centre's frame), or use the Kerr–Schild chart"
-            + (
-                " with an implicit method such as gauss4 (Kerr's explicit split is traced"
-                " in Boyer–Lindquist)"
-                if isinstance(chart, KerrBLChart)
-                else ""
-            )
+            "(x = y = 0 in the centre's frame), or use the Kerr–Schild chart" + chart.axis_hint
         )
     inside = _inside_horizon(model, Q)
     if inside.any():

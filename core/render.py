@@ -434,7 +434,9 @@ class _Buffers:
             if name == "direction":  # nothing is seen where a ray was captured or failed
                 ending = self.ending[idx]
                 data[(ending == ENDING["captured"]) | (ending == ENDING["failed"])] = np.nan
-            out.passes[name] = data.reshape(shape if kind.channels == 1 else (*shape, 3))
+            out.passes[name] = data.reshape(
+                shape if kind.channels == 1 else (*shape, kind.channels)
+            )
         return out
 
     def result(self, camera, passes, seconds, cancelled, tracer) -> RenderResult:

@@ -16,10 +16,12 @@ from typing import Any
 import bpy
 import numpy as np
 
-from . import output, properties, render_job
+from ..core import passes as core_passes
+from . import output, render_job
 
-PASSES = tuple((name, f"SymRay {label}", toggle) for name, label, toggle in properties.PASSES)
-"""(core pass, Blender pass name, scene.symray toggle), in properties.PASSES order."""
+PASSES = tuple((p.name, p.layer, p.toggle) for p in core_passes.PASSES if p.label)
+"""(core pass, Blender pass name, scene.symray toggle) of the add-on's passes, in the core
+table's order (core.passes)."""
 
 
 def enabled_passes(settings: Any) -> list[tuple[str, str]]:

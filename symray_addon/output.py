@@ -24,9 +24,9 @@ import bpy
 import numpy as np
 
 from ..core import imageio
-from .properties import PASSES
+from ..core import passes as core_passes
 
-PASS_LAYERS = {name: f"SymRay {label}.X" for name, label, _toggle in PASSES}
+PASS_LAYERS = {p.name: f"{p.layer}.X" for p in core_passes.PASSES if p.label}
 """Core pass -> its channel in the operator's passes EXR (the engine's pass name + '.X')."""
 BLENDER_IMAGES = {"RENDER_RESULT": "render result", "COMPOSITING": "compositor viewer"}
 """Image types Blender fills itself (Image.type) -> what to call them in a message."""

@@ -136,11 +136,12 @@ class Method:
         system's form lowers it: Splitting)."""
         return self.order
 
-    def error_constant_on(self, model: Any) -> float | None:
-        """C in err = C h^order_on(model) around a mass, from the method alone: its own
-        ``error_constant`` (the renderer's measurements per model form take precedence:
+    def error_constant_on(self, system: Any) -> float | None:
+        """C in err = C h^order_on(system) around a mass, from the method alone: its own
+        ``error_constant``, measured at its nominal order, so None where the system lowers
+        it (the renderer's measurements per model form take precedence:
         core.tracing.steps.FORM_CALIBRATIONS)."""
-        return self.error_constant
+        return self.error_constant if self.order_on(system) == self.order else None
 
     def __init__(self, **options: Any) -> None:
         self.options = dict(options)

@@ -57,17 +57,16 @@ def run_batch(
 ) -> int:
     """Step every ray of ``batch`` until it ends or ``max_steps`` are taken: each step the
     state becomes ``step(batch)``'s, ``events`` says which rays ended and they are dropped.
-    Returns the steps taken (the last complete one where ``cancel()`` said stop; it is
-    asked every CANCEL_EVERY steps)."""
+    Returns the steps taken (none for an empty batch; the last complete one where
+    ``cancel()`` said stop: it is asked before every CANCEL_EVERY-th step)."""
     taken = 0
-    for taken in range(1, max_steps + 1):
-        if cancel is not None and taken % CANCEL_EVERY == 0 and cancel():
-            return taken - 1
+    while taken < max_steps and batch.size:
+        if cancel is not None and (taken + 1) % CANCEL_EVERY == 0 and cancel():
+            break
+        taken += 1
         start = batch.state
         batch.state, ok, extra = step(batch)
         ended = events(batch, taken, start, ok, extra)
         if ended.any():
             batch.drop(ended)
-            if batch.size == 0:
-                return taken
     return taken

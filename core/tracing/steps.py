@@ -128,11 +128,14 @@ def form_calibration(traced: Any) -> FormCalibration:
     return FormCalibration()
 
 
-def error_constant(method: Any, traced: Any) -> float | None:
+def error_constant(method: Any, traced: Any, system: Any = None) -> float | None:
     """C of ``method`` on the form ``traced``: measured there (FORM_CALIBRATIONS), else the
-    method's own (``Method.error_constant_on``)."""
+    method's own on what it integrates, ``system`` (default ``traced``; a split for the
+    splittings: ``Method.error_constant_on``)."""
     measured = form_calibration(traced).error_constants.get(method.name)
-    return method.error_constant_on(traced) if measured is None else measured
+    if measured is not None:
+        return measured
+    return method.error_constant_on(traced if system is None else system)
 
 
 def default_method(model: Any) -> str:
@@ -166,8 +169,8 @@ def default_step(
     FAR_FIELD_SHARE of it, see core.tracing.regions); ``constant`` replaces the method's own
     where one was measured on the traced form (``error_constant``), ``largest`` the
     splittings' largest step where the form sets one (FORM_CALIBRATIONS), and
-    ``order`` the method's nominal order (``Method.order_on``: its order on the system
-    traced). Otherwise
+    ``order`` the method's order on what it integrates (``Method.order_on``; default its
+    nominal ``order``). Otherwise
     (media, user models, methods without a constant): h = 0.5 length tol^(1/order).
     """
     tol = min(max(float(tolerance), 1e-14), 1e-1)

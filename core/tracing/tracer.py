@@ -86,7 +86,8 @@ class TracePlan:
     chart: Any = None
     region: Region | None = None
     step: float | None = None
-    captured: RayCapture | None = None
+    capture_test: RayCapture | None = None
+    """(Q, P) -> (N,) bool: rays that cannot come back out of a horizon (None: no horizon)."""
 
 
 def plan_trace(scene: Scene, options: TraceOptions, extent: float = 1.0) -> TracePlan:
@@ -113,13 +114,13 @@ def plan_trace(scene: Scene, options: TraceOptions, extent: float = 1.0) -> Trac
         options.tolerance,
         region.length_scale(model),
         scaled=region.scaled(model),
-        constant=error_constant(method, model),
+        constant=error_constant(method, model, system),
         largest=form_calibration(model).largest_step,
         order=order,
     )
     return TracePlan(
         curved=True, model=model, method=method, order=order, chart=chart_for(model),
-        region=region, step=step, captured=ray_capture_test(model),
+        region=region, step=step, capture_test=ray_capture_test(model),
     )  # fmt: skip
 
 
@@ -139,11 +140,13 @@ class Tracer:
         self.plan = plan = plan_trace(scene, options, extent)
         self.curved, self.model = plan.curved, plan.model
         self.method, self.order, self.chart = plan.method, plan.order, plan.chart
-        self.region, self.step, self.captured = plan.region, plan.step, plan.captured
+        self.region, self.step, self.captured = plan.region, plan.step, plan.capture_test
+        self.spacetime = self.curved and self.chart.time_index is not None
+        self.mass = self.model.mass if self.curved else 0.0
+        self.stepper: Stepper | None = None
+        self._near: tuple[np.ndarray, np.ndarray] | None = None
         if not self.curved:
             return
-        self.spacetime = self.chart.time_index is not None
-        self.mass = self.model.mass
         if scene.disk is not None:
             self.disk = self._disk_light(scene)
         self.stepper = Stepper(self.method, self.model, self.captured)
@@ -265,6 +268,7 @@ class Tracer:
         )  # fmt: skip
 
         def step(batch: Batch):
+            assert self.stepper is not None  # a curved scene's tracer has one
             return self.stepper.step(batch.systems["K"], batch.state, batch.arrays["h"], SPLITS)
 
         def events(batch: Batch, taken: int, start, ok, shell) -> np.ndarray:

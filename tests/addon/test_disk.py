@@ -112,8 +112,8 @@ def test_f12_writes_the_redshift_pass(addon, scene, helpers, tmp_path):
 @pytest.mark.parametrize("spin", [1.0, -1.0])
 def test_an_extremal_spin_with_the_disk_is_a_named_problem(addon, scene, helpers, spin):
     """Spin a/M = ±1 with the disk: the panel's checks name it as it is typed, and a render
-    refuses with the same message (it was a bare ZeroDivisionError, the panel silent);
-    without the disk, or just below ±1, nothing is wrong."""
+    refuses with the same message (never a bare ZeroDivisionError); without the disk, or
+    just below ±1, nothing is wrong."""
     _disk_scene(scene, helpers)
     validation = addon.module("symray_addon.validation")
     settings = scene.symray

@@ -81,3 +81,16 @@ def test_max_steps_and_cancel_leave_the_rest_going():
 
     assert run_batch(batch, step, events, 1000, cancel) == 2 * CANCEL_EVERY - 1
     assert np.all(batch.state[0] == 10 + 2 * CANCEL_EVERY - 1)
+
+
+def test_an_empty_batch_takes_no_step():
+    """A batch whose rays all ended before the loop (integrate: every initial H not finite)
+    takes no step; integrate returns at once, the rays failed where they started."""
+    import core
+    from core import hamiltonians as hm
+
+    batch = _batch([])
+    assert run_batch(batch, lambda b: 1 / 0, lambda *a: 1 / 0, max_steps=10**6) == 0
+    res = core.integrate(hm.from_expression("0.5*(p**2 + q**2)", q=["q"], p=["p"]),
+                         [[np.nan]], [[1.0]], step=0.01, steps=10**6, record_every=1)  # fmt: skip
+    assert res.failed[0] and res.steps[0] == 0 and res.trajectory.s.shape[0] == 1

@@ -80,6 +80,18 @@ def test_a_trace_is_planned_once_in_a_frozen_plan():
     tracer = Tracer(kerr, TraceOptions(tolerance=1e-6), 10.0)
     assert plan.method.name == tracer.method.name == "blanes_moan_s10"
     assert (plan.order, plan.step, plan.chart.name) == (tracer.order, tracer.step, "kerr_bl")
-    assert plan.region.radius == tracer.region.radius and plan.captured is not None
+    assert plan.region.radius == tracer.region.radius and plan.capture_test is not None
     with pytest.raises(dataclasses.FrozenInstanceError):
         plan.step = 1.0
+
+
+def test_a_methods_own_constant_holds_only_at_its_nominal_order():
+    """blanes_moan6's own constant was measured at order 6: it has none on a split where it
+    reaches 4 (Kerr's, Schwarzschild's), where the renderer's table has one; it keeps it on a
+    medium's split (order 6)."""
+    method = METHODS["blanes_moan6"]
+    kerr = hm.kerr(rg=1.0, a=0.45, chart="kerr_schild").for_backward_tracing(True)
+    assert method.error_constant_on(kerr.split_parts()) is None
+    assert error_constant(method, kerr, kerr.split_parts()) == 5.5e-4
+    medium = hm.medium("1 + 0.1*x").split_parts(0.5)
+    assert method.error_constant_on(medium) == method.error_constant

@@ -329,7 +329,7 @@ def test_disk_refusals():
 @pytest.mark.parametrize("spin", [1.0, -1.0])
 def test_an_extremal_hole_refuses_the_disk_by_name(spin):
     """|a/M| = 1: the prograde ISCO meets the horizon (r = M); a disk there is refused with a
-    message naming the spin and why (it was a bare ZeroDivisionError at the first disk
+    message naming the spin and why (never a bare ZeroDivisionError at the first disk
     hit); just below, the Novikov–Thorne closed form still matches the Page–Thorne
     quadrature and a render has every disk pixel's g finite."""
     message = r"spin a/M must lie in \(-1, 1\) with an accretion disk, got -?1: at ±1 the disk's"

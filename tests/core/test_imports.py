@@ -1,4 +1,4 @@
-"""No import cycles among the project's modules (issue 21).
+"""No import cycles among the project's modules.
 
 The graph is read from the source (ast), every import statement counted: module level, inside
 functions (a lazy import that only hides a cycle is still one) and under TYPE_CHECKING.
