@@ -115,7 +115,7 @@ class RENDER_PT_symray(SymRayPanelMixin, bpy.types.Panel):
         layout.prop(settings, "model")
         layout.prop(settings, "center")
         model = settings.model
-        if model in {"SCHWARZSCHILD", "KERR"}:
+        if capabilities(model).mass:
             layout.prop(settings, "rg")
         if model == "KERR":
             row = layout.row()
