@@ -115,7 +115,7 @@ def test_engine_reports_bad_input(addon, scene, helpers, rendered):
     np.testing.assert_array_equal(helpers.image_array(scene.symray.image_name), rendered)
 
 
-# -- issue #11: values beyond the properties' ranges, methods and cameras that cannot render --
+# -- values beyond the properties' ranges, methods and cameras that cannot render ------------
 
 KERR_METHODS_REFUSED = ("tao2", "tao4")
 SIGNATURE_MINUS = "1, 0, 0, 0; 0, -1, 0, 0; 0, 0, -1, 0; 0, 0, 0, -1"
@@ -222,7 +222,7 @@ def test_engine_reports_out_of_range_settings(addon, scene, helpers, rendered):
     np.testing.assert_array_equal(helpers.image_array(scene.symray.image_name), rendered)
 
 
-# -- issue 22 item 14: settings handled silently ----------------------------------------
+# -- settings that must not be handled silently -------------------------------------------
 
 
 @pytest.mark.parametrize(

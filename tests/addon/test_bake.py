@@ -1,4 +1,4 @@
-"""Surfaces lit by Blender (issue #15): Cycles bakes, emission, unsupported-node reports.
+"""Surfaces lit by Blender: Cycles bakes, emission, unsupported-node reports.
 
 The reference for lit surfaces is Cycles itself: the same scene rendered by Cycles (same
 camera) must match SymRay's flat-space image with baking. Scenes are tiny (64x48 pixels,
@@ -181,7 +181,7 @@ def _cycles_reference(scene, tmp_path, filter_width: float) -> np.ndarray:
 
 @pytest.mark.parametrize("quality", ["RADIANS", "FINAL"])
 def test_baked_surfaces_match_cycles(addon, scene, helpers, tmp_path, quality):
-    """Acceptance (issue #15): flat model, diffuse materials under a Sun and a point light,
+    """Acceptance: flat model, diffuse materials under a Sun and a point light,
     baked: SymRay's image matches Cycles' render of the same scene within 0.05 mean
     absolute on surface pixels; one ray through each pixel centre (Cycles' filter made
     0.01 px wide), and anti-aliased (Final; both with Blender's 1.5 px filter)."""

@@ -1,4 +1,4 @@
-"""Baking in Blender's own factory scene (issue 22): child collections, animations.
+"""Baking in Blender's own factory scene: child collections, animations.
 
 The factory scene keeps its objects in the "Collection" child collection, which the
 temporary bake scene must link and whose exclusions it must copy; an animation render

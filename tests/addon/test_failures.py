@@ -1,4 +1,4 @@
-"""Every failure of a render is a clear error and nothing good is lost (issue 11).
+"""Every failure of a render is a clear error and nothing good is lost.
 
 F12 (``bpy.ops.render.render(write_still=True)``) and the SymRay operator, failing in
 every way a frame can fail: a worker process killed, no memory, Python's recursion limit,

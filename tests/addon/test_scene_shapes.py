@@ -1,4 +1,4 @@
-"""Real scene shapes (issue #22), starting from Blender's factory startup scene.
+"""Real scene shapes, starting from Blender's factory startup scene.
 
 The factory file (Cube, Light, Camera in "Collection") gains what users' files hold:
 nested and excluded collections, a collection instance, a modifier, a NURBS path with a

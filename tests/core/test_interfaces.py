@@ -1,4 +1,4 @@
-"""The written interfaces (issue #12): what a method and a model provide, no probing."""
+"""The written interfaces: what a method and a model provide, no probing."""
 
 import numpy as np
 import pytest

@@ -1,4 +1,4 @@
-"""Fast evaluation paths of the models agree with the plain ones (issue #6 optimizations).
+"""Fast evaluation paths of the models agree with the plain ones.
 
 Kerr–Schild is evaluated in its Kerr–Schild form with dual numbers over q only, the
 Poincaré-transformed K = g (H - H0) in one fused evaluation, and implicit kicks at fixed

@@ -1,4 +1,4 @@
-"""Explicit symplectic splittings (issue #14): coefficients, observed order, the exact flows
+"""Explicit symplectic splittings: coefficients, observed order, the exact flows
 of a medium's split, the refusal where a model offers none, and images against dopri5.
 
 References are independent of the methods: the exact circular Kepler orbit, the analytic

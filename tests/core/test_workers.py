@@ -240,7 +240,7 @@ def test_finished_chunks_are_not_kept_by_the_pool(kind):
 @pytest.mark.parametrize("kind", ["threads", pytest.param("processes", marks=needs_fork)])
 @pytest.mark.parametrize("count", [1, 2, 3])
 def test_chunks_handed_out_are_bounded_by_what_the_caller_took(kind, count):
-    """Back-pressure (issue 11 item 6): workers faster than the caller never run more than
+    """Back-pressure: workers faster than the caller never run more than
     IN_FLIGHT_PER_WORKER chunks per worker ahead of it, whatever the number of chunks
     (before, every chunk was handed out at once and the results piled up)."""
     started = multiprocessing.get_context("fork" if kind == "processes" else None).Value("i", 0)
