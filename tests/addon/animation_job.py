@@ -25,6 +25,8 @@ import os
 import resource
 from pathlib import Path
 
+from exr_output import exr_output  # this folder: the script's own
+
 
 def _rss() -> int:
     """Resident memory of this process now, in bytes (Linux)."""
@@ -64,12 +66,7 @@ def _scene(frames: int, texel: float):
     for frame, x in ((1, -1.0), (max(frames, 2), 1.0)):
         cube.location.x = x
         cube.keyframe_insert("location", index=0, frame=frame)
-    settings = scene.render.image_settings
-    if "media_type" in settings.bl_rna.properties:
-        settings.media_type = "IMAGE"
-    settings.file_format = "OPEN_EXR"
-    settings.color_depth = "32"
-    settings.color_mode = "RGBA"
+    exr_output(scene)
     scene.render.use_file_extension = True
     scene.frame_set(1)
     return scene

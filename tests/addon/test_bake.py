@@ -14,6 +14,8 @@ import bpy
 import numpy as np
 import pytest
 
+from tests.addon.exr_output import exr_output
+
 EMISSION = (1.0, 0.5, 0.2)
 
 
@@ -161,14 +163,7 @@ def _cycles_reference(scene, tmp_path, filter_width: float) -> np.ndarray:
     scene.cycles.use_denoising = False
     scene.cycles.use_adaptive_sampling = False
     scene.cycles.filter_width = filter_width  # 0.01: samples at pixel centres
-    settings = scene.render.image_settings
-    if "media_type" in settings.bl_rna.properties:
-        settings.media_type = "IMAGE"
-    settings.file_format = "OPEN_EXR"
-    settings.color_depth = "32"
-    settings.color_mode = "RGBA"
-    scene.render.filepath = str(tmp_path / "cycles.exr")
-    scene.render.use_file_extension = False
+    exr_output(scene, tmp_path / "cycles.exr")
     bpy.ops.render.render(write_still=True)
     scene.render.engine = engine
     image = bpy.data.images.load(str(tmp_path / "cycles.exr"))
@@ -410,18 +405,25 @@ def test_f12_off_the_main_thread_without_a_bake(addon, scene, helpers):
 # -- what a bake must leave out, see, and leave alone ------------------------------------
 
 
-def _sunlit(scene, helpers, energy: float = 3.0):
-    """A Sun shining straight down, a camera on -Y looking at the origin, the flat model
-    and Baked lighting with small, quick bakes."""
+def _sunlit(
+    scene,
+    helpers,
+    energy: float = 3.0,
+    tilt=(0.4, 0.3, 0.0),
+    camera=((0.0, -12.0, 3.0), (1.35, 0.0, 0.0)),
+    texel: float = 0.3,
+):
+    """A Sun of ``energy`` turned by ``tilt`` from straight down, a camera (location,
+    rotation), the flat model and Baked lighting with small, quick bakes of ``texel``."""
     sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
     sun.data.energy = energy
-    sun.rotation_euler = (0.4, 0.3, 0.0)
+    sun.rotation_euler = tilt
     scene.collection.objects.link(sun)
-    helpers.add_camera(scene, location=(0.0, -12.0, 3.0), rotation=(1.35, 0.0, 0.0))
+    helpers.add_camera(scene, location=camera[0], rotation=camera[1])
     scene.symray.model = "FLAT"
     scene.symray.lighting = "BAKE"
     scene.symray.pass_ending = True
-    scene.symray.bake_texel_size = 0.3
+    scene.symray.bake_texel_size = texel
     scene.symray.bake_samples = 4
     bpy.context.view_layer.update()
 
@@ -580,19 +582,9 @@ def test_text_is_drawn_once_with_its_bake(addon, scene, helpers):
     warning). Flat text facing a Sun straight above: Lambert 0.8 E / pi (the median hit
     within 2 %; texels on the glyphs' edges mix the glyph with the bake's margin, so 60 %
     of hits, not all, are within 5 %: 67 % measured)."""
-    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
-    sun.data.energy = 1.0
-    scene.collection.objects.link(sun)
     bpy.ops.object.text_add()
-    text = bpy.context.object
-    text.data.body = "Sym"
-    helpers.add_camera(scene, location=(0.8, 0.35, 3.0), rotation=(0.0, 0.0, 0.0))
-    scene.symray.model = "FLAT"
-    scene.symray.lighting = "BAKE"
-    scene.symray.pass_ending = True
-    scene.symray.bake_texel_size = 0.02
-    scene.symray.bake_samples = 4
-    bpy.context.view_layer.update()
+    bpy.context.object.data.body = "Sym"
+    _sunlit(scene, helpers, 1.0, (0.0, 0.0, 0.0), ((0.8, 0.35, 3.0), (0.0, 0.0, 0.0)), 0.02)
     addon.module("symray_addon.bake").clear_cache()
     job, result = _trace(addon, scene)
     assert job.warnings == []

@@ -17,6 +17,8 @@ from pathlib import Path
 import bpy
 import numpy as np
 
+from tests.addon.exr_output import exr_output
+
 JOB = Path(__file__).with_name("animation_job.py")
 
 
@@ -30,21 +32,9 @@ def _exr(path: Path) -> np.ndarray:
     return flat.reshape(h, w, 4)[::-1]
 
 
-def _exr_output(scene, path: Path) -> None:
-    """Make F12 write linear RGBA float EXR to ``path``."""
-    settings = scene.render.image_settings
-    if "media_type" in settings.bl_rna.properties:
-        settings.media_type = "IMAGE"
-    settings.file_format = "OPEN_EXR"
-    settings.color_depth = "32"
-    settings.color_mode = "RGBA"
-    scene.render.filepath = str(path)
-    scene.render.use_file_extension = False
-
-
 def _f12(scene, path: Path) -> np.ndarray:
     """An F12 still of ``scene`` (its engine) as linear RGBA."""
-    _exr_output(scene, path)
+    exr_output(scene, path)
     assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
     return _exr(path)
 

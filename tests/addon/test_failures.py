@@ -16,6 +16,8 @@ import bpy
 import numpy as np
 import pytest
 
+from tests.exr_faults import fail_passes_file
+
 FAILURES = ["killed worker", "MemoryError", "RecursionError", "deep expression"]
 
 
@@ -145,7 +147,7 @@ def _image_pixels(name: str) -> np.ndarray:
 
 
 def test_the_operators_image_survives_saving_the_blend(addon, scene, helpers, tmp_path):
-    """Issue 11 item 9: the generated float image came back blank (80x45) after reload."""
+    """The generated float image keeps its pixels (above 1 too) through a save and reload."""
     _flat_scene(scene, helpers)
     helpers.set_world_color(scene, (0.2, 0.3, 1.7, 1.0))  # a float value above 1
     blend = str(tmp_path / "scene.blend")
@@ -166,7 +168,7 @@ def test_the_operators_image_survives_saving_the_blend(addon, scene, helpers, tm
 
 
 def test_a_blend_relative_exr_path_needs_a_saved_file(addon, scene, helpers, tmp_path, monkeypatch):
-    """Issue 11 item 10: '//x.exr' in an unsaved file landed in the working directory."""
+    """'//x.exr' in an unsaved file is refused, never written to the working directory."""
     monkeypatch.chdir(tmp_path)
     _flat_scene(scene, helpers)
     assert bpy.ops.symray.render() == {"FINISHED"}
@@ -197,39 +199,15 @@ def _exr_pair(scene, helpers, tmp_path):
 def test_a_failed_passes_write_keeps_both_exr_files(
     addon, scene, helpers, tmp_path, monkeypatch, stage
 ):
-    """Issue 22 item 11: the passes EXR failing left a new RGBA file beside the old passes
-    file, with the message "Invalid argument". Now both stay as they were, and so does the
-    image; the message names the file and what failed."""
+    """The passes EXR failing to be written or renamed: both files stay as they were (never
+    a new RGBA file beside the old passes file), and so does the image; the message names
+    the file and what failed."""
     files, before = _exr_pair(scene, helpers, tmp_path)
     image = helpers.image_array(scene.symray.image_name).copy()
     cube = bpy.data.materials["Red"].node_tree.nodes["Principled BSDF"]
     cube.inputs["Base Color"].default_value = (0.1, 0.2, 0.9, 1.0)  # a different image
-    real_replace = os.replace
-
-    def replace(src, dst):
-        if str(dst).endswith(".passes.exr"):
-            raise OSError(22, "Invalid argument")
-        return real_replace(src, dst)
-
-    imageio = addon.module("core.imageio")
-    real_writer = imageio._bytes_writer
-
-    def disk_full_on_passes(data):
-        def write(tmp):
-            if ".out.passes.exr." not in tmp:
-                return real_writer(data)(tmp)
-            with open(tmp, "wb") as f:
-                f.write(data[: len(data) // 2])
-            raise OSError(28, "No space left on device")
-
-        return write
-
-    if stage == "replace":
-        monkeypatch.setattr(os, "replace", replace)
-    else:
-        monkeypatch.setattr(imageio, "_bytes_writer", disk_full_on_passes)
+    reason = fail_passes_file(monkeypatch, addon.module("core.imageio"), stage)
     message = helpers.operator_error(lambda: bpy.ops.symray.render())
-    reason = "Invalid argument" if stage == "replace" else "No space left on device"
     assert f"cannot write image '{files[1]}': {reason}; no file was changed" in message
     assert [f.read_bytes() for f in files] == before
     assert sorted(os.listdir(tmp_path)) == ["out.exr", "out.passes.exr"]
@@ -244,8 +222,8 @@ def test_a_failed_passes_write_keeps_both_exr_files(
 def test_blenders_own_images_are_refused_before_anything_is_written(
     addon, scene, helpers, tmp_path, name, exists
 ):
-    """Issue 22 item 12: Image "Render Result" gave a TypeError text and "nothing was
-    written" while the EXR pair had been replaced."""
+    """Image "Render Result" (or "Viewer Node") is refused by name before anything is
+    written: the EXR pair and the image stay as they were."""
     files, before = _exr_pair(scene, helpers, tmp_path)
     image = helpers.image_array(scene.symray.image_name).copy()
     if exists:  # Blender makes both once something is rendered and composited
@@ -266,7 +244,7 @@ def test_blenders_own_images_are_refused_before_anything_is_written(
 def test_an_image_failing_after_the_exr_pair_says_what_was_written(
     addon, scene, helpers, tmp_path, monkeypatch
 ):
-    """Issue 22 item 12: "nothing was written" while the EXR pair had been replaced."""
+    """An image failing after the EXR pair was written says which files were written."""
     files, _before = _exr_pair(scene, helpers, tmp_path)
     output = addon.module("symray_addon.output")
 

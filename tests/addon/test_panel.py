@@ -100,7 +100,7 @@ def test_sub_panels_draw(scene, panel):
 
 
 def test_lighting_panel_states_the_limits(scene):
-    """Issue #15: what baking cannot show is said in the panel, next to the bake button."""
+    """What baking cannot show is said in the panel, next to the bake button."""
     log = _draw("RENDER_PT_symray_lighting", scene)
     text = " ".join(t for kind, t in log if kind == "label")
     assert "no glossy" in text and "straight paths" in text
@@ -153,7 +153,7 @@ def _camera(scene, location):
     ],
 )
 def test_panel_shows_render_problems_before_a_render(scene, setup, words):
-    """Issue #11: what a render would refuse is shown in the panel before it starts."""
+    """What a render would refuse is shown in the panel before it starts."""
     _camera(scene, (0.0, -30.0, 0.0))
     assert not any(words in text for text in _labels(scene))  # the defaults are fine
     for name, value in setup.items():

@@ -113,7 +113,7 @@ def test_center_picker_offers_empties(scene, helpers):
 
 
 def test_panels_and_compat_engines(addon, scene):
-    """Issue #15: SymRay's panels only for the SYMRAY engine; the render button stays
+    """SymRay's panels only for the SYMRAY engine; the render button stays
     reachable for other engines; Film › Transparent and View Layer › Passes for SYMRAY."""
     context = SimpleNamespace(scene=scene)
     own = (

@@ -411,10 +411,9 @@ def test_operator_writes_exr(addon, scene, helpers, tmp_path):
 def test_passes_exr_holds_the_passes_switched_on_by_name(
     addon, scene, helpers, tmp_path, transparent
 ):
-    """Issue 22 item 14: passes switched off were written as zeros (ones for redshift) in
-    anonymous R, G, B, A channels: a reader took them for real values. Now each pass switched
-    on is a layer named as the engine's pass, and a pass switched off has none (Film ›
-    Transparent computes the ending pass for itself: still not written when it is off)."""
+    """Each pass switched on is a layer named as the engine's pass, and a pass switched off
+    has none (never zeros a reader would take for values; Film › Transparent computes the
+    ending pass for itself: still not written when it is off)."""
     _hole_scene(scene, helpers)
     scene.render.resolution_x, scene.render.resolution_y = 16, 12
     scene.render.film_transparent = transparent
@@ -585,7 +584,7 @@ def _prepared(addon, scene):
 def test_film_filter_size_outside_the_supported_range_is_clamped_visibly(
     addon, scene, helpers, size, used
 ):
-    """Issue 22 item 14: Filter Size 0 rendered as 0.01 px and 500 as 2 px, silently."""
+    """Filter Size outside 0.01–2 px is clamped with a warning naming both values."""
     flat_scene(scene, helpers)
     scene.render.filter_size = size
     job = _prepared(addon, scene)
@@ -621,9 +620,9 @@ def _switch_on(scene, what: str) -> None:
 
 
 def test_unsupported_settings_are_named_once_per_render(addon, factory_scene):
-    """Issue 22 item 16: depth of field, motion blur and the Z, Normal and Cryptomatte
-    passes changed nothing (byte-identical images) and said nothing. Each one switched on
-    is now a warning of its own, once per render, for the operator and for F12."""
+    """Depth of field, motion blur and the Z, Normal and Cryptomatte passes, which SymRay
+    does not render: each one switched on is a warning of its own, once per render, for
+    the operator and for F12."""
     factory_scene.symray.lighting = "UNLIT"
     assert [w for w in _prepared(addon, factory_scene).warnings if "not supported" in w] == []
     for what, name in IGNORED.items():  # one more each time

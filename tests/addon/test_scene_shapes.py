@@ -23,6 +23,8 @@ import mathutils
 import numpy as np
 import pytest
 
+from tests.addon.exr_output import exr_output
+
 ARRAYS = (
     bpy.types.bpy_prop_array,
     mathutils.Vector,
@@ -209,15 +211,6 @@ def _read_exr(path) -> np.ndarray:
     return flat.reshape(h, w, 4)[::-1]
 
 
-def _exr_output(scene, path) -> None:
-    """Make ``scene`` write 32-bit RGBA OpenEXR stills to ``path``."""
-    settings = scene.render.image_settings
-    if "media_type" in settings.bl_rna.properties:
-        settings.media_type = "IMAGE"
-    settings.file_format, settings.color_depth, settings.color_mode = "OPEN_EXR", "32", "RGBA"
-    scene.render.filepath, scene.render.use_file_extension = str(path), False
-
-
 def _cycles_alpha(scene, tmp_path) -> np.ndarray:
     """Cycles' coverage of the scene at pixel centres (row 0 at the top); the scene's
     engine and output path are given back."""
@@ -253,7 +246,7 @@ def shapes_scene(factory_scene, tmp_path):
     scene.render.resolution_x, scene.render.resolution_y = 96, 72
     scene.render.film_transparent = True
     scene.render.filter_size = 0.01
-    _exr_output(scene, tmp_path / "f12.exr")
+    exr_output(scene, tmp_path / "f12.exr")
     return scene
 
 
@@ -321,7 +314,7 @@ def test_scene_shapes_animation(addon, shapes_scene, helpers, tmp_path, lighting
     )
     assert run.returncode == 0, run.stderr[-2000:]
     frames = [_read_exr(tmp_path / f"frame_{n:04d}.exr") for n in (1, 2)]
-    _exr_output(scene, tmp_path / "f12.exr")
+    exr_output(scene, tmp_path / "f12.exr")
     for n, frame in zip((1, 2), frames, strict=True):
         scene.frame_set(n)
         here = _render("f12", helpers)

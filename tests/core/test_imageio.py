@@ -17,6 +17,7 @@ from core.imageio import (
     write_exr,
     write_png,
 )
+from tests.exr_faults import fail_passes_file
 
 RNG = np.random.default_rng(7)
 
@@ -193,37 +194,14 @@ def test_bad_png_input_shapes(tmp_path):
 
 @pytest.mark.parametrize("stage", ["write", "replace"])
 def test_a_pair_is_written_whole_or_not_at_all(tmp_path, monkeypatch, stage):
-    """Issue 22 item 11: the second file failing leaves both previous files as they were,
-    and the message names the file that failed."""
+    """The second file failing leaves both previous files as they were, and the message
+    names the file that failed."""
     first, second = _old_file(tmp_path, "a.exr"), tmp_path / "a.passes.exr"
     second.write_bytes(b"previous passes")
-    real_replace = os.replace
-
-    def broken_replace(src, dst):
-        if str(dst).endswith("passes.exr"):
-            raise OSError(5, "Input/output error")
-        return real_replace(src, dst)
-
-    real_writer = imageio._bytes_writer
-
-    def disk_full_on_passes(data):
-        def write(tmp):
-            if ".a.passes.exr." not in tmp:
-                return real_writer(data)(tmp)
-            with open(tmp, "wb") as f:
-                f.write(data[: len(data) // 2])
-            raise OSError(28, "No space left on device")
-
-        return write
-
-    if stage == "replace":
-        monkeypatch.setattr(imageio.os, "replace", broken_replace)
-    else:
-        monkeypatch.setattr(imageio, "_bytes_writer", disk_full_on_passes)
+    reason = fail_passes_file(monkeypatch, imageio, stage)
     files = [(first, {"R": np.ones((2, 2))}), (second, {"G": np.ones((2, 2))})]
     with pytest.raises(ImageWriteError) as info:
         imageio.write_exr_files(files)
-    reason = "Input/output error" if stage == "replace" else "No space left on device"
     assert str(info.value) == f"cannot write image {str(second)!r}: {reason}; no file was changed"
     assert first.read_bytes() == b"previous contents"
     assert second.read_bytes() == b"previous passes"

@@ -1,4 +1,4 @@
-"""Issue #11 (core): bad input is refused with a message that says what and why.
+"""Bad input is refused with a message that says what and why.
 
 Item 2: textured primitives with no hit in a batch; item 3: numeric inputs of core.render,
 core.integrate and the models are range-checked (no silent clamping); item 7: Tao's

@@ -171,7 +171,7 @@ def _aa_scene():
 
 
 def test_samples_in_groups_are_the_image_in_one_batch(monkeypatch):
-    """Issue 22 item 15: anti-aliasing works through SAMPLE_POINTS points at a time. Groups
+    """Anti-aliasing works through SAMPLE_POINTS points at a time. Groups
     of whole pixels' samples give the very image of one batch (and the same ray count), on a
     flat scene and on Kerr's (interpolated blocks); groups of 40 points, which split a
     pixel's 64 samples, the same within 1e-12 (the weighted sum is accumulated in another
@@ -196,9 +196,9 @@ def test_samples_in_groups_are_the_image_in_one_batch(monkeypatch):
 
 
 def test_anti_aliasing_memory_does_not_grow_with_samples(monkeypatch):
-    """Issue 22 item 15: the peak of numpy's memory (tracemalloc) rendering a frame at 1024
-    samples stays within 1.5x the peak at 64, with groups of 4096 points (before: all the
-    sub-pixel points of a tile in one batch, 128x96 at 1024 samples took 1.3 GiB)."""
+    """The peak of numpy's memory (tracemalloc) rendering a frame at 1024 samples stays
+    within 1.5x the peak at 64, with groups of 4096 points (all the sub-pixel points of a
+    tile in one batch grow with the samples: 1.3 GiB at 128x96 and 1024 samples)."""
     import tracemalloc
 
     scene = _aa_scene()

@@ -182,10 +182,10 @@ else:
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS and /proc")
 def test_threads_out_of_memory_raise_memory_error_never_exit():
-    """Issue 22 item 10: threads under an address-space limit end with MemoryError (the
-    add-on's "ran out of memory"), never by OpenBLAS ending the process ("Memory allocation
-    still failed after 10 retries", exit 1: before, at 16, 32 and often 48 MiB above the
-    warm process). With room enough the image is the one rendered inline."""
+    """Threads under an address-space limit (16, 32, 48 MiB above the warm process) end
+    with MemoryError (the add-on's "ran out of memory"), never by OpenBLAS ending the process
+    ("Memory allocation still failed after 10 retries", exit 1). With room enough the image
+    is the one rendered inline."""
     root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     env = dict(os.environ, PYTHONPATH=root)
     outcomes = {}

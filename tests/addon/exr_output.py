@@ -1,0 +1,20 @@
+"""Render output as linear RGBA 32-bit float OpenEXR (tests and animation_job.py)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+
+def exr_output(scene: Any, path: Path | str | None = None) -> None:
+    """Make ``scene``'s renders write linear RGBA float EXR (to ``path`` exactly, when given:
+    no frame number or extension added)."""
+    settings = scene.render.image_settings
+    if "media_type" in settings.bl_rna.properties:  # Blender 5
+        settings.media_type = "IMAGE"
+    settings.file_format = "OPEN_EXR"
+    settings.color_depth = "32"
+    settings.color_mode = "RGBA"
+    if path is not None:
+        scene.render.filepath = str(path)
+        scene.render.use_file_extension = False
