@@ -228,14 +228,19 @@ def _camera_distance(scene: Scene, camera) -> float:
 
 
 def _watch_margin(tracer: Tracer, camera, pixel_angle: float) -> float:
-    """World margin around geometry within which straight segments stop interpolation: a
-    coarsest block (core.sampling.STRIDE pixels) seen at the geometry's farthest corner."""
-    box = tracer.geometry.local_box(lambda x: x)
-    if box is None:
+    """World margin around each object beyond which a ray counts as clear of it: a
+    coarsest block (core.sampling.STRIDE pixels) seen at the farthest finite corner of the
+    objects' boxes (an infinite side, a plane's, counts at the camera's coordinate)."""
+    boxes = tracer.geometry.boxes()
+    if not boxes:
         return 0.0
-    corners = np.array(np.meshgrid(*zip(box[0], box[1], strict=True))).reshape(3, -1).T
-    far = float(np.max(np.linalg.norm(corners - camera.frame.position, axis=1)))
-    return CLEARANCE * STRIDE * pixel_angle * far if np.isfinite(far) else np.inf
+    eye = camera.frame.position
+    far = 0.0
+    for lo, hi in boxes:
+        ends = [np.where(np.isfinite(x), x, eye) for x in (lo, hi)]
+        corners = np.array(np.meshgrid(*zip(*ends, strict=True))).reshape(3, -1).T
+        far = max(far, float(np.max(np.linalg.norm(corners - eye, axis=1))))
+    return CLEARANCE * STRIDE * pixel_angle * far
 
 
 def _integration_budget(tolerance_px, pixel_angle: float, tracer: Tracer) -> float:

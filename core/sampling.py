@@ -7,8 +7,9 @@ rounded up to whole blocks of ``STRIDE`` nodes; blocks reaching the tile are ref
 quadtree: a block's four corners and its centre are traced; the block is
 *accepted* when
 
-- all five rays escaped, each kept clear of every object's bounds by more than
-  ``CLEARANCE`` block widths (``Tracer.watch_geometry``), none crossed a volume, and the
+- all five rays escaped, each kept clear of every object's own bounds, along every chord
+  of its path, by more than ``CLEARANCE`` x the block's spread (``Tracer.watch_geometry``,
+  core/tracing/clearance.py), none crossed a volume, and the
   centre's final direction differs from the corners' bilinear interpolation by at most
   the interpolation tolerance (over INTERPOLATION_SAFETY): the block's directions are then
   interpolated (bilinear, normalised) and each point is shaded from the background in its
@@ -74,10 +75,12 @@ its memory does not grow with ``samples`` (128x96 at 1024 samples: 1.3 GiB befor
 batch; ~0.5 kB a traced point)."""
 FILTERS = ("box", "blackman_harris")
 """Reconstruction filters: the pixel's square, or Cycles' default (width ``filter_size``)."""
-CLEARANCE = 2.0
-"""Sky and shadow blocks are interpolated only where each of their rays kept clear of every
-object's bounds by more than CLEARANCE block widths (as seen from the camera): nothing
-smaller than a block hides between its rays."""
+CLEARANCE = 1.0
+"""Sky and shadow blocks are interpolated only where each of their traced rays kept clear
+of every object's bounds by more than CLEARANCE x the block's spread (its width as seen
+from the camera, times how much its rays spread apart on the way: _magnification): every
+point of a block lies within half a block width of one of its five traced rays, so an
+object cannot reach an untraced ray there without passing within that of a traced one."""
 INTERPOLATION_SAFETY = 2.0
 """The interpolation error reported (and held within the tolerance) is this many times the
 quadratic estimate 2 d (u (1 - u) + v (1 - v)): higher-order terms of the map are not
@@ -360,8 +363,9 @@ class TileSampler:
         alike = nodes.plain[cj, ci].copy()
         ending, object_id = nodes.ending[cj, ci], nodes.object_id[cj, ci]
         alike &= object_id != DISK_ID  # its colour follows each ray's momentum: traced
-        clear = CLEARANCE * s * self.pixel_angle  # sky and shadow: no object in between
-        alike &= nodes.clearance[cj, ci] > clear
+        width = s * self.pixel_angle  # the block's width, radians
+        clear = CLEARANCE * width * _magnification(nodes, corners, width)
+        alike &= nodes.clearance[cj, ci] > clear  # sky and shadow: no object in between
         for j, i in corners:
             alike &= nodes.plain[j, i] & (nodes.ending[j, i] == ending)
             alike &= (nodes.object_id[j, i] == object_id) & (nodes.clearance[j, i] > clear)
@@ -530,6 +534,18 @@ class TileSampler:
             rays, _, _ = self._trace_points(self._image_xy(y[todo], x[todo]), cancel, False)
             points.rgba[todo] = self.shade(rays, self.background)
         return points.rgba.reshape(pj.size, offsets.shape[0], 4)
+
+
+def _magnification(nodes: _Nodes, corners, width: float) -> np.ndarray:
+    """(B,) how much wider than at the camera a block's rays spread at their ends (at
+    least 1): the largest angle between its corners' final directions over their angle
+    at the camera (``width`` radians along an edge, width sqrt 2 across); the bundle's
+    spread on the way stays within the larger of the two (NaN: 1)."""
+    (a, b, c, d) = (nodes.direction[j, i] for j, i in corners)
+    edges = [angle_between(a, b), angle_between(c, d), angle_between(a, c), angle_between(b, d)]
+    diagonals = [angle_between(a, d), angle_between(b, c)]
+    ratio = np.maximum(np.max(edges, axis=0), np.max(diagonals, axis=0) / math.sqrt(2))
+    return np.maximum(np.nan_to_num(ratio / width, nan=0.0), 1.0)
 
 
 def _pixel_groups(pixels: int, samples: int):

@@ -102,13 +102,20 @@ def _fill(n: int, rows: np.ndarray, t, p, nrm, uv, color, object_id: int) -> Hit
 
 def slab_entry(a: np.ndarray, inv_d: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Entry parameter t of segments a + t d, t in [0, 1], into the box; +inf where missed."""
+    enter, leave = slab_span(a, inv_d, lo, hi)
+    return np.where(enter <= leave, enter, _INF)
+
+
+def slab_span(a: np.ndarray, inv_d: np.ndarray, lo: np.ndarray, hi: np.ndarray):
+    """(enter, leave) parameters t of segments a + t d inside the box [lo, hi], clipped to
+    [0, 1] (enter > leave where missed)."""
     with np.errstate(invalid="ignore", over="ignore"):
         t1, t2 = (lo - a) * inv_d, (hi - a) * inv_d
     # fmin/fmax skip the NaN of 0 * inf (a segment parallel to a slab, starting on its face)
     # (numpy's stubs do not type ufunc.reduce of an array expression)
     enter = np.maximum(np.fmax.reduce(np.fmin(t1, t2), axis=1), 0.0)  # type: ignore[call-overload]
     leave = np.minimum(np.fmin.reduce(np.fmax(t1, t2), axis=1), 1.0)  # type: ignore[call-overload]
-    return np.where(enter <= leave, enter, _INF)
+    return enter, leave
 
 
 def segment_meets_box(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray):

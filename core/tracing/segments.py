@@ -127,6 +127,16 @@ class SceneGeometry:
                 trans[rows] *= t
         return radiance, trans
 
+    def boxes(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """World (lo, hi) of each object (each member of a Group) and volume."""
+        members = getattr(self.objects, "objects", [self.objects])
+        boxes = [(np.asarray(v.lo, float), np.asarray(v.hi, float)) for v in self.volumes]
+        for obj in members:
+            lo, hi = (np.asarray(x, float) for x in obj.bounds)
+            if not np.any(lo > hi):
+                boxes.append((lo, hi))
+        return boxes
+
     def local_box(self, to_local: Any) -> tuple[np.ndarray, np.ndarray] | None:
         """(lo, hi) in local coordinates (``to_local``: world (N, 3) -> local) around every
         object and volume; None: nothing."""

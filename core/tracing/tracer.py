@@ -19,10 +19,10 @@ import numpy as np
 
 from .. import checks, integrators
 from ..charts import chart_for
-from ..geometry import segment_meets_box
 from ..integrators.batch import Batch, run_batch
 from ..observer import medium_momenta, spacetime_momenta
 from . import dense
+from .clearance import ClearanceBoxes
 from .disklight import DiskLight
 from .regions import Region, region_for
 from .scene import DISK_ID, ENDING, Scene
@@ -129,8 +129,7 @@ class Tracer:
     ``plan_trace``)."""
 
     disk: DiskLight | None = None
-    _watch: tuple[np.ndarray, np.ndarray] | None = None  # world box (Tracer.watch_geometry)
-    _watch_local: tuple[np.ndarray, np.ndarray] | None = None
+    _watch: ClearanceBoxes | None = None  # Tracer.watch_geometry
 
     def __init__(self, scene: Scene, options: TraceOptions, extent: float = 1.0):
         self.scene = scene
@@ -167,18 +166,13 @@ class Tracer:
 
     def watch_geometry(self, margin: float) -> None:
         """Record each ray's clearance (``RayResults.clearance``): the smallest angle, seen
-        from the camera, between its path and the bounds of every object and volume
-        (adaptive sampling interpolates a block of pixels only where its rays kept clear by
-        more than the block's width). Straight segments count as 0 where they pass within
-        ``margin`` (world units) of the bounds, else not at all (they leave a black hole's
-        region moving away from it)."""
-        world = self.geometry.local_box(lambda x: x)
-        if world is None:
-            return
-        self._watch = (world[0] - margin, world[1] + margin)
-        local = self.geometry.local_box(self._to_local)
-        assert local is not None
-        self._watch_local = local
+        from the camera, between any chord of its path and any object's or volume's bounds
+        (core.tracing.clearance; adaptive sampling interpolates a block of pixels only
+        where its rays kept clear by more than the block's spread). Chords farther than
+        ``margin`` (world units) from every box count as clear."""
+        boxes = self.geometry.boxes()
+        if boxes:
+            self._watch = ClearanceBoxes(boxes, margin)
 
     @property
     def objects(self) -> Any:
@@ -221,10 +215,11 @@ class Tracer:
         return out
 
     # --- straight parts --------------------------------------------------------------
-    def _straight(self, rows, a, d, out: RayResults, far: float = _FAR):
-        """Rays that stay straight from a along d: one cast each, ending hit or escaped."""
-        self._watch_segments(rows, a, a + far * d, out)
-        h = self.geometry.record(rows, a, a + far * d, out)
+    def _straight(self, rows, a, d, out: RayResults, eye=None):
+        """Rays that stay straight from a along d: one cast each, ending hit or escaped
+        (``eye``: where they are seen from, default a)."""
+        self._watch_segments(rows, a, a + _FAR * d, out, eye)
+        h = self.geometry.record(rows, a, a + _FAR * d, out)
         out.ending[rows[~h]] = ENDING["escaped"]
         out.direction[rows] = d
 
@@ -303,7 +298,9 @@ class Tracer:
         if not ok.all():
             out.ending[idx[ended]] = ENDING["failed"]
             out.position[idx[ended]] = self._to_world(X_prev[:, ended].T)
-        self._watch_steps(idx, X, camera, out)
+        if self._watch is not None:
+            world = [self._to_world(x.T) for x in (X_prev, X, camera)]
+            self._watch_segments(idx, world[0], world[1], out, world[2])
         if self._near is not None:  # surfaces and volumes along this step's segment
             step_ends = _StepEnds(self, batch.systems["K"], start, (Q, P), arrays["h"], camera)
             ended |= self._segments(idx, X_prev, X, ok, out, step_ends, camera)
@@ -325,6 +322,7 @@ class Tracer:
                 local,
                 self._to_world(local),
                 out,
+                self._to_world(camera[:, leaving].T),
             )
             ended |= leaving
         if ended.any():
@@ -429,38 +427,25 @@ class Tracer:
             keep = deviation[todo[ok]] > allowed[todo[ok]]
             todo, lo = todo[ok][keep], ta[first][keep]
 
-    def _watch_segments(self, rows, a, b, out: RayResults) -> None:
-        """Clearance 0 for the rays whose straight world segment a -> b meets the watched
-        box (with its margin)."""
+    def _watch_segments(self, rows, a, b, out: RayResults, eye=None) -> None:
+        """Lower the clearance of the rays ``rows`` to that of their world chords a -> b
+        seen from ``eye`` (default: a, the camera)."""
         if self._watch is not None:
-            out.clearance[rows[segment_meets_box(a, b, *self._watch)]] = 0.0
-
-    def _watch_steps(self, idx, X, camera, out: RayResults) -> None:
-        """Lower the clearance of the rays at local X (3, M) to their angular distance, from
-        the camera (local, (3, M)), to the watched box (steps are short: their ends stand
-        for them, the block test's factor 2 covers the rest)."""
-        if self._watch_local is None:
-            return
-        lo, hi = self._watch_local
-        outside = np.maximum(np.maximum(lo[:, None] - X, X - hi[:, None]), 0.0)
-        gap = np.sqrt(np.einsum("ij,ij->j", outside, outside))
-        seen = np.sqrt(np.einsum("ij,ij->j", X - camera, X - camera))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            angle = np.where(gap > 0, gap / seen, 0.0)
-        out.clearance[idx] = np.minimum(out.clearance[idx], angle)
+            angle = self._watch.angles(a, b, a if eye is None else eye)
+            out.clearance[rows] = np.minimum(out.clearance[rows], angle)
 
     def _finish_energy(self, out, rows, Q, P, H0):
         with np.errstate(all="ignore"):
             out.energy_error[rows] = np.abs(self.model.value_soa(Q, P) - H0)
 
-    def _escape(self, rows, S, Q, P, local, world, out: RayResults):
+    def _escape(self, rows, S, Q, P, local, world, out: RayResults, eye):
         """Rays leaving the region: direction from dq/ds, far-field correction, straight on."""
         _, dHdp = self.model.gradient_soa(Q, P, wrt="p")
         V = self.chart.cartesian_velocity(S, dHdp[self.chart.offset :])
         D = (V / np.linalg.norm(V, axis=0)).T
         D = self._far_field(local, D)
         d_world = D @ self.rotation.T
-        self._straight(rows, world, d_world, out)
+        self._straight(rows, world, d_world, out, eye)
         failed = ~np.isfinite(d_world).all(axis=1)
         out.ending[rows[failed]] = ENDING["failed"]
 
