@@ -12,7 +12,7 @@ export BLENDER_USER_RESOURCES ?= $(CURDIR)/.blender-user
 PYTEST_FLAGS ?= -n 2 -q
 
 .PHONY: test test-main test-oldest lint venv venv311 clean extension render figures bench \
-	bench-quick stress bench-perf bench-memory
+	bench-quick stress bench-perf bench-memory bench-honesty
 
 test: lint test-main test-oldest
 
@@ -87,6 +87,13 @@ PERF_ARGS ?=
 
 bench-perf: venv
 	PYTHONPATH=. $(PY) benchmarks/bench_perf.py $(if $(FULL),--full) $(PERF_ARGS)
+
+# The adaptive sampler's promise (tolerance_px, an honest error pass) on 8 scenes against dense
+# dopri5 references (benchmarks/honesty.py), ~5 min; HONESTY_ARGS="--quick": ~2.5 min.
+HONESTY_ARGS ?=
+
+bench-honesty: venv
+	PYTHONPATH=. $(PY) benchmarks/honesty.py $(HONESTY_ARGS)
 
 # Peak memory against resolution, issue #13 (benchmarks/bench_memory.py): Preview at 1080p
 # and 4K in ~2 min; MEMORY_ARGS="--sizes 1920x1080,7680x4320 --presets preview,final".

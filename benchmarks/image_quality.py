@@ -35,7 +35,7 @@ from image_precision import _black_hole_camera, schwarzschild_scene
 
 import core
 from core import hamiltonians as hm
-from core.sampling import angle_between
+from core.sampling import angle_between, seen_apart
 
 BASELINE = "af19e2b"
 """The commit the adaptive image's speed-up is measured against (one ray a pixel, gauss4;
@@ -51,17 +51,24 @@ def kerr_board_scene() -> core.Scene:
     )
 
 
-def _seen(result) -> np.ndarray:
-    return result.passes["direction"].reshape(-1, 3).astype(np.float64)
+def _seen(result, name: str = "direction") -> np.ndarray:
+    return result.passes[name].reshape(-1, 3).astype(np.float64)
 
 
-def true_error_px(ref, run, pixel: float) -> np.ndarray:
-    """Per pixel: angle (pixels) between what the reference and the run see; inf where
-    their endings differ; NaN where neither sees anything (captured)."""
+def true_error_px(ref, run, pixel: float, eye=None) -> np.ndarray:
+    """Per pixel, how far (pixels) what the run shows is from what the reference shows
+    (tolerance_px's measure, core.sampling.seen_apart): the angle between the escape
+    directions; for a hit, with a position pass and the camera's ``eye``, the distance
+    between the hit points over the pixel's footprint there (else the angle between the
+    directions to them); inf where the endings differ; NaN where both are captured."""
     e_ref, e_run = ref.passes["ending"].ravel(), run.passes["ending"].ravel()
-    u, v = _seen(ref), _seen(run)
     with np.errstate(all="ignore"):
-        angle = angle_between(u, v) / pixel
+        if eye is not None and "position" in ref.passes and "position" in run.passes:
+            apart = seen_apart(_seen(ref), _seen(ref, "position"), _seen(run),
+                               _seen(run, "position"), e_ref, np.asarray(eye, float))  # fmt: skip
+        else:
+            apart = angle_between(_seen(ref), _seen(run))
+        angle = apart / pixel
     angle = np.where(e_ref == e_run, angle, np.inf)
     return np.where((e_ref == e_run) & (e_ref == core.ENDING["captured"]), np.nan, angle)
 

@@ -14,6 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from .tracing.scene import ENDING
+
 
 @dataclass(frozen=True)
 class Pass:
@@ -72,6 +74,9 @@ PASSES: tuple[Pass, ...] = (
     Pass("direction", np.float32, math.nan,
          "what each pixel's centre sees: the escape direction, or the unit vector to the hit "
          "point (NaN where captured or failed)", channels=3),
+    Pass("position", np.float32, math.nan,
+         "where each pixel's centre's ray ended on a surface (world coordinates; NaN where it "
+         "hit nothing)", channels=3),
     Pass("redshift", np.float32, math.nan,
          "g = observed / emitted frequency where a ray ends on the accretion disk (or first "
          "crosses a translucent one), NaN elsewhere", interpolated=False, label="Redshift"),
@@ -87,7 +92,10 @@ STORED = tuple(p for p in PASSES if p.derived_from is None)
 def traced_passes(rays: Any, seen: np.ndarray | None, error: np.ndarray | None) -> dict:
     """The stored passes of rays traced through pixel centres (a RayResults), by name:
     ``seen`` the directions they see (or None), ``error`` their estimate (or None)."""
-    values = {"steps": rays.steps, "ending": rays.ending, "redshift": rays.redshift}
+    hit = rays.ending == ENDING["hit"]
+    position = np.where(hit[:, None], rays.position, np.nan)
+    values = {"steps": rays.steps, "ending": rays.ending, "redshift": rays.redshift,
+              "position": position}  # fmt: skip
     if seen is not None:
         values["direction"] = seen
     if error is not None:

@@ -47,7 +47,7 @@ from .tracing.steps import DEFAULT_METHOD
 
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
-DEFAULT_PASSES = tuple(name for name in ALL_PASSES if name != "direction")
+DEFAULT_PASSES = tuple(name for name in ALL_PASSES if name not in ("direction", "position"))
 """The passes core.render computes unless asked otherwise."""
 _MIN_CHUNK = 2048
 TRACE_SHARE = 0.5
@@ -132,7 +132,7 @@ def render(
     sampled = samples > 1 or (tolerance_px is not None and tracer.curved)
     if sampled:
         interpolation = interpolation if tracer.curved else 0.0
-        if interpolation > 0:
+        if interpolation > 0 or samples > 1:  # blocks and anti-aliasing need clearance
             tracer.watch_geometry(_watch_margin(tracer, camera, pixel_angle))
         sampler = TileSampler(
             tracer, camera, background, shade, interpolation=interpolation, samples=samples,

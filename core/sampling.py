@@ -15,8 +15,9 @@ quadtree: a block's four corners and its centre are traced; the block is
   interpolated (bilinear, normalised) and each point is shaded from the background in its
   interpolated direction, so the sky's own detail is kept; or
 - all five hit the same object (never the accretion disk: its colour and g follow each
-  ray's own momentum, so its pixels are traced) and the centre's apparent direction is within the
-  tolerance of the corners' interpolation: each point's hit point and chord direction are
+  ray's own momentum, so its pixels are traced) and the centre's hit point is within the
+  tolerance of the corners' interpolation (the distance over the pixel footprint there:
+  what the renderer interpolates is the hit point): each point's hit point and chord direction are
   interpolated and cast again against the scene (its texture is kept); a point whose
   segment misses the object (an edge) is traced; or
 - all five were captured, kept clear of geometry as above (the shadow's inside, black).
@@ -95,6 +96,10 @@ RETRACE = 3
 again at half the step, up to RETRACE times: rays magnified near the photon ring (whose
 forward error the step rule, made for the initial direction's, does not bound) still meet
 the tolerance, at the cost of those rays only."""
+FLIP = math.pi
+"""The error (radians) of a pixel whose runs at two steps ended on different things (sky,
+shadow, another object): what it shows may be wrong whatever its last runs agree on (its
+ray passes within the integration's error of an edge); it keeps this error."""
 COMPANION_RATIO = 2.0
 """The error pass traces each camera ray again at COMPANION_RATIO x the step: for a method
 of order p the ray's error is |d_h - d_rh| / (r^p - 1) (Richardson); 1 / r of the cost."""
@@ -127,22 +132,44 @@ def tiles(width: int, height: int, size: int | None = None, rows: int | None = N
     ]
 
 
-def sample_offsets(samples: int, pixel_filter: str, filter_size: float) -> tuple:
-    """Sub-pixel offsets (S, 2) from the pixel centre and their filter weights (S,): the
-    cells of a k x k grid (k = ceil(sqrt(S))) over the filter's footprint, farthest-first."""
-    unit = stratified_points(samples)
+def sample_offsets(unit: np.ndarray, pixel_filter: str, filter_size: float) -> tuple:
+    """Sub-pixel offsets (..., 2) from the pixel centre of points ``unit`` (..., 2) in the
+    unit square, and their filter weights (...): the pixel's square (box) or the filter's
+    footprint (Blackman-Harris of width ``filter_size``)."""
     if pixel_filter == "box":
-        return unit - 0.5, np.ones(samples)
+        return unit - 0.5, np.ones(unit.shape[:-1])
     offsets = (unit - 0.5) * filter_size
     window = 0.35875 - 0.48829 * np.cos(2 * np.pi * unit) + 0.14128 * np.cos(4 * np.pi * unit)
     window -= 0.01168 * np.cos(6 * np.pi * unit)
-    return offsets, np.prod(window, axis=1)
+    return offsets, np.prod(window, axis=-1)
+
+
+R2 = np.array([0.7548776662466927, 0.5698402909980532])
+"""The R2 sequence's steps (frac(n R2), n = 0, 1, ...: low-discrepancy points in 2-D)."""
+PIXEL_STRIDE = 65537
+"""Pixel (row, column) numbers its samples' jitter from (row PIXEL_STRIDE + column) K."""
+
+
+def pixel_samples(
+    unit: np.ndarray, ks: slice, k: int, rows: np.ndarray, columns: np.ndarray
+) -> np.ndarray:
+    """(P, K, 2) points in the unit square: the samples ``ks`` of the cell centres ``unit``
+    (of a k x k grid) of the pixels (rows, columns) (image indices, (P,)), each jittered
+    within its cell, differently in every pixel (the R2 sequence over the pixel's and the
+    sample's numbers): stratified, unbiased for any feature, whereas one fixed pattern
+    for all pixels covers a strip 0.3 px wide along a column with the same one or two grid
+    columns in every pixel (0.25 or 0.5 of its light)."""
+    count = unit.shape[0]
+    number = (rows.astype(np.float64) * PIXEL_STRIDE + columns)[:, None] * count
+    number = number + np.arange(count)[ks][None, :]
+    jitter = np.mod(0.5 + number[..., None] * R2, 1.0)  # (P, K, 2)
+    return unit[ks][None, :, :] + (jitter - 0.5) / k
 
 
 def stratified_points(n: int) -> np.ndarray:
     """n points (n, 2) in the unit square: centres of a k x k grid's cells, k = ceil(sqrt n),
     in farthest-point order from the one nearest the middle (every prefix is spread out)."""
-    k = math.isqrt(n - 1) + 1 if n > 1 else 1
+    k = _cells_per_side(n)
     cells = (np.stack(np.meshgrid(np.arange(k), np.arange(k)), axis=-1).reshape(-1, 2) + 0.5) / k
     order = [int(np.argmin(np.hypot(*(cells - 0.5).T)))]
     gap = np.hypot(*(cells - cells[order[0]]).T)
@@ -150,6 +177,11 @@ def stratified_points(n: int) -> np.ndarray:
         order.append(int(np.argmax(gap)))
         gap = np.minimum(gap, np.hypot(*(cells - cells[order[-1]]).T))
     return cells[order]
+
+
+def _cells_per_side(n: int) -> int:
+    """k = ceil(sqrt(n)): the side of the k x k grid whose cells n points take."""
+    return math.isqrt(n - 1) + 1 if n > 1 else 1
 
 
 @dataclass
@@ -184,6 +216,7 @@ class _Nodes:
         self.position = np.zeros(shape + (3,))  # hit points (world)
         self.tangent = np.zeros(shape + (3,))  # the hitting chords' directions
         self.redshift = np.full(shape, np.nan)  # g on the accretion disk
+        self.flipped = np.zeros(shape, dtype=bool)  # two of its runs ended on different things
 
 
 class TileSampler:
@@ -208,7 +241,10 @@ class TileSampler:
         self.tracer, self.camera, self.background, self.shade = tracer, camera, background, shade
         self.interpolation = float(interpolation)  # radians; 0: trace every pixel
         self.samples = int(samples)
-        self.offsets, self.weights = sample_offsets(self.samples, pixel_filter, filter_size)
+        self.unit = stratified_points(self.samples)  # (S, 2), shifted per pixel
+        self.pixel_filter, self.filter_size = pixel_filter, filter_size
+        extent = 1.0 if pixel_filter == "box" else filter_size
+        self.footprint = extent / math.sqrt(2)  # pixels from the centre to its corners
         self.with_error = with_error and tracer.curved
         self.far_field = far_field  # error of escaped rays beyond the region, radians
         self.pixel_angle = pixel_angle  # radians (core.Camera.pixel_angle)
@@ -277,6 +313,8 @@ class TileSampler:
         nodes.tangent[jj, ii] = rays.tangent
         nodes.redshift[jj, ii] = rays.redshift
         err = np.zeros(jj.size) if error is None else error
+        nodes.flipped[jj, ii] |= err >= FLIP  # once two runs ended apart, it stays a flip
+        err = np.where(nodes.flipped[jj, ii], np.maximum(err, FLIP), err)
         nodes.integration[jj, ii] = err
         far = np.where(escaped, self.far_field, 0.0)
         nodes.error[jj, ii] = np.where(rays.ending == ENDING["failed"], np.inf, err + far)
@@ -296,10 +334,15 @@ class TileSampler:
             xy = self._image_xy(jj, ii)
             rays, seen, _ = self._trace_points(xy, cancel, companion=False, step=step)
             assert self.tracer.order is not None  # a companion run: the scene is curved
-            error = _richardson(
-                seen, rays.ending, nodes.direction[jj, ii], nodes.ending[jj, ii],
-                self.tracer.order,
+            origins, _ = self.camera.rays_at(xy)
+            apart = seen_apart(
+                seen, rays.position, nodes.direction[jj, ii], nodes.position[jj, ii],
+                rays.ending, origins,
             )  # fmt: skip
+            alike = (rays.ending == nodes.ending[jj, ii]) & (
+                rays.object_id == nodes.object_id[jj, ii]
+            )
+            error = _richardson(apart, rays.ending, alike, self.tracer.order)
             self.error_rays += jj.size
             self._store(nodes, jj, ii, rays, seen, error)
 
@@ -370,7 +413,11 @@ class TileSampler:
             alike &= nodes.plain[j, i] & (nodes.ending[j, i] == ending)
             alike &= (nodes.object_id[j, i] == object_id) & (nodes.clearance[j, i] > clear)
         mean = sum(nodes.direction[j, i] for j, i in corners)
-        deviation = angle_between(mean, nodes.direction[cj, ci])
+        origins, _ = self.camera.rays_at(self._image_xy(cj, ci))
+        at = sum(nodes.position[j, i] for j, i in corners) / 4.0  # where hits interpolate
+        deviation = seen_apart(
+            nodes.direction[cj, ci], nodes.position[cj, ci], mean, at, ending, origins
+        )  # hit points over the pixel footprint there; directions for the sky
         deviation = np.where(ending == ENDING["captured"], 0.0, deviation)
         accepted = alike & (INTERPOLATION_SAFETY * deviation <= self.interpolation)
         return accepted, deviation
@@ -386,23 +433,26 @@ class TileSampler:
         if missed.size:
             self._trace_nodes(nodes, jj[missed], ii[missed], origin, cancel)
             again = self._evaluate(nodes, blocks, jj[missed] * 1.0, ii[missed] * 1.0)
-            for name in ("rgba", "ending", "error", "direction", "redshift"):
+            for name in ("rgba", "ending", "error", "direction", "redshift", "position"):
                 getattr(centre, name)[missed] = getattr(again, name)
         rgba = centre.rgba.reshape(h + 2, w + 2, 4)
         error = centre.error.reshape(h + 2, w + 2)
         ending = centre.ending.reshape(h + 2, w + 2)
         direction = centre.direction.reshape(h + 2, w + 2, 3)
         redshift = centre.redshift.reshape(h + 2, w + 2)
+        position = centre.position.reshape(h + 2, w + 2, 3)
         inner = (slice(1, h + 1), slice(1, w + 1))
         steps = nodes.steps[inner]
         energy = nodes.energy[inner]
         colour = rgba[inner].copy()
         if self.samples > 1:
             differs = _contrast(rgba, ending)
-            busy = np.any(np.stack(differs), axis=0)
-            colour[busy] = self._supersample(nodes, blocks, busy, differs, origin, cancel)
+            near = nodes.clearance[inner] < self.footprint * self.pixel_angle
+            busy = np.any(np.stack(differs), axis=0) | near
+            colour[busy] = self._supersample(nodes, blocks, busy, differs, near, cancel)
         passes = {"error": error[inner], "steps": steps, "ending": ending[inner],
-                  "direction": direction[inner], "redshift": redshift[inner]}  # fmt: skip
+                  "direction": direction[inner], "redshift": redshift[inner],
+                  "position": position[inner]}  # fmt: skip
         return TileResult(
             colour.astype(np.float32),
             {name: data.astype(BY_NAME[name].dtype, copy=False) for name, data in passes.items()},
@@ -416,7 +466,7 @@ class TileSampler:
         m = y.shape[0]
         out = _Points(
             np.zeros((m, 4)), np.full(m, -1, dtype=np.int8), np.zeros(m), np.full((m, 3), np.nan),
-            np.full(m, np.nan),
+            np.full(m, np.nan), np.full((m, 3), np.nan),
         )  # fmt: skip
         cell_j = np.clip(np.floor(y).astype(np.int64), 0, blocks.block.shape[0] - 1)
         cell_i = np.clip(np.floor(x).astype(np.int64), 0, blocks.block.shape[1] - 1)
@@ -433,6 +483,8 @@ class TileSampler:
         out.error[t] = nodes.error[nj[t], ni[t]]
         out.direction[t] = nodes.direction[nj[t], ni[t]]
         out.redshift[t] = nodes.redshift[nj[t], ni[t]]
+        hit = out.ending[t] == ENDING["hit"]
+        out.position[t[hit]] = nodes.position[nj[t[hit]], ni[t[hit]]]
         return out
 
     def _interpolate(self, nodes: _Nodes, blocks: _Blocks, b, y, x, out: _Points, rows):
@@ -470,6 +522,7 @@ class TileSampler:
             ok = found.hit
             colour[hit[ok]] = found.color[ok]
             ending[hit[~ok]] = -1  # missed its object (an edge): trace this point
+            out.position[rows[hit[ok]]] = found.position[ok]
             seen = found.position[ok] - origins[ok]
             out.direction[rows[hit[ok]]] = seen / np.linalg.norm(seen, axis=1, keepdims=True)
         shape = 2.0 * INTERPOLATION_SAFETY * (u * (1 - u) + v * (1 - v))
@@ -491,49 +544,55 @@ class TileSampler:
         """Image points (M, 2) (column, row) of lattice points (y, x) of the current tile."""
         return np.stack([self._origin[1] + x + 0.5, self._origin[0] + y + 0.5], axis=1)
 
-    def _supersample(self, nodes: _Nodes, blocks: _Blocks, busy, differs, origin, cancel):
+    def _supersample(self, nodes: _Nodes, blocks: _Blocks, busy, differs, near, cancel):
         """Filter-weighted colour (K, 4) of the ``busy`` pixels (h, w mask) from up to
         ``samples`` points each (interpolated where a block allows, traced elsewhere): the
-        first FIRST_SAMPLES; the rest where those disagree by > AA_CONTRAST, or where a pixel
-        and a neighbour it differs from both looked uniform (_edge_unseen). The pixels go in
-        groups of at most SAMPLE_POINTS points (_pixel_groups)."""
+        first FIRST_SAMPLES; the rest where those disagree by > AA_CONTRAST, where a pixel
+        and a neighbour it differs from both looked uniform (_edge_unseen), or where the
+        centre's ray passed an object's bounds within the filter's footprint (``near``: a
+        thin object or a star between the samples). The pixels go in groups of at most
+        SAMPLE_POINTS points (_pixel_groups)."""
         pj, pi = np.nonzero(busy)
-        count = self.offsets.shape[0]
+        count = self.samples
         first = min(FIRST_SAMPLES, count)
         total, spread = np.zeros((pj.size, 4)), np.zeros(pj.size)
+        norm = np.zeros(pj.size)
         for rows in _pixel_groups(pj.size, first):
-            colour = self._sample(
-                nodes, blocks, pj[rows], pi[rows], self.offsets[:first], origin, cancel
+            colour, weight = self._sample(
+                nodes, blocks, pj[rows], pi[rows], slice(0, first), cancel
             )
-            weight = np.broadcast_to(self.weights[:first], colour.shape[:2])
             total[rows] = np.einsum("pkc,pk->pc", colour, weight)
+            norm[rows] = weight.sum(axis=1)
             spread[rows] = np.max(np.abs(colour - colour[:, :1]), axis=(1, 2))
-        norm = np.full(pj.size, self.weights[:first].sum())
         uniform = np.ones(busy.shape, dtype=bool)
         uniform[pj, pi] = spread <= AA_CONTRAST
-        more = np.flatnonzero(~uniform[pj, pi] | _edge_unseen(differs, uniform)[pj, pi])
+        more = ~uniform[pj, pi] | _edge_unseen(differs, uniform)[pj, pi] | near[pj, pi]
+        more = np.flatnonzero(more)
         if more.size and first < count:
             for k in range(first, count, SAMPLE_POINTS):  # one round unless samples > that
-                offsets = slice(k, min(k + SAMPLE_POINTS, count))
-                for rows in _pixel_groups(more.size, offsets.stop - offsets.start):
+                ks = slice(k, min(k + SAMPLE_POINTS, count))
+                for rows in _pixel_groups(more.size, ks.stop - ks.start):
                     at = more[rows]
-                    rest = self._sample(
-                        nodes, blocks, pj[at], pi[at], self.offsets[offsets], origin, cancel
-                    )
-                    total[at] += np.einsum("pkc,k->pc", rest, self.weights[offsets])
-            norm[more] += self.weights[first:].sum()
+                    rest, weight = self._sample(nodes, blocks, pj[at], pi[at], ks, cancel)
+                    total[at] += np.einsum("pkc,pk->pc", rest, weight)
+                    norm[at] += weight.sum(axis=1)
         return total / norm[:, None]
 
-    def _sample(self, nodes: _Nodes, blocks: _Blocks, pj, pi, offsets, origin, cancel):
-        """Colours (P, K, 4) at the pixels (pj, pi) (tile pixels) plus each of K offsets."""
-        y = (pj[:, None] + 1 + offsets[None, :, 1]).ravel()
-        x = (pi[:, None] + 1 + offsets[None, :, 0]).ravel()
+    def _sample(self, nodes: _Nodes, blocks: _Blocks, pj, pi, ks: slice, cancel):
+        """Colours (P, K, 4) and filter weights (P, K) at the pixels (pj, pi) (tile pixels)
+        of their samples ``ks`` (of ``stratified_points``, shifted per pixel)."""
+        rows, columns = self._origin[0] + pj + 1, self._origin[1] + pi + 1
+        k = _cells_per_side(self.samples)
+        unit = pixel_samples(self.unit, ks, k, rows, columns)
+        offsets, weight = sample_offsets(unit, self.pixel_filter, self.filter_size)
+        y = (pj[:, None] + 1 + offsets[:, :, 1]).ravel()
+        x = (pi[:, None] + 1 + offsets[:, :, 0]).ravel()
         points = self._evaluate(nodes, blocks, y, x)
         todo = np.flatnonzero(points.ending < 0)
         if todo.size:
             rays, _, _ = self._trace_points(self._image_xy(y[todo], x[todo]), cancel, False)
             points.rgba[todo] = self.shade(rays, self.background)
-        return points.rgba.reshape(pj.size, offsets.shape[0], 4)
+        return points.rgba.reshape(pj.size, -1, 4), weight
 
 
 def _magnification(nodes: _Nodes, corners, width: float) -> np.ndarray:
@@ -562,6 +621,7 @@ class _Points:
     error: np.ndarray
     direction: np.ndarray
     redshift: np.ndarray
+    position: np.ndarray
 
 
 class _Blocks:
@@ -630,24 +690,40 @@ HIT_ORDER = 4
 
 
 def richardson_error(fine: RayResults, coarse: RayResults, origins, order: int) -> np.ndarray:
-    """Richardson estimate of the fine run's final-direction error (radians, (N,)) from a
-    run at COMPANION_RATIO x its step: the escape direction's, or for a hit the direction
-    from the camera to the hit point; pi where the endings differ, +inf where failed."""
-    return _richardson(
-        seen_direction(fine, origins), fine.ending, seen_direction(coarse, origins),
-        coarse.ending, order,
+    """Richardson estimate of the fine run's error (radians, (N,)) from a run at
+    COMPANION_RATIO x its step: the escape direction's, or for a hit its hit point's over
+    its distance from the camera (``seen_apart``); pi where the endings or the objects hit
+    differ, +inf where failed."""
+    apart = seen_apart(
+        seen_direction(fine, origins), fine.position, seen_direction(coarse, origins),
+        coarse.position, fine.ending, origins,
     )  # fmt: skip
+    alike = (fine.ending == coarse.ending) & (fine.object_id == coarse.object_id)
+    return _richardson(apart, fine.ending, alike, order)
 
 
-def _richardson(seen_fine, ending_fine, seen_coarse, ending_coarse, order: int) -> np.ndarray:
-    """richardson_error from what the two runs see and how they end. A hit point lies on the
-    cubic through its step's ends (core/tracing/dense.py): its error falls at most at that
-    cubic's order (HIT_ORDER), whatever the method's."""
+def seen_apart(seen_a, position_a, seen_b, position_b, ending, origins) -> np.ndarray:
+    """(N,) radians between what two rays from ``origins`` see: for a hit (``ending``), the
+    distance between the hit points over the first's distance from the camera (the pixel
+    footprint there, at any angle of incidence: a grazing surface's hit point moves far
+    while its direction barely turns); else the angle between the directions."""
+    hit = ending == ENDING["hit"]
+    with np.errstate(all="ignore"):
+        gap = np.linalg.norm(position_a - position_b, axis=-1)
+        moved = gap / np.linalg.norm(position_a - origins, axis=-1)
+    return np.where(hit, moved, angle_between(seen_a, seen_b))
+
+
+def _richardson(apart, ending_fine, alike, order: int) -> np.ndarray:
+    """richardson_error from how far apart the two runs' ends are (radians, ``seen_apart``)
+    and whether they end ``alike``. A hit point lies on the cubic through its step's ends
+    (core/tracing/dense.py): its error falls at most at that cubic's order (HIT_ORDER),
+    whatever the method's."""
     orders = np.where(ending_fine == ENDING["hit"], min(order, HIT_ORDER), order)
     with np.errstate(all="ignore"):
-        err = angle_between(seen_coarse, seen_fine) / (COMPANION_RATIO**orders - 1.0)
-    err = np.where(ending_coarse == ending_fine, err, np.pi)
+        err = apart / (COMPANION_RATIO**orders - 1.0)
     err = np.where(ending_fine == ENDING["captured"], 0.0, err)
+    err = np.where(alike, err, FLIP)  # an ending flip, captured or not
     bad = (ending_fine == ENDING["failed"]) | (ending_fine == ENDING["max_steps"])
     return np.where(bad | ~np.isfinite(err), np.inf, err)
 

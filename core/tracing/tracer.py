@@ -40,6 +40,17 @@ CROSSING_SHARE, CROSSING_ITERATIONS = 1e-6, 4
 """The disk's crossing is found to |z| <= CROSSING_SHARE x tolerance x |X| (a share of the
 integration's own error there) in at most CROSSING_ITERATIONS Newton steps."""
 _FAR = 1e12  # length of the straight segment cast after a ray leaves the model's region
+BEND_LIMIT = 64.0
+"""A step near geometry whose cubic path deviates from its chord by more than BEND_LIMIT
+chord allowances is taken again at half the step (Tracer._bent_steps): hits are found on
+the cubic, and a long step whose bend is not a cubic's (far from a small hole, where the
+steps grow with r and the bending happened near one end) misplaced them by pixels while
+the step-doubling estimate, one step either way, saw nothing."""
+TURN_LIMIT = 0.1
+"""With geometry, a step whose chord turns from the ray's heading by more than this
+(radians) is taken again at half the step (Tracer._bent_steps)."""
+MAX_HALVINGS = 10
+"""At most this many halvings of a ray's step (1/64 of the rule's)."""
 CHORD_SHARE = 0.5
 """Chords near geometry stay within CHORD_SHARE x tolerance x (distance from the camera) of
 the ray's cubic path: half the tolerance, as the integration gets (core/tracing/steps.py)."""
@@ -258,7 +269,10 @@ class Tracer:
             self.method,
             self.method.init(K, Q, P),
             {"K": K},
-            {"idx": rows.copy(), "X": X, "camera": camera, "H0": H0, "h": h,
+            {"idx": rows.copy(), "X": X, "camera": camera, "H0": H0,
+             "h": np.broadcast_to(np.asarray(h, dtype=np.float64), rows.shape).copy(),
+             "h0": np.broadcast_to(np.asarray(h, dtype=np.float64), rows.shape).copy(),
+             "heading": D / np.linalg.norm(D, axis=0),  # the last chord's direction
              "streak": np.zeros(rows.size, dtype=np.int64)},  # steps in a row off the cone
         )  # fmt: skip
 
@@ -284,7 +298,7 @@ class Tracer:
         region ((M,) bool), each recorded in ``out``; the batch's X becomes the step's end."""
         chart, arrays = self.chart, batch.arrays
         idx, X_prev, camera = arrays["idx"], arrays["X"], arrays["camera"]
-        start = self.method.qp(start)
+        raw_start, start = start, self.method.qp(start)
         Q, P = self.method.qp(batch.state)
         if self.spacetime:
             with np.errstate(invalid="ignore"):
@@ -298,20 +312,32 @@ class Tracer:
         if not ok.all():
             out.ending[idx[ended]] = ENDING["failed"]
             out.position[idx[ended]] = self._to_world(X_prev[:, ended].T)
+        paths, going = None, ok
+        if self._near is not None:  # surfaces and volumes along this step's segment
+            step_ends = _StepEnds(self, batch.systems["K"], start, (Q, P), arrays["h"], camera)
+            chord, turn = _turn(X_prev, X, arrays["heading"])
+            paths = self._near_paths(X_prev, X, ok, step_ends, camera, turn)
+            redo = self._bent_steps(paths, chord, turn, ok, arrays)
+            if redo.any():  # back to the step's start, at half the step
+                batch.state = tuple(
+                    np.where(redo, a, b) for a, b in zip(raw_start, batch.state, strict=True)
+                )
+                Q, P = self.method.qp(batch.state)
+                S, X = Q[chart.offset :], np.where(redo, X_prev, X)
+                paths, going = paths.without(redo), ok & ~redo
         if self._watch is not None:
             world = [self._to_world(x.T) for x in (X_prev, X, camera)]
             self._watch_segments(idx, world[0], world[1], out, world[2])
-        if self._near is not None:  # surfaces and volumes along this step's segment
-            step_ends = _StepEnds(self, batch.systems["K"], start, (Q, P), arrays["h"], camera)
-            ended |= self._segments(idx, X_prev, X, ok, out, step_ends, camera)
+        if paths is not None:
+            ended |= self._segments(idx, paths, out, step_ends)
         if self.captured is not None:
-            captured = ~ended & self.captured(Q, P)
+            captured = ~ended & going & self.captured(Q, P)
             if captured.any():
                 out.ending[idx[captured]] = ENDING["captured"]
                 out.position[idx[captured]] = self._to_world(X[:, captured].T)
                 ended |= captured
         assert self.region is not None
-        leaving = ~ended & self.region.left_soa(X, X_prev)
+        leaving = ~ended & going & self.region.left_soa(X, X_prev)
         if leaving.any():
             local = X[:, leaving].T
             self._escape(
@@ -331,9 +357,54 @@ class Tracer:
         arrays["X"] = X
         return ended
 
-    def _segments(
-        self, idx, X_prev, X, ok, out: RayResults, step_ends: _StepEnds, camera
-    ) -> np.ndarray:
+    def _near_paths(self, X_prev, X, ok, step_ends: _StepEnds, camera, turn) -> _NearPaths:
+        """The steps whose path X_prev -> X may pass the geometry's box (their chord's
+        bounds widened by how far a path turning by ``turn`` from its heading can stray
+        from it), with their ends' velocities, their cubics' deviation from the chord and
+        the deviation the chords may keep at their distance from the camera
+        (core/tracing/dense.py)."""
+        assert self._near is not None
+        lo, hi = self._near
+        stray = np.linalg.norm(X - X_prev, axis=0) * np.sin(np.minimum(turn, 0.5 * np.pi))
+        near = ok.copy()
+        for i in range(3):
+            near &= np.minimum(X_prev[i], X[i]) - stray <= hi[i]
+            near &= np.maximum(X_prev[i], X[i]) + stray >= lo[i]
+        c = np.flatnonzero(near)
+        X0, X1 = X_prev[:, c], X[:, c]
+        V0, V1, h = step_ends.velocities(c)
+        allowed = CHORD_SHARE * self.options.tolerance * np.linalg.norm(X0 - camera[:, c], axis=0)
+        return _NearPaths(c, X0, X1, V0, V1, h, dense.chord_deviation(V0, V1, h), allowed)
+
+    def _bent_steps(self, paths: _NearPaths, chord, turn, ok, arrays) -> np.ndarray:
+        """(M,) the steps near geometry to take again at half the step (down to
+        2^-MAX_HALVINGS of the rule's): those whose chord turns from the ray's heading (its
+        last chord's direction, ``turn``) by more than TURN_LIMIT, or whose cubic path
+        deviates from its chord by more than BEND_LIMIT chord allowances. Hits are found on
+        the cubic through a step's ends; a step in the Poincaré time covers a distance
+        ~ r / M, so far from a small hole one step can jump past it (or back out of the
+        region), and the cubic is then no path at all. A ray's step grows back (doubling)
+        after steps clear of both by a factor 4; its heading follows its accepted chords.
+        None with an explicit ``TraceOptions.step`` (step studies) or an adaptive method
+        (its own control)."""
+        h, h0, heading = arrays["h"], arrays["h0"], arrays["heading"]
+        if self.options.step is not None or self.method.adaptive:
+            return np.zeros(h.shape, dtype=bool)  # a step given is taken as given; dopri5
+        near = np.zeros(h.shape, dtype=bool)
+        near[paths.rows] = True
+        bent = near & (turn > TURN_LIMIT)
+        bent[paths.rows] |= paths.deviation > BEND_LIMIT * paths.allowed
+        close = near & (turn > 0.25 * TURN_LIMIT)
+        close[paths.rows] |= paths.deviation > 0.25 * BEND_LIMIT * paths.allowed
+        redo = ok & bent & (h > h0 * 0.5**MAX_HALVINGS)
+        h[redo] *= 0.5
+        grow = ok & ~redo & ~close & (h < h0)
+        h[grow] = np.minimum(2.0 * h[grow], h0[grow])
+        taken = ok & ~redo & np.isfinite(chord).all(axis=0)
+        heading[:, taken] = chord[:, taken]
+        return redo
+
+    def _segments(self, idx, paths: _NearPaths, out: RayResults, step_ends: _StepEnds):
         """Surface hits and volume emission along this step's path near geometry.
 
         The path between X_prev and X is followed on chords through its cubic Hermite
@@ -341,19 +412,11 @@ class Tracer:
         the tolerance at the ray's distance from the camera (one where the path is
         straight enough). -> (M,) bool: the rays that hit a surface (recorded in ``out``).
         """
-        assert self._near is not None
-        lo, hi = self._near
-        near = ok.copy()
-        for i in range(3):
-            near &= (np.minimum(X_prev[i], X[i]) <= hi[i]) & (np.maximum(X_prev[i], X[i]) >= lo[i])
-        hit_rows = np.zeros(ok.shape[0], dtype=bool)
-        c = np.flatnonzero(near)
+        hit_rows = np.zeros(idx.shape[0], dtype=bool)
+        c, X0, X1, V0, V1, h = paths.rows, paths.X0, paths.X1, paths.V0, paths.V1, paths.h
+        deviation, allowed = paths.deviation, paths.allowed
         if c.size == 0:
             return hit_rows
-        X0, X1 = X_prev[:, c], X[:, c]
-        V0, V1, h = step_ends.velocities(c)
-        allowed = CHORD_SHARE * self.options.tolerance * np.linalg.norm(X0 - camera[:, c], axis=0)
-        deviation = dense.chord_deviation(V0, V1, h)
         k = dense.pieces(deviation, allowed)
         for n in np.unique(k):
             g = np.flatnonzero(k == n)
@@ -472,6 +535,39 @@ class Tracer:
 
     def _to_world(self, local):
         return local @ self.rotation.T + self.scene.center
+
+
+def _turn(X_prev: np.ndarray, X: np.ndarray, heading: np.ndarray) -> tuple:
+    """(unit chords X_prev -> X (3, M), their angles from ``heading`` (M,); 0 where not
+    finite)."""
+    with np.errstate(all="ignore"):
+        chord = (X - X_prev) / np.linalg.norm(X - X_prev, axis=0)
+        turn = np.arccos(np.clip(np.einsum("im,im->m", chord, heading), -1.0, 1.0))
+    return chord, np.where(np.isfinite(turn), turn, 0.0)
+
+
+@dataclass
+class _NearPaths:
+    """Steps near geometry (Tracer._near_paths): their rows in the batch, local ends and
+    velocities (3, K), step sizes, cubic deviations from the chords and allowances (K,)."""
+
+    rows: np.ndarray
+    X0: np.ndarray
+    X1: np.ndarray
+    V0: np.ndarray
+    V1: np.ndarray
+    h: Any
+    deviation: np.ndarray
+    allowed: np.ndarray
+
+    def without(self, rows: np.ndarray) -> _NearPaths:
+        """These paths less those of the batch rows ``rows`` ((M,) bool)."""
+        keep = ~rows[self.rows]
+        h = self.h if np.ndim(self.h) == 0 else self.h[keep]
+        return _NearPaths(
+            self.rows[keep], self.X0[:, keep], self.X1[:, keep], self.V0[:, keep],
+            self.V1[:, keep], h, self.deviation[keep], self.allowed[keep],
+        )  # fmt: skip
 
 
 class _StepEnds:
