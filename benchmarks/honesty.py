@@ -82,7 +82,9 @@ OBJECT_PASS = "object_id"
 """An object-id pass, used where core.passes has one (it has none yet: hits on different
 objects then compare as the same ending)."""
 IDS = (OBJECT_PASS,) if OBJECT_PASS in BY_NAME else ()
-REF_PASSES = ("ending", "direction", "position", *IDS)
+POSITIONS = ("position",) if "position" in BY_NAME else ()
+"""Hit points, where core has the pass (a hit's error: their distance over the footprint)."""
+REF_PASSES = ("ending", "direction", *POSITIONS, *IDS)
 RUN_PASSES = (*REF_PASSES, "error_px")
 TOLERANCES = (1.0, 0.25, 0.05)
 QUICK_TOLERANCES = (1.0, 0.25)
