@@ -236,7 +236,7 @@ def _watch_margin(tracer: Tracer, camera, pixel_angle: float) -> float:
         return 0.0
     eye = camera.frame.position
     far = 0.0
-    for lo, hi in boxes:
+    for lo, hi, *_ in boxes:
         ends = [np.where(np.isfinite(x), x, eye) for x in (lo, hi)]
         corners = np.array(np.meshgrid(*zip(*ends, strict=True))).reshape(3, -1).T
         far = max(far, float(np.max(np.linalg.norm(corners - eye, axis=1))))

@@ -100,6 +100,9 @@ FLIP = math.pi
 """The error (radians) of a pixel whose runs at two steps ended on different things (sky,
 shadow, another object): what it shows may be wrong whatever its last runs agree on (its
 ray passes within the integration's error of an edge); it keeps this error."""
+NEAR_MISS = 2.0
+"""A traced ray that missed every object by less than NEAR_MISS x its integration error
+(its clearance, in radians like the error) may have hit one: it reports a flip (FLIP)."""
 COMPANION_RATIO = 2.0
 """The error pass traces each camera ray again at COMPANION_RATIO x the step: for a method
 of order p the ray's error is |d_h - d_rh| / (r^p - 1) (Richardson); 1 / r of the cost."""
@@ -307,7 +310,7 @@ class TileSampler:
         no_light = (rays.transmittance == 1.0) & ~np.any(rays.radiance, axis=1)
         hit = rays.ending == ENDING["hit"]
         nodes.plain[jj, ii] = (escaped | (rays.ending == ENDING["captured"]) | hit) & no_light
-        nodes.clearance[jj, ii] = np.where(hit, np.inf, rays.clearance)
+        nodes.clearance[jj, ii] = rays.clearance  # a hit's: from all but its object
         nodes.object_id[jj, ii] = rays.object_id
         nodes.position[jj, ii] = rays.position
         nodes.tangent[jj, ii] = rays.tangent
@@ -315,9 +318,11 @@ class TileSampler:
         err = np.zeros(jj.size) if error is None else error
         nodes.flipped[jj, ii] |= err >= FLIP  # once two runs ended apart, it stays a flip
         err = np.where(nodes.flipped[jj, ii], np.maximum(err, FLIP), err)
-        nodes.integration[jj, ii] = err
+        nodes.integration[jj, ii] = err  # a flip is traced again (RETRACE), a near miss not
+        near_miss = rays.clearance < NEAR_MISS * err  # it may have hit something
         far = np.where(escaped, self.far_field, 0.0)
-        nodes.error[jj, ii] = np.where(rays.ending == ENDING["failed"], np.inf, err + far)
+        err = np.where(near_miss, np.maximum(err, FLIP), err + far)
+        nodes.error[jj, ii] = np.where(rays.ending == ENDING["failed"], np.inf, err)
 
     def _retrace(self, nodes: _Nodes, cancel) -> None:
         """Trace the nodes whose integration error exceeds ``budget`` again at half the

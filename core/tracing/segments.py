@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..geometry import Hits, Intersector, segment_overlaps
+from .clearance import Bound, shape_distance
 from .scene import ENDING
 
 
@@ -28,7 +29,9 @@ class RayResults:
     steps: np.ndarray  # (N,) int32 integration steps
     energy_error: np.ndarray  # (N,) |H - H0| at the end
     redshift: np.ndarray  # (N,) g = nu_obs / nu_emit where the ray ended on a disk, else NaN
-    clearance: np.ndarray  # (N,) radians from the watched box (Tracer.watch_geometry)
+    clearance: np.ndarray  # (N,) radians from objects' bounds (Tracer.watch_geometry)
+    clearance_box: np.ndarray  # (N,) int: the bound it was to (-1: none)
+    clearance_other: np.ndarray  # (N,) radians from the other bounds
     object_id: np.ndarray  # (N,) int32: the object hit (Hits.object_id); -1 where none
     tangent: np.ndarray  # (N, 3) where hit: the unit direction of the chord that hit
 
@@ -46,6 +49,8 @@ class RayResults:
             energy_error=np.zeros(n),
             redshift=np.full(n, np.nan),
             clearance=np.full(n, np.inf),
+            clearance_box=np.full(n, -1, dtype=np.int64),
+            clearance_other=np.full(n, np.inf),
             object_id=np.full(n, -1, dtype=np.int32),
             tangent=np.zeros((n, 3)),
         )
@@ -127,14 +132,19 @@ class SceneGeometry:
                 trans[rows] *= t
         return radiance, trans
 
-    def boxes(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """World (lo, hi) of each object (each member of a Group) and volume."""
+    def boxes(self) -> list[Bound]:
+        """World (lo, hi, distance, object id) of each object (each member of a Group) and
+        volume (core.tracing.clearance: the distance from a sphere or an annulus, else
+        None; the id its hits report, -2 for a volume)."""
         members = getattr(self.objects, "objects", [self.objects])
-        boxes = [(np.asarray(v.lo, float), np.asarray(v.hi, float)) for v in self.volumes]
-        for obj in members:
+        ids = getattr(self.objects, "ids", [None] * len(members))
+        boxes: list[Bound] = [(np.asarray(v.lo, float), np.asarray(v.hi, float), None, -2)
+                              for v in self.volumes]  # fmt: skip
+        for obj, oid in zip(members, ids, strict=True):
             lo, hi = (np.asarray(x, float) for x in obj.bounds)
             if not np.any(lo > hi):
-                boxes.append((lo, hi))
+                oid = getattr(obj, "object_id", -3) if oid is None else oid
+                boxes.append((lo, hi, shape_distance(obj), oid))
         return boxes
 
     def local_box(self, to_local: Any) -> tuple[np.ndarray, np.ndarray] | None:

@@ -207,7 +207,7 @@ class Tracer:
         out = RayResults.empty(n, origins, directions)
         if not self.curved:
             self._straight(np.arange(n), origins, directions, out)
-            return out
+            return self._besides_hit(out)
         assert self.region is not None
         X = self._to_local(origins)
         D = directions @ self.rotation  # (N, 3) local components
@@ -223,6 +223,12 @@ class Tracer:
             if np.ndim(h):
                 h = np.asarray(h, dtype=np.float64)[todo]
             self._integrate(todo, start[todo].T.copy(), D[todo].T.copy(), out, h, cancel, camera)
+        return self._besides_hit(out)
+
+    def _besides_hit(self, out: RayResults) -> RayResults:
+        """``out`` with each hit ray's clearance from everything but what it hit."""
+        if self._watch is not None:
+            out.clearance = self._watch.besides_hit(out)
         return out
 
     # --- straight parts --------------------------------------------------------------
@@ -494,8 +500,7 @@ class Tracer:
         """Lower the clearance of the rays ``rows`` to that of their world chords a -> b
         seen from ``eye`` (default: a, the camera)."""
         if self._watch is not None:
-            angle = self._watch.angles(a, b, a if eye is None else eye)
-            out.clearance[rows] = np.minimum(out.clearance[rows], angle)
+            self._watch.record(rows, a, b, a if eye is None else eye, out)
 
     def _finish_energy(self, out, rows, Q, P, H0):
         with np.errstate(all="ignore"):

@@ -160,9 +160,7 @@ def test_error_pass_tells_the_truth_on_a_small_frame():
     48x27 frame has few pixels to spread the interpolated edge pixels over); a pixel that
     ends apart from the reference reports a flip (error_px >= 1). A hit's error is its hit
     point's distance over the pixel footprint (tolerance_px's measure), not the direction
-    to it: measured so, 33 of 42 pixels above a tenth of the tolerance are within 3x (the
-    direction-based measure gave 90 %): the other 9 are interpolated hits, estimated at
-    3.2-3.4x their truth from the block's one centre sample, either way; hence 75 %."""
+    to it: measured so, 39 of 42 pixels above a tenth of the tolerance are within 3x."""
     scene, cam = _kerr_board(), _hole_camera(48, 27)
     passes = ("error_px", "ending", "direction", "position")
     ref = core.render(scene, cam, method="dopri5", tolerance=1e-11, passes=passes,
@@ -172,9 +170,9 @@ def test_error_pass_tells_the_truth_on_a_small_frame():
     est = run.passes["error_px"].astype(float)
     seen = np.isfinite(truth)
     big = seen & (truth > 0.1)
-    assert big.sum() > 50
+    assert big.sum() > 30
     within = (est[big] <= 3 * truth[big]) & (est[big] >= truth[big] / 3)
-    assert within.mean() >= 0.75
+    assert within.mean() >= 0.9
     assert np.count_nonzero(seen & (est < truth / 3)) / truth.size < 0.02
     apart = np.isinf(truth)
     assert np.count_nonzero(apart) <= 2  # at most a grazing pixel or two ends apart
