@@ -113,19 +113,25 @@ def _chord_angle(a, b, eye, lo, hi, distance=None) -> np.ndarray:
     gap = gap_of(points)
     with np.errstate(divide="ignore", invalid="ignore"):
         angle = gap / np.linalg.norm(points - eye[:, None, :], axis=2)
-    k = np.argmin(gap, axis=1)
-    lo_t, hi_t = t[np.maximum(k - 1, 0)], t[np.minimum(k + 1, SUBPOINTS)]
-    best = _golden(lambda u: gap_of(a + u[:, None] * d), lo_t, hi_t)
-    at = a + best[:, None] * d
-    with np.errstate(divide="ignore", invalid="ignore"):
-        nearest = gap_of(at) / np.linalg.norm(at - eye, axis=1)
-    least = np.minimum(np.min(np.nan_to_num(angle, nan=0.0), axis=1), nearest)
-    return np.nan_to_num(least, nan=0.0)
+    least = np.nan_to_num(np.min(angle, axis=1), nan=0.0)
+    slack = 0.5 * np.linalg.norm(d, axis=1) / SUBPOINTS  # a point's farthest from a sample
+    rough = np.flatnonzero(np.min(gap, axis=1) < 2.0 * slack)  # the samples may miss it
+    if rough.size:
+        k = np.argmin(gap[rough], axis=1)
+        lo_t, hi_t = t[np.maximum(k - 1, 0)], t[np.minimum(k + 1, SUBPOINTS)]
+        a, d, eye = a[rough], d[rough], eye[rough]
+        best = _golden(lambda u: gap_of(a + u[:, None] * d), lo_t, hi_t)
+        at = a + best[:, None] * d
+        with np.errstate(divide="ignore", invalid="ignore"):
+            nearest = gap_of(at) / np.linalg.norm(at - eye, axis=1)
+        least[rough] = np.minimum(least[rough], np.nan_to_num(nearest, nan=0.0))
+    return least
 
 
-REFINE = 30
-"""Golden-section steps for a chord's point nearest an object (its bracket shrinks to
-0.618^30 ~ 5e-7 of itself)."""
+REFINE = 16
+"""Golden-section steps for a chord's point nearest an object (its bracket, a quarter of
+the chord, shrinks to 0.618^16 ~ 5e-4 of itself), where the samples may have missed it
+(their nearest within two half-spacings of it)."""
 
 
 def _golden(f, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:

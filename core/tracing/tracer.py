@@ -141,6 +141,7 @@ class Tracer:
 
     disk: DiskLight | None = None
     _watch: ClearanceBoxes | None = None  # Tracer.watch_geometry
+    _watch_near: tuple[np.ndarray, np.ndarray] = (np.full(3, -np.inf), np.full(3, np.inf))
 
     def __init__(self, scene: Scene, options: TraceOptions, extent: float = 1.0):
         self.scene = scene
@@ -184,6 +185,9 @@ class Tracer:
         boxes = self.geometry.boxes()
         if boxes:
             self._watch = ClearanceBoxes(boxes, margin)
+            local = self.geometry.local_box(self._to_local)
+            if local is not None:
+                self._watch_near = (local[0] - margin, local[1] + margin)
 
     @property
     def objects(self) -> Any:
@@ -331,9 +335,13 @@ class Tracer:
                 Q, P = self.method.qp(batch.state)
                 S, X = Q[chart.offset :], np.where(redo, X_prev, X)
                 paths, going = paths.without(redo), ok & ~redo
-        if self._watch is not None:
-            world = [self._to_world(x.T) for x in (X_prev, X, camera)]
-            self._watch_segments(idx, world[0], world[1], out, world[2])
+        if self._watch is not None:  # the steps within the margin of the objects' box
+            lo, hi = self._watch_near
+            near = np.all((np.minimum(X_prev, X).T <= hi) & (np.maximum(X_prev, X).T >= lo), axis=1)
+            r = np.flatnonzero(near)
+            if r.size:
+                world = [self._to_world(x[:, r].T) for x in (X_prev, X, camera)]
+                self._watch_segments(idx[r], world[0], world[1], out, world[2])
         if paths is not None:
             ended |= self._segments(idx, paths, out, step_ends)
         if self.captured is not None:
