@@ -452,7 +452,9 @@ class TileSampler:
         colour = rgba[inner].copy()
         if self.samples > 1:
             differs = _contrast(rgba, ending)
-            near = nodes.clearance[inner] < self.footprint * self.pixel_angle
+            near = nodes.traced[inner] & (
+                nodes.clearance[inner] < self.footprint * self.pixel_angle
+            )
             busy = np.any(np.stack(differs), axis=0) | near
             colour[busy] = self._supersample(nodes, blocks, busy, differs, near, cancel)
         passes = {"error": error[inner], "steps": steps, "ending": ending[inner],
