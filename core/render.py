@@ -25,6 +25,7 @@ from . import checks
 from . import sampling as sampling_module
 from . import workers as workers_module
 from .geometry import Intersector
+from .geometry.hits import box_corners
 from .imageio import FAILED_COLOR
 from .integrators import Splitting
 from .observer import ObserverError, check_camera
@@ -238,7 +239,7 @@ def _watch_margin(tracer: Tracer, camera, pixel_angle: float) -> float:
     far = 0.0
     for lo, hi, *_ in boxes:
         ends = [np.where(np.isfinite(x), x, eye) for x in (lo, hi)]
-        corners = np.array(np.meshgrid(*zip(*ends, strict=True))).reshape(3, -1).T
+        corners = box_corners(*ends)
         far = max(far, float(np.max(np.linalg.norm(corners - eye, axis=1))))
     return CLEARANCE * STRIDE * pixel_angle * far
 
@@ -538,7 +539,7 @@ def _scene_extent(scene: Scene, camera) -> float:
     if annulus is not None:
         bounds.append(annulus.bounds)
     for lo, hi in bounds:
-        corners = np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T
+        corners = box_corners(lo, hi)
         if np.all(np.isfinite(corners)):
             far = max(far, float(np.max(np.linalg.norm(corners - scene.center, axis=1))))
     return float(max(far, 1e-9))

@@ -31,10 +31,12 @@ accepted only when all its rays end the same way (the same object, for hits).
 
 Anti-aliasing (``samples`` > 1): a pixel whose colour differs from a neighbour's by more
 than ``AA_CONTRAST`` (or whose ending does) gets up to ``samples`` points spread over its
-filter footprint (the cells of a k x k grid, k = ceil(sqrt(samples)), the same in every
-pixel, farthest-first; ``FIRST_SAMPLES`` first, the rest where those disagree), each
-shaded by interpolation inside an accepted block or by a traced ray elsewhere; its colour
-is their filter-weighted mean (box over the pixel, or Blackman-Harris of width
+filter footprint (one in each cell of a k x k grid, k = ceil(sqrt(samples)), jittered
+within it differently in every pixel, farthest-first; ``FIRST_SAMPLES`` first, the rest
+where those disagree), and so does, with all its samples, a traced pixel whose ray passed
+an object within the footprint (a thin strip or a small sphere between the samples); each
+point is shaded by interpolation inside an accepted block or by a traced ray elsewhere;
+its colour is their filter-weighted mean (box over the pixel, or Blackman-Harris of width
 ``filter_size`` as in Cycles). Other pixels keep their centre's colour.
 """
 
@@ -77,11 +79,12 @@ batch; ~0.5 kB a traced point)."""
 FILTERS = ("box", "blackman_harris")
 """Reconstruction filters: the pixel's square, or Cycles' default (width ``filter_size``)."""
 CLEARANCE = 1.0
-"""Sky and shadow blocks are interpolated only where each of their traced rays kept clear
-of every object's bounds by more than CLEARANCE x the block's spread (its width as seen
-from the camera, times how much its rays spread apart on the way: _magnification): every
-point of a block lies within half a block width of one of its five traced rays, so an
-object cannot reach an untraced ray there without passing within that of a traced one."""
+"""Blocks are interpolated only where each of their traced rays kept clear of every
+object's bounds (a hit's: of every object but its own) by more than CLEARANCE x the
+block's spread (its width as seen from the camera, times how much its rays spread apart
+on the way: _magnification): every point of a block lies within half a block width of one
+of its five traced rays, so an object cannot reach an untraced ray there without passing
+within that of a traced one."""
 INTERPOLATION_SAFETY = 2.0
 """The interpolation error reported (and held within the tolerance) is this many times the
 quadratic estimate 2 d (u (1 - u) + v (1 - v)): higher-order terms of the map are not
@@ -244,7 +247,7 @@ class TileSampler:
         self.tracer, self.camera, self.background, self.shade = tracer, camera, background, shade
         self.interpolation = float(interpolation)  # radians; 0: trace every pixel
         self.samples = int(samples)
-        self.unit = stratified_points(self.samples)  # (S, 2), shifted per pixel
+        self.unit = stratified_points(self.samples)  # (S, 2), jittered per pixel
         self.pixel_filter, self.filter_size = pixel_filter, filter_size
         extent = 1.0 if pixel_filter == "box" else filter_size
         self.footprint = extent / math.sqrt(2)  # pixels from the centre to its corners
@@ -413,7 +416,7 @@ class TileSampler:
         alike &= object_id != DISK_ID  # its colour follows each ray's momentum: traced
         width = s * self.pixel_angle  # the block's width, radians
         clear = CLEARANCE * width * _magnification(nodes, corners, width)
-        alike &= nodes.clearance[cj, ci] > clear  # sky and shadow: no object in between
+        alike &= nodes.clearance[cj, ci] > clear  # no (other) object in between
         for j, i in corners:
             alike &= nodes.plain[j, i] & (nodes.ending[j, i] == ending)
             alike &= (nodes.object_id[j, i] == object_id) & (nodes.clearance[j, i] > clear)
@@ -587,7 +590,7 @@ class TileSampler:
 
     def _sample(self, nodes: _Nodes, blocks: _Blocks, pj, pi, ks: slice, cancel):
         """Colours (P, K, 4) and filter weights (P, K) at the pixels (pj, pi) (tile pixels)
-        of their samples ``ks`` (of ``stratified_points``, shifted per pixel)."""
+        of their samples ``ks`` (of ``stratified_points``, jittered per pixel)."""
         rows, columns = self._origin[0] + pj + 1, self._origin[1] + pi + 1
         k = _cells_per_side(self.samples)
         unit = pixel_samples(self.unit, ks, k, rows, columns)

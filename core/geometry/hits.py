@@ -118,6 +118,11 @@ def slab_span(a: np.ndarray, inv_d: np.ndarray, lo: np.ndarray, hi: np.ndarray):
     return enter, leave
 
 
+def box_corners(lo: Any, hi: Any) -> np.ndarray:
+    """(8, 3) the corners of the box [lo, hi]."""
+    return np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T
+
+
 def segment_meets_box(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray):
     """(N,) bool: the segment a -> b passes through the box [lo, hi] (a slab test)."""
     with np.errstate(divide="ignore"):

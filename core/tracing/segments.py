@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from ..geometry import Hits, Intersector, segment_overlaps
+from ..geometry.hits import box_corners
 from .clearance import Bound, shape_distance
 from .scene import ENDING
 
@@ -160,6 +161,6 @@ class SceneGeometry:
         hi = np.max([b[1] for b in boxes], axis=0)
         if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
             return np.full(3, -np.inf), np.full(3, np.inf)
-        corners = np.array(np.meshgrid(*zip(lo, hi, strict=True))).reshape(3, -1).T
+        corners = box_corners(lo, hi)
         local = to_local(corners)
         return local.min(axis=0), local.max(axis=0)

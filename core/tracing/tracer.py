@@ -19,6 +19,7 @@ import numpy as np
 
 from .. import checks, integrators
 from ..charts import chart_for
+from ..geometry import segment_overlaps
 from ..integrators.batch import Batch, run_batch
 from ..observer import medium_momenta, spacetime_momenta
 from . import dense
@@ -50,7 +51,7 @@ TURN_LIMIT = 0.1
 """With geometry, a step whose chord turns from the ray's heading by more than this
 (radians) is taken again at half the step (Tracer._bent_steps)."""
 MAX_HALVINGS = 10
-"""At most this many halvings of a ray's step (1/64 of the rule's)."""
+"""At most this many halvings of a ray's step (1/1024 of the rule's)."""
 CHORD_SHARE = 0.5
 """Chords near geometry stay within CHORD_SHARE x tolerance x (distance from the camera) of
 the ray's cubic path: half the tolerance, as the integration gets (core/tracing/steps.py)."""
@@ -336,9 +337,7 @@ class Tracer:
                 S, X = Q[chart.offset :], np.where(redo, X_prev, X)
                 paths, going = paths.without(redo), ok & ~redo
         if self._watch is not None:  # the steps within the margin of the objects' box
-            lo, hi = self._watch_near
-            near = np.all((np.minimum(X_prev, X).T <= hi) & (np.maximum(X_prev, X).T >= lo), axis=1)
-            r = np.flatnonzero(near)
+            r = np.flatnonzero(segment_overlaps(X_prev.T, X.T, *self._watch_near))
             if r.size:
                 world = [self._to_world(x[:, r].T) for x in (X_prev, X, camera)]
                 self._watch_segments(idx[r], world[0], world[1], out, world[2])
