@@ -5,9 +5,9 @@ Everything here may import bpy/mathutils; the numpy core (``..core``) never does
 
 from __future__ import annotations
 
-from . import engine, operator, panel, presets, properties
+from . import engine, migration, objects, operator, overlay, panel, presets, properties
 
-_MODULES = (properties, presets, operator, engine, panel)
+_MODULES = (objects, properties, presets, operator, engine, panel, overlay, migration)
 
 
 def register() -> None:

@@ -17,7 +17,7 @@ import numpy as np
 from ..core import AccretionDisk, Scene, expressions
 from ..core import hamiltonians as hm
 from ..core.render import check_scene_camera
-from . import validation
+from . import objects, validation
 from .capabilities import capabilities
 
 
@@ -59,6 +59,7 @@ def _expression(text: str, names: tuple[str, ...], what: str) -> str:
 
 def build_model(settings: Any, metric_source: str) -> Any | None:
     """The core Hamiltonian for ``settings`` (a scene.symray), or None for flat space."""
+    settings = objects.effective(settings)
     model = settings.model
     if model == "FLAT":
         return None
@@ -114,6 +115,7 @@ def camera_problem(
 ) -> str:
     """The message check_camera raises, "" if none (or if the settings themselves are
     invalid: their own messages say so). Cached: the panel asks at every redraw."""
+    settings = objects.effective(settings)
     if not capabilities(settings.model).observer or validation.settings_problems(settings):
         return ""
     center = None if center_matrix is None else tuple(map(tuple, center_matrix))

@@ -3,11 +3,12 @@ engine; for any other engine only a small panel with the Render SymRay Image but
 
 from __future__ import annotations
 
+import math
 import textwrap
 
 import bpy
 
-from . import models, presets, properties, validation
+from . import models, objects, presets, properties, validation
 from .capabilities import capabilities
 from .operator import SYMRAY_OT_bake_lighting, SYMRAY_OT_render
 
@@ -38,7 +39,7 @@ def render_problems(scene: bpy.types.Scene) -> list[str]:
     """What a render would stop with that is known before it: settings out of range (a
     .blend or a script can set anything), a method that cannot trace the model, a camera
     where no rays can start (inside a horizon, metric singular or of the wrong signature)."""
-    settings = scene.symray
+    settings = objects.effective(scene.symray)
     problems = validation.settings_problems(settings)
     if problems or scene.camera is None:
         return problems
@@ -107,38 +108,23 @@ class RENDER_PT_symray(SymRayPanelMixin, bpy.types.Panel):
         self.layout.menu(presets.SYMRAY_MT_presets.bl_idname, text="Presets", icon="PRESET")
 
     def draw(self, context: bpy.types.Context) -> None:
-        """Draw the model settings."""
+        """Draw the model settings, the quality and the render button."""
         settings = context.scene.symray
         layout = self.layout
         layout.use_property_split = True
         layout.use_property_decorate = True
         layout.prop(settings, "model")
-        layout.prop(settings, "center")
-        model = settings.model
-        if capabilities(model).mass:
-            layout.prop(settings, "rg")
-        if model == "KERR":
-            row = layout.row()
-            row.alert = bool(validation.spin_problem(settings.spin))
-            row.prop(settings, "spin")
-        elif model == "MEDIUM":
-            _expression(layout, settings, "refractive_index", settings.refractive_index_error)
-            layout.prop(settings, "index_form")
-            layout.prop(settings, "use_medium_bounds")
-            col = layout.column()
-            col.active = settings.use_medium_bounds
-            col.prop(settings, "medium_min")
-            col.prop(settings, "medium_max")
-        elif model == "METRIC":
-            if settings.metric_text is None:
-                _expression(layout, settings, "metric", settings.metric_error)
-            layout.prop(settings, "metric_text")
-            if settings.metric_text is not None:
-                error = validation.check_metric(properties.metric_source(settings))
-                if error:
-                    _error_lines(layout, error)
-        elif model == "CUSTOM":
-            _expression(layout, settings, "hamiltonian", settings.hamiltonian_error)
+        if settings.model == "OBJECTS":
+            _scene_objects(layout, context.scene)
+        else:
+            layout.prop(settings, "center")
+            _model_settings(layout, settings)
+        layout.prop(settings, "quality")
+        if settings.quality == "CUSTOM":
+            layout.prop(settings, "tolerance_px")
+            layout.prop(settings, "samples")
+        elif settings.quality == "RADIANS":
+            layout.prop(settings, "tolerance")
         layout.separator()
         for message in render_problems(context.scene):
             _error_lines(layout, message)
@@ -147,24 +133,92 @@ class RENDER_PT_symray(SymRayPanelMixin, bpy.types.Panel):
         row.operator(SYMRAY_OT_render.bl_idname, icon="RENDER_STILL")
 
 
-class RENDER_PT_symray_integration(SymRayPanelMixin, bpy.types.Panel):
-    """How Hamilton's equations are integrated"""
+def _scene_objects(layout: bpy.types.UILayout, scene: bpy.types.Scene) -> None:
+    """What the scene's SymRay objects make of the model: the hole's or medium's settings,
+    or how to add one."""
+    hole = objects.hole_of(scene)
+    media = [o for o in scene.objects if o.symray.kind == "MEDIUM" and not o.hide_render]
+    if hole is not None:
+        hole_settings(layout, hole)
+    elif len(media) == 1:
+        layout.label(text=f"Medium: {media[0].name}", icon="MOD_FLUID")
+        medium_settings(layout, scene.symray)
+    elif not objects.objects_problem(scene):
+        col = layout.column(align=True)
+        col.label(text="Flat space: the scene has no black hole", icon="INFO")
+        col.label(text="Add one: Add › SymRay › Black Hole", icon="BLANK1")
+        col.operator(objects.SYMRAY_OT_add_black_hole.bl_idname, text="Add Black Hole")
 
-    bl_label = "Integration"
+
+def hole_settings(layout: bpy.types.UILayout, hole: bpy.types.Object) -> None:
+    """A hole object's Size and Spin, with its horizon and shadow in scene units."""
+    layout.label(text=f"Black Hole: {hole.name}", icon="SHADING_SOLID")
+    layout.prop(hole.symray, "size")
+    layout.prop(hole.symray, "spin")
+    rg = objects.rg_of(hole.symray.size, hole.symray.spin)
+    shadow = 1.5 * math.sqrt(3.0) * rg  # seen from afar, at spin 0 (Kerr: within ~7 %)
+    layout.label(text=f"Shadow: about {_length(hole, shadow)} across", icon="INFO")
+
+
+def medium_settings(layout: bpy.types.UILayout, settings: bpy.types.PropertyGroup) -> None:
+    """The refractive index and the optical form of the medium."""
+    _expression(layout, settings, "refractive_index", settings.refractive_index_error)
+    layout.prop(settings, "index_form")
+
+
+def _length(datablock: bpy.types.ID, value: float) -> str:
+    """A length in scene units as Blender writes it (unit system and scale of the scene
+    of ``datablock``, or metres)."""
+    scene = datablock if isinstance(datablock, bpy.types.Scene) else bpy.context.scene
+    units = scene.unit_settings
+    if units.system == "NONE":
+        return f"{value:.3g}"
+    return bpy.utils.units.to_string(
+        units.system, "LENGTH", value * units.scale_length, precision=3
+    )
+
+
+def _model_settings(layout: bpy.types.UILayout, settings: bpy.types.PropertyGroup) -> None:
+    """The explicit model's parameters (all models but Scene Objects)."""
+    model = settings.model
+    if capabilities(model).mass:
+        layout.prop(settings, "rg")
+    if model == "KERR":
+        row = layout.row()
+        row.alert = bool(validation.spin_problem(settings.spin))
+        row.prop(settings, "spin")
+    elif model == "MEDIUM":
+        medium_settings(layout, settings)
+        layout.prop(settings, "use_medium_bounds")
+        col = layout.column()
+        col.active = settings.use_medium_bounds
+        col.prop(settings, "medium_min")
+        col.prop(settings, "medium_max")
+    elif model == "METRIC":
+        if settings.metric_text is None:
+            _expression(layout, settings, "metric", settings.metric_error)
+        layout.prop(settings, "metric_text")
+        if settings.metric_text is not None:
+            error = validation.check_metric(properties.metric_source(settings))
+            if error:
+                _error_lines(layout, error)
+    elif model == "CUSTOM":
+        _expression(layout, settings, "hamiltonian", settings.hamiltonian_error)
+
+
+class RENDER_PT_symray_integration(SymRayPanelMixin, bpy.types.Panel):
+    """How Hamilton's equations are integrated, and how the cores share the work"""
+
+    bl_label = "Advanced"
     bl_parent_id = "RENDER_PT_symray"
+    bl_options = {"DEFAULT_CLOSED"}
 
     def draw(self, context: bpy.types.Context) -> None:
-        """Draw method, quality (accuracy), step limit and how the cores are shared."""
+        """Draw method, step limit and how the cores are shared."""
         settings = context.scene.symray
         layout = self.layout
         layout.use_property_split = True
         layout.prop(settings, "method")
-        layout.prop(settings, "quality")
-        if settings.quality == "CUSTOM":
-            layout.prop(settings, "tolerance_px")
-            layout.prop(settings, "samples")
-        elif settings.quality == "RADIANS":
-            layout.prop(settings, "tolerance")
         layout.prop(settings, "max_steps")
         layout.prop(settings, "parallel")
         layout.prop(settings, "workers")
@@ -180,31 +234,41 @@ class RENDER_PT_symray_disk(SymRayPanelMixin, bpy.types.Panel):
     @classmethod
     def poll(cls, context: bpy.types.Context) -> bool:
         """Shown for the black-hole models."""
-        return super().poll(context) and capabilities(context.scene.symray.model).disk
+        return super().poll(context) and capabilities(_model(context.scene)).disk
 
     def draw_header(self, context: bpy.types.Context) -> None:
         """The on/off switch in the header."""
         self.layout.prop(context.scene.symray.disk, "enabled", text="")
 
     def draw(self, context: bpy.types.Context) -> None:
-        """Draw the disk's radii, temperature and light."""
-        settings = context.scene.symray
-        disk = settings.disk
-        layout = self.layout
-        layout.use_property_split = True
-        layout.active = disk.enabled
-        layout.prop(disk, "use_isco")
-        row = layout.row()
-        row.active = not disk.use_isco
-        row.prop(disk, "inner_radius")
-        if settings.rg > 0:
-            layout.label(text=f"ISCO: r = {validation.inner_edge(settings):.4g}", icon="INFO")
-        layout.prop(disk, "outer_radius")
-        layout.prop(disk, "profile")
-        layout.prop(disk, "temperature")
-        layout.prop(disk, "doppler")
-        layout.prop(disk, "brightness")
-        layout.prop(disk, "opacity")
+        """Draw the disk's settings."""
+        self.layout.active = context.scene.symray.disk.enabled
+        disk_settings(self.layout, context.scene)
+
+
+def _model(scene: bpy.types.Scene) -> str:
+    """The model the scene renders with (Scene Objects resolved)."""
+    return objects.effective(scene.symray).model
+
+
+def disk_settings(layout: bpy.types.UILayout, scene: bpy.types.Scene) -> None:
+    """The disk's radii (the innermost stable orbit in scene units), temperature and light."""
+    settings = objects.effective(scene.symray)
+    disk = settings.disk
+    layout.use_property_split = True
+    layout.prop(disk, "use_isco")
+    row = layout.row()
+    row.active = not disk.use_isco
+    row.prop(disk, "inner_radius")
+    if capabilities(settings.model).disk and settings.rg > 0:
+        isco = _length(scene, validation.inner_edge(settings))
+        layout.label(text=f"Innermost stable orbit: {isco}", icon="INFO")
+    layout.prop(disk, "outer_radius")
+    layout.prop(disk, "profile")
+    layout.prop(disk, "temperature")
+    layout.prop(disk, "doppler")
+    layout.prop(disk, "brightness")
+    layout.prop(disk, "opacity")
 
 
 class RENDER_PT_symray_lighting(SymRayPanelMixin, bpy.types.Panel):
@@ -263,6 +327,46 @@ class VIEWLAYER_PT_symray_passes(SymRayPanelMixin, bpy.types.Panel):
             col.prop(settings, toggle)
 
 
+class OBJECT_PT_symray(bpy.types.Panel):
+    """A SymRay object's settings (a black hole or a medium), in Object Properties"""
+
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    bl_context = "object"
+    bl_label = "SymRay"
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        """Shown for black hole and medium objects, whatever the render engine."""
+        obj = context.object
+        return (
+            obj is not None
+            and getattr(obj, "symray", None) is not None
+            and (obj.symray.kind != "NONE")
+        )
+
+    def draw(self, context: bpy.types.Context) -> None:
+        """The hole's size, spin and disk, or the medium's index."""
+        obj, scene = context.object, context.scene
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(obj.symray, "kind")
+        if obj.symray.kind == "BLACK_HOLE":
+            hole_settings(layout, obj)
+            layout.prop(scene.symray.disk, "enabled")
+            col = layout.column()
+            col.active = scene.symray.disk.enabled
+            disk_settings(col, scene)
+        else:
+            medium_settings(layout, scene.symray)
+            layout.label(text="The Empty's cube is the medium's box", icon="INFO")
+        if scene.symray.model != "OBJECTS":
+            _error_lines(layout, "The scene's SymRay model is not Scene Objects: this object "
+                         "is not rendered as what it is")  # fmt: skip
+        elif objects.objects_problem(scene):
+            _error_lines(layout, objects.objects_problem(scene))
+
+
 class RENDER_PT_symray_film(SymRayPanelMixin, bpy.types.Panel):
     """Blender's film settings that SymRay honours"""
 
@@ -288,6 +392,7 @@ CLASSES = (
     RENDER_PT_symray_launch,
     RENDER_PT_symray_film,
     VIEWLAYER_PT_symray_passes,
+    OBJECT_PT_symray,
 )
 
 

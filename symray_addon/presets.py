@@ -8,9 +8,14 @@ figures can be reproduced as printed; see docs/design.md, "Models and convention
 
 from __future__ import annotations
 
+import math
+
 import bpy
+import numpy as np
+from mathutils import Vector
 
 from ..core.presets import MIRAGE_EQ17_INDEX, MIRAGE_EQ18_INDEX
+from . import models, objects
 
 MINKOWSKI_METRIC = "-1, 0, 0, 0; 0, 1, 0, 0; 0, 0, 1, 0; 0, 0, 0, 1"
 """Flat spacetime in Cartesian coordinates (seed Eq. 13): the default user metric."""
@@ -18,29 +23,30 @@ MINKOWSKI_METRIC = "-1, 0, 0, 0; 0, 1, 0, 0; 0, 0, 1, 0; 0, 0, 0, 1"
 PRESETS: dict[str, tuple[str, str, dict[str, object]]] = {
     "SCHWARZSCHILD_LENS": (
         "Schwarzschild Lens",
-        "Non-rotating black hole (seed Eq. 15) lensing the sky and the objects behind it",
-        {"model": "SCHWARZSCHILD", "rg": 1.0, "method": "AUTO", "tolerance": 1e-6},
+        "A black hole that does not spin (seed Eq. 15), Size 1, lensing the sky and the "
+        "objects behind it; the camera frames it",
+        {"hole.size": 1.0, "hole.spin": 0.0, "method": "AUTO", "tolerance": 1e-6},
     ),
     "KERR": (
         "Kerr Black Hole",
-        "Rotating black hole, a/M = 0.9 (seed Eq. 12), spin axis = the centre's local Z",
-        {"model": "KERR", "rg": 1.0, "spin": 0.9, "method": "AUTO", "tolerance": 1e-6},
+        "A black hole spinning at 0.9 of the fastest possible (seed Eq. 12), Size 1, about "
+        "its local Z; the camera frames it",
+        {"hole.size": 1.0, "hole.spin": 0.9, "method": "AUTO", "tolerance": 1e-6},
     ),
     "KERR_DISK": (
         "Kerr with Accretion Disk",
-        "Rotating black hole, a/M = 0.9, rg = 0.5, with a hot thin disk from the ISCO to "
-        "3 units in the centre's XY plane (Novikov–Thorne, 6000 K, Doppler; framed for "
-        "the default camera) and the SymRay Redshift pass",
+        "A black hole spinning at 0.9, Size 1, with a hot thin disk from its innermost "
+        "stable orbit to 12× its size (Novikov–Thorne, 6000 K, Doppler), seen from 10° "
+        "above the disk, and the SymRay Redshift pass",
         {
-            "model": "KERR",
-            "rg": 0.5,
-            "spin": 0.9,
+            "hole.size": 1.0,
+            "hole.spin": 0.9,
             "method": "AUTO",
             "tolerance": 1e-6,
             "pass_redshift": True,
             "disk.enabled": True,
             "disk.use_isco": True,
-            "disk.outer_radius": 3.0,
+            "disk.outer_radius": 12.0,
             "disk.profile": "NOVIKOV_THORNE",
             "disk.temperature": 6000.0,
             "disk.doppler": True,
@@ -74,18 +80,63 @@ PRESETS: dict[str, tuple[str, str, dict[str, object]]] = {
     ),
 }
 """identifier -> (label, description, settings to assign to scene.symray; "disk.x" is
-scene.symray.disk.x)."""
+scene.symray.disk.x, "hole.x" the scene's black hole object's object.symray.x)."""
+
+FILL = 0.7
+"""A black hole preset's camera sees the hole (and disk) across this part of the frame."""
+INCLINATION = {True: 80.0, False: 90.0}
+"""Degrees between the hole's spin axis and the camera, with and without a disk."""
 
 
 def apply_preset(settings: bpy.types.PropertyGroup, identifier: str) -> None:
     """Assign the values of preset ``identifier`` to ``settings`` (a scene.symray); a
-    preset without a disk switches the disk off."""
+    preset without a disk switches the disk off. A black hole preset sets the scene's
+    hole object (made at the 3D cursor if it has none) and the model Scene Objects."""
     values = PRESETS[identifier][2]
     if "disk.enabled" not in values:
         settings.disk.enabled = False
+    hole = None
+    if any(key.startswith("hole.") for key in values):
+        hole = objects.ensure_hole(settings.id_data)
+        settings.model, settings.center = "OBJECTS", None
     for key, value in values.items():
         *group, name = key.split(".")
-        setattr(getattr(settings, group[0]) if group else settings, name, value)
+        target = (
+            {"disk": settings.disk, "hole": hole and hole.symray}.get(group[0])
+            if group
+            else settings
+        )
+        setattr(target, name, value)
+
+
+def frame_hole(scene: bpy.types.Scene, camera: bpy.types.Object) -> None:
+    """Place ``camera`` to see the scene's hole (and its disk) across FILL of the frame:
+    looking at its centre from INCLINATION off its spin axis."""
+    hole = objects.hole_of(scene)
+    if hole is None:
+        return
+    where = models.placement(hole.matrix_world)
+    rg = objects.rg_of(hole.symray.size, hole.symray.spin)
+    disk = scene.symray.disk.enabled
+    # what must fit: the disk's outer edge, or twice the shadow's radius (its lensed ring)
+    extent = scene.symray.disk.outer_radius if disk else 2.0 * 1.5 * math.sqrt(3.0) * rg
+    render = scene.render
+    aspect = (
+        render.resolution_x * render.pixel_aspect_x / (render.resolution_y * render.pixel_aspect_y)
+    )
+    data = camera.data
+    data.sensor_fit = "AUTO"
+    wide = 2.0 * math.atan(0.5 * data.sensor_width / data.lens)  # across the longer side
+    narrow = 2.0 * math.atan(math.tan(0.5 * wide) / max(aspect, 1.0 / aspect))
+    # a disk spans the frame's width; a hole alone its height
+    half_angle = 0.5 * FILL * (wide if disk else narrow)
+    distance = extent / math.tan(half_angle)
+    inclination = math.radians(INCLINATION[disk])
+    local = np.array([0.0, -math.sin(inclination), math.cos(inclination)])
+    camera.location = tuple(where.center + where.rotation @ local * distance)
+    forward = -(where.rotation @ local)
+    camera.rotation_euler = Vector(forward).to_track_quat("-Z", "Y").to_euler()
+    data.clip_end = max(data.clip_end, 4.0 * distance)
 
 
 class SYMRAY_OT_apply_preset(bpy.types.Operator):
@@ -101,20 +152,41 @@ class SYMRAY_OT_apply_preset(bpy.types.Operator):
     )
     add_center: bpy.props.BoolProperty(  # type: ignore[valid-type]
         name="Add Centre",
-        description="Create an Empty at the world origin as the model's centre if none is set",
+        description="Create an Empty at the world origin as the model's centre if none is set "
+        "(the mirages; the black holes are objects of their own)",
+        default=True,
+    )
+    frame_camera: bpy.props.BoolProperty(  # type: ignore[valid-type]
+        name="Frame Camera",
+        description="Move the scene camera (or add one) to see the black hole and its disk "
+        f"across {FILL:.0%} of the frame",
         default=True,
     )
 
     def execute(self, context: bpy.types.Context) -> set[str]:
         """Apply the preset to the active scene."""
-        settings = context.scene.symray
+        scene = context.scene
+        settings = scene.symray
         apply_preset(settings, self.preset)
+        if settings.model == "OBJECTS":
+            if self.frame_camera:
+                frame_hole(scene, _scene_camera(scene))
+            return {"FINISHED"}
         if self.add_center and settings.center is None:
             empty = bpy.data.objects.new("SymRay Centre", None)
             empty.empty_display_type = "SPHERE"
             context.scene.collection.objects.link(empty)
             settings.center = empty
         return {"FINISHED"}
+
+
+def _scene_camera(scene: bpy.types.Scene) -> bpy.types.Object:
+    """The scene's camera; a new one (made the scene camera) if it has none."""
+    if scene.camera is None:
+        camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+        scene.collection.objects.link(camera)
+        scene.camera = camera
+    return scene.camera
 
 
 class SYMRAY_MT_presets(bpy.types.Menu):

@@ -25,13 +25,19 @@ QUALITY_PRESETS = {"PREVIEW": (1.0, 1), "FINAL": (0.25, 16)}
 """Quality -> (tolerance in pixels, samples per pixel)."""
 
 MODEL_ITEMS = [
-    ("FLAT", "Flat", "No bending: straight rays, an ordinary ray tracer"),
-    ("SCHWARZSCHILD", "Schwarzschild", "Non-rotating black hole of Schwarzschild radius rg"),
-    ("KERR", "Kerr", "Rotating black hole; spin axis = the centre's local Z"),
-    ("MEDIUM", "Medium", "Refractive index n(x, y, z) in the centre's local frame (mirages)"),
-    ("METRIC", "Metric", "Any spacetime given by its inverse metric g^ij(t, x, y, z)"),
-    ("CUSTOM", "Hamiltonian", "Any Hamiltonian H(x, y, z, p_x, p_y, p_z)"),
-]
+    ("OBJECTS", "Scene Objects", "The scene's black hole or medium object (Add › SymRay); "
+     "flat space without one", "OUTLINER_OB_EMPTY", 6),
+    ("FLAT", "Flat", "No bending: straight rays, an ordinary ray tracer", "NONE", 0),
+    ("SCHWARZSCHILD", "Schwarzschild", "Non-rotating black hole of size rg at the centre "
+     "object", "NONE", 1),
+    ("KERR", "Kerr", "Rotating black hole at the centre object; spin axis = its local Z",
+     "NONE", 2),
+    ("MEDIUM", "Medium", "Refractive index n(x, y, z) in the centre's local frame (mirages)",
+     "NONE", 3),
+    ("METRIC", "Metric", "Any spacetime given by its inverse metric g^ij(t, x, y, z)", "NONE", 4),
+    ("CUSTOM", "Custom Hamiltonian", "Any Hamiltonian H(x, y, z, p_x, p_y, p_z)", "NONE", 5),
+]  # fmt: skip
+"""(identifier, label, description, icon, number): the number is what a .blend stores."""
 
 METHOD_TEXT = {
     "symplectic_euler": (0, "Symplectic Euler", "1st order, seed Eq. 11"),
@@ -85,7 +91,11 @@ INDEX_FORM_ITEMS = [
 ]
 
 BACKGROUND_ITEMS = [
-    ("AUTO", "Auto", "The world's environment texture if it has one, else the procedural sky"),
+    (
+        "AUTO",
+        "Auto",
+        "The world's environment texture or colour; the procedural sky when the scene has no world",
+    ),
     ("WORLD", "World", "The world: its environment texture or its background colour"),
     ("PROCEDURAL", "Procedural Sky", "SymRay's procedural star field and grid"),
 ]
@@ -192,32 +202,34 @@ class SymRaySettings(bpy.types.PropertyGroup):
     """SymRay settings of one scene (``scene.symray``)"""
 
     model: bpy.props.EnumProperty(  # type: ignore[valid-type]
-        name="Model", items=MODEL_ITEMS, default="SCHWARZSCHILD", description="What bends the light"
+        name="Model", items=MODEL_ITEMS, default="OBJECTS", description="What bends the light"
     )
     center: bpy.props.PointerProperty(  # type: ignore[valid-type]
         name="Centre",
         type=bpy.types.Object,
         poll=_center_poll,
-        description="Empty placing the model: its position is the black hole's centre, its "
-        "local Z the spin axis, its local axes the frame of n(x, y, z) and g^ij; "
-        "none = the world origin",
+        description="Empty placing the model (all models but Scene Objects): its position is "
+        "the black hole's centre, its local Z the spin axis, its local axes the frame of "
+        "n(x, y, z) and g^ij; none = the world origin",
     )
     rg: bpy.props.FloatProperty(  # type: ignore[valid-type]
-        name="Schwarzschild Radius",
+        name="Size",
         default=1.0,
         min=1e-6,
         soft_max=100.0,
         subtype="DISTANCE",
-        description="rg = 2GM/c² of the black hole, in scene units",
+        description="Size of the black hole, in scene units: its horizon's radius when it "
+        "does not spin (physics: the Schwarzschild radius rg = 2GM/c²)",
     )
     spin: bpy.props.FloatProperty(  # type: ignore[valid-type]
-        name="Spin a/M",
+        name="Spin",
         default=0.9,
         min=-1e6,
         max=1e6,
         soft_min=-1.0,
         soft_max=1.0,
-        description="Kerr spin parameter a/M; |a/M| <= 1 (1 = extremal)",
+        description="How fast the hole turns, -1 to 1 (1: the fastest possible). Physics: "
+        "Kerr's a/M (1 = extremal)",
     )
     refractive_index: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Refractive Index",
@@ -230,7 +242,7 @@ class SymRaySettings(bpy.types.PropertyGroup):
         name="Refractive Index Error", default=""
     )
     index_form: bpy.props.EnumProperty(  # type: ignore[valid-type]
-        name="Hamiltonian",
+        name="Optical Form",
         items=INDEX_FORM_ITEMS,
         default="PHYSICAL",
         description="Optical Hamiltonian built from n",
@@ -244,14 +256,14 @@ class SymRaySettings(bpy.types.PropertyGroup):
         name="Box Min",
         size=3,
         default=(-10.0, -10.0, -10.0),
-        subtype="XYZ",
+        subtype="XYZ_LENGTH",
         description="Lower corner of the medium's box, in the centre's local frame",
     )
     medium_max: bpy.props.FloatVectorProperty(  # type: ignore[valid-type]
         name="Box Max",
         size=3,
         default=(10.0, 10.0, 10.0),
-        subtype="XYZ",
+        subtype="XYZ_LENGTH",
         description="Upper corner of the medium's box, in the centre's local frame",
     )
     metric: bpy.props.StringProperty(  # type: ignore[valid-type]
@@ -290,7 +302,7 @@ class SymRaySettings(bpy.types.PropertyGroup):
     quality: bpy.props.EnumProperty(  # type: ignore[valid-type]
         name="Quality",
         items=QUALITY_ITEMS,
-        default="FINAL",
+        default="PREVIEW",
         description="How accurate the image is, in pixels of the camera: Preview or Final",
     )
     tolerance_px: bpy.props.FloatProperty(  # type: ignore[valid-type]
@@ -382,18 +394,25 @@ class SymRaySettings(bpy.types.PropertyGroup):
         max=1 << 20,
         description="Cycles samples per texel of a bake (more = less noise)",
     )
+    file_version: bpy.props.IntProperty(  # type: ignore[valid-type]
+        name="File Version",
+        default=0,
+        options={"HIDDEN"},
+        description="SymRay's file version when the .blend was saved (migration.py)",
+    )
     image_name: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Image",
         default="SymRay Result",
-        description="Image the SymRay Render operator writes (created if missing; not "
-        "Blender's own Render Result or Viewer Node)",
+        description="Image the Render SymRay Image button writes (created if missing; not "
+        "Blender's own Render Result or Viewer Node). F12 writes the Render Result",
     )
     exr_path: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="EXR Path",
         default="",
         subtype="FILE_PATH",
         options=_PATH_OPTIONS,
-        description="Also write the operator's result as OpenEXR here, a path ending in "
+        description="The Render SymRay Image button also writes its result as OpenEXR here "
+        "(F12 uses Output Properties), a path ending in "
         ".exr (none: .exr is added), with <name>.passes.exr beside it (empty = no EXR; "
         "'//' = next to the .blend, which must be saved)",
     )

@@ -19,7 +19,7 @@ import numpy as np
 
 from .. import core
 from ..core.render import summary_text as render_summary_text
-from . import bake, export_camera, export_meshes, models, properties, validation, world
+from . import bake, export_camera, export_meshes, models, objects, properties, validation, world
 
 Progress = Callable[[int, int], None]
 Cancel = Callable[[], bool]
@@ -60,7 +60,7 @@ def prepare(
     ``camera_object`` overrides the scene camera. Raises ValueError (bad settings, no
     camera, camera inside a horizon, nothing to render).
     """
-    settings = scene.symray
+    settings = objects.effective(scene.symray)
     problems = validation.settings_problems(settings)
     if problems:
         raise ValueError(problems[0])
@@ -83,8 +83,8 @@ def prepare(
     intersector = export_meshes.build_intersector(depsgraph, baked, warnings)
     if intersector is None and model is None:
         raise ValueError(
-            "Nothing to render: the scene has no visible mesh objects and the "
-            "model is Flat (choose a model or add objects)"
+            "Nothing to render: the scene has no visible mesh objects and no black hole "
+            "(Add › SymRay › Black Hole)"
         )
     transparent = bool(scene.render.film_transparent)
     # Film › Transparent: a clear sky, so that what lies in front of it (a translucent disk,

@@ -24,6 +24,7 @@ from typing import Any
 from ..core import checks, expressions
 from ..core.geometry.disk import check_spin, isco
 from ..core.integrators import METHODS, Splitting
+from . import objects
 from .capabilities import capabilities
 
 INDEX_NAMES: tuple[str, ...] = ("x", "y", "z")
@@ -251,7 +252,7 @@ def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
         found.append(lambda: checks.check_int("Max Resolution", settings.bake_max_resolution, 8))
         found.append(lambda: checks.check_int("Bake Samples", settings.bake_samples))
     if traits.mass:
-        found.append(lambda: checks.check_positive("Schwarzschild Radius", settings.rg))
+        found.append(lambda: checks.check_positive("Size", settings.rg))
     if model == "MEDIUM" and settings.use_medium_bounds:
         found.append(lambda: checks.check_vector("Box Min", settings.medium_min))
         found.append(lambda: checks.check_vector("Box Max", settings.medium_max))
@@ -261,8 +262,12 @@ def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
 def settings_problems(settings: Any) -> list[str]:
     """Messages for settings a render would refuse: values a .blend or a script can set
     beyond the properties' own ranges (NaN, 0, ...), a Kerr spin beyond extremal, a method
-    that cannot trace the model. Empty when every setting is usable."""
+    that cannot trace the model, two black holes in the scene. Empty when every setting is
+    usable."""
+    settings = objects.effective(settings)
     problems = enum_problems(settings) + enum_problems(settings.disk)
+    if settings.object_problem:
+        problems.append(settings.object_problem)
     for check in _settings_checks(settings):
         try:
             check()
@@ -275,10 +280,13 @@ def settings_problems(settings: Any) -> list[str]:
 
 def disk_problems(settings: Any) -> list[str]:
     """Messages for disk settings a render would refuse (names as in the panel)."""
+    settings = objects.effective(settings)
     disk = settings.disk
     if not disk.enabled:
         return []
     if not capabilities(settings.model).disk:
+        if settings.follows_objects:
+            return ["The Accretion Disk needs a black hole: Add › SymRay › Black Hole"]
         return ["Accretion Disk needs a Schwarzschild or Kerr model"]
     problems = []
     for check in _disk_checks(settings):
@@ -299,7 +307,7 @@ def _disk_checks(settings: Any) -> list[Callable[[], Any]]:
         lambda: checks.check_range("Disk Opacity", disk.opacity, 0.0, 1.0, lo_open=True),
     ]
     if settings.model == "KERR" and not spin_problem(settings.spin):
-        found.append(lambda: check_spin(settings.spin, "Spin a/M"))
+        found.append(lambda: check_spin(settings.spin, "Spin"))
     if not disk.use_isco:
         found.append(
             lambda: checks.check_range(
@@ -324,6 +332,7 @@ def _disk_checks(settings: Any) -> list[Callable[[], Any]]:
 
 def inner_edge(settings: Any) -> float:
     """The prograde ISCO of the settings' hole, in scene units (Boyer–Lindquist r)."""
+    settings = objects.effective(settings)
     mass = 0.5 * float(settings.rg)
     spin = float(settings.spin) if settings.model == "KERR" else 0.0
     return isco(mass, spin * mass)

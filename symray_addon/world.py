@@ -71,7 +71,8 @@ def world_background(scene: bpy.types.Scene, mode: str = "AUTO") -> Any:
     """The ``background=`` for core.Scene: "procedural", an rgba tuple or a Background.
 
     ``mode``: 'PROCEDURAL', 'WORLD' (texture or colour of the world, black without one) or
-    'AUTO' (the world's environment texture if it has one, else procedural).
+    'AUTO' (the world's environment texture or plain colour; the procedural sky when the
+    scene has no world, or a world whose nodes SymRay cannot read).
     """
     if mode == "PROCEDURAL":
         return "procedural"
@@ -80,8 +81,8 @@ def world_background(scene: bpy.types.Scene, mode: str = "AUTO") -> Any:
         return "procedural" if mode == "AUTO" else (0.0, 0.0, 0.0, 1.0)
     node = _background_node(world)
     if node is None:
-        if mode == "AUTO":
-            return "procedural"
+        if mode == "AUTO" and node_tree_of(world) is not None:
+            return "procedural"  # nodes, but no Background node SymRay reads
         return (*(float(c) for c in world.color[:3]), 1.0)
     strength_socket = node.inputs.get("Strength")
     strength = 1.0
@@ -93,7 +94,5 @@ def world_background(scene: bpy.types.Scene, mode: str = "AUTO") -> Any:
         if environment is not None:
             return environment
         return "procedural" if mode == "AUTO" else (0.0, 0.0, 0.0, 1.0)
-    if mode == "AUTO":
-        return "procedural"
     rgb = np.array(color.default_value[:3], dtype=np.float64) * strength
     return (*rgb.tolist(), 1.0)

@@ -131,7 +131,7 @@ ALL_ZERO = "0, 0, 0, 0; 0, 0, 0, 0; 0, 0, 0, 0; 0, 0, 0, 0"
             "KERR",
             "Tolerance must be a finite number in [1e-14, 0.1], got nan",
         ),
-        ("rg", math.nan, "SCHWARZSCHILD", "Schwarzschild Radius must be a finite number > 0"),
+        ("rg", math.nan, "SCHWARZSCHILD", "Size must be a finite number > 0"),
         ("spin", math.nan, "KERR", "Spin a/M must be a finite number, got nan"),
         ("medium_min", (math.nan, 0.0, 0.0), "MEDIUM", "Box Min must be finite numbers"),
     ],

@@ -13,9 +13,15 @@ OpenEXR = pytest.importorskip("OpenEXR")
 
 
 def _disk_scene(scene, helpers):
-    """The preset's Kerr a/M = 0.9 hole (rg 0.5) with its disk (to 3 units), seen at
-    inclination 80 deg from 12 units."""
-    assert bpy.ops.symray.apply_preset(preset="KERR_DISK") == {"FINISHED"}
+    """The preset's disk settings on a Kerr a/M = 0.9 hole of rg 0.5 (the explicit model at
+    a centre Empty) with its disk to 3 units, seen at inclination 80 deg from 12 units."""
+    assert bpy.ops.symray.apply_preset(preset="KERR_DISK", frame_camera=False) == {"FINISHED"}
+    for obj in list(scene.objects):
+        bpy.data.objects.remove(obj)
+    settings = scene.symray
+    settings.model, settings.rg, settings.spin = "KERR", 0.5, 0.9
+    settings.center = helpers.add_empty(scene)
+    settings.disk.outer_radius = 3.0
     inc = math.radians(80.0)
     cam = helpers.add_camera(scene, location=(0.0, -12 * math.sin(inc), 12 * math.cos(inc)),
                              rotation=(inc, 0.0, 0.0))  # fmt: skip
@@ -28,11 +34,12 @@ def _disk_scene(scene, helpers):
 def test_preset_sets_the_scene(scene):
     assert bpy.ops.symray.apply_preset(preset="KERR_DISK") == {"FINISHED"}
     settings = scene.symray
-    assert settings.model == "KERR" and settings.spin == pytest.approx(0.9)
-    assert settings.center is not None and settings.center.type == "EMPTY"
+    assert settings.model == "OBJECTS" and settings.center is None
+    hole = next(o for o in scene.objects if o.symray.kind == "BLACK_HOLE")
+    assert (hole.symray.size, hole.symray.spin) == (1.0, pytest.approx(0.9))
     disk = settings.disk
     assert disk.enabled and disk.use_isco and disk.doppler
-    assert disk.outer_radius == 3.0 and disk.profile == "NOVIKOV_THORNE"
+    assert disk.outer_radius == 12.0 and disk.profile == "NOVIKOV_THORNE"
     assert settings.pass_redshift and "redshift" in settings.passes()
     # another preset turns the disk off again
     assert bpy.ops.symray.apply_preset(preset="KERR") == {"FINISHED"}
@@ -119,12 +126,12 @@ def test_an_extremal_spin_with_the_disk_is_a_named_problem(addon, scene, helpers
     settings = scene.symray
     settings.spin = spin
     message = (
-        f"Spin a/M must lie in (-1, 1) with an accretion disk, got {spin:g}: at ±1 the disk's "
+        f"Spin must lie in (-1, 1) with an accretion disk, got {spin:g}: at ±1 the disk's "
         "innermost stable orbit meets the horizon"
     )
     assert [p for p in validation.settings_problems(settings) if p.startswith(message)]
     job = addon.module("symray_addon.render_job")
-    with pytest.raises(ValueError, match=r"Spin a/M must lie in \(-1, 1\) with an accretion"):
+    with pytest.raises(ValueError, match=r"Spin must lie in \(-1, 1\) with an accretion"):
         job.prepare(scene, bpy.context.evaluated_depsgraph_get())
     settings.disk.enabled = False
     assert validation.settings_problems(settings) == []

@@ -73,6 +73,33 @@ def test_main_panel_draws(scene, model):
         assert ("prop", expected) in log
 
 
+def test_the_panel_says_how_to_add_a_black_hole(factory_scene):
+    log = _draw("RENDER_PT_symray", factory_scene)  # the factory scene: no hole, flat space
+    assert ("label", "Flat space: the scene has no black hole") in log
+    assert ("operator", "symray.add_black_hole") in log
+    bpy.ops.symray.add_black_hole(size=0.5)
+    log = _draw("RENDER_PT_symray", factory_scene)
+    assert ("operator", "symray.add_black_hole") not in log
+    assert ("prop", "size") in log and ("prop", "spin") in log  # the hole's own settings
+    hole = bpy.context.active_object
+    log = _draw_object(hole, factory_scene)
+    assert {("prop", "size"), ("prop", "spin"), ("prop", "outer_radius")} <= set(log)
+    assert any(
+        text.startswith("Innermost stable orbit: ") and text.endswith(" m")
+        for kind, text in log
+        if kind == "label"
+    )
+
+
+def _draw_object(obj, scene) -> list:
+    log: list = []
+    fake = SimpleNamespace(layout=FakeLayout(log))
+    context = SimpleNamespace(scene=scene, object=obj)
+    assert bpy.types.OBJECT_PT_symray.poll(context)
+    bpy.types.OBJECT_PT_symray.draw(fake, context)
+    return log
+
+
 def test_panel_shows_expression_errors(scene):
     scene.symray.model = "MEDIUM"
     scene.symray.refractive_index = "1 + w"

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import bpy
 import pytest
 
-MODELS = {"FLAT", "SCHWARZSCHILD", "KERR", "MEDIUM", "METRIC", "CUSTOM"}
+MODELS = {"OBJECTS", "FLAT", "SCHWARZSCHILD", "KERR", "MEDIUM", "METRIC", "CUSTOM"}
 METHOD_ORDER = (
     # the numbers a .blend stores the Method enum by (once its items' positions): fixed
     ("symplectic_euler", "stormer_verlet", "implicit_midpoint", "gauss4", "yoshida4")
@@ -173,11 +173,14 @@ def test_engine_passes_declared(scene):
         ("MIRAGE_EQ18", "MEDIUM"),
     ],
 )
-def test_presets(scene, preset, model):
+def test_presets(addon, scene, preset, model):
     assert bpy.ops.symray.apply_preset(preset=preset) == {"FINISHED"}
     settings = scene.symray
-    assert settings.model == model
-    assert settings.center is not None and settings.center.type == "EMPTY"
+    assert addon.module("symray_addon.objects").effective(settings).model == model
+    if model != "MEDIUM":  # a black hole: the scene's hole object, framed by its camera
+        assert settings.model == "OBJECTS" and scene.camera is not None
+    else:
+        assert settings.center is not None and settings.center.type == "EMPTY"
     if model == "MEDIUM":
         assert settings.index_form == "SEED"
         assert settings.refractive_index_error == ""

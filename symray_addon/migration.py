@@ -1,0 +1,110 @@
+"""Files saved by earlier SymRay versions keep rendering what they rendered.
+
+Every save stamps ``scene.symray.file_version`` (FILE_VERSION); a scene loaded with SymRay
+settings but no stamp was saved before the black hole became an object (issue 24). Its
+settings are made explicit where a default changed (model Schwarzschild, quality Final,
+Background › Auto over a plain world = the procedural sky, the disk's physical look at
+exposure 1), and a centre Empty of a Schwarzschild or Kerr model becomes the scene's
+black hole object with the same size and spin.
+"""
+
+from __future__ import annotations
+
+import bpy
+from bpy.app.handlers import persistent
+
+from . import objects, world
+
+FILE_VERSION = 1
+"""The settings' layout this version writes (0: before black hole objects)."""
+
+
+def _centre_to_hole(settings: bpy.types.PropertyGroup) -> None:
+    """A Schwarzschild/Kerr model at a centre Empty -> that Empty as the scene's hole."""
+    centre = settings.center
+    if centre is None or centre.type != "EMPTY" or settings.model not in ("SCHWARZSCHILD", "KERR"):
+        return
+    spin = float(settings.spin) if settings.model == "KERR" else 0.0
+    if not -1.0 <= spin <= 1.0 or centre.symray.kind not in ("NONE", "BLACK_HOLE"):
+        return
+    size = objects.size_of(settings.rg, spin)
+    if centre.symray.kind == "BLACK_HOLE":  # shared with a scene migrated before
+        same = (centre.symray.size, centre.symray.spin) == (size, spin)
+        if not same:
+            return
+    centre.symray.size, centre.symray.spin = size, spin  # before kind: no disk rescaling
+    centre.symray.kind = "BLACK_HOLE"
+    centre.empty_display_type = "SPHERE"
+    settings.model, settings.center = "OBJECTS", None
+
+
+def _any_set(settings: bpy.types.PropertyGroup) -> bool:
+    """Whether the file holds any of these settings (a scene SymRay never touched holds
+    none: it is new, not old)."""
+    for group in (settings, settings.disk):
+        for prop in group.bl_rna.properties:
+            if prop.identifier in ("rna_type", "disk"):
+                continue
+            if prop.type == "POINTER":  # reported set even when empty
+                if getattr(group, prop.identifier) is not None:
+                    return True  # a centre object or a metric text
+            elif group.is_property_set(prop.identifier):
+                return True
+    return False
+
+
+def migrate(scene: bpy.types.Scene) -> bool:
+    """Bring an unstamped scene's settings to FILE_VERSION, keeping its image; True if
+    anything was done."""
+    settings = getattr(scene, "symray", None)
+    if settings is None or settings.file_version >= FILE_VERSION or not _any_set(settings):
+        return False
+    for name, old_default in (("model", "SCHWARZSCHILD"), ("quality", "FINAL")):
+        if not settings.is_property_set(name):
+            setattr(settings, name, old_default)
+    if settings.background == "AUTO" and not isinstance(world.world_background(scene, "AUTO"), str):
+        settings.background = "PROCEDURAL"  # Auto showed the stars over a plain world
+    disk = settings.disk
+    if hasattr(disk, "look"):
+        disk.look = "PHYSICAL"
+    if hasattr(disk, "auto_exposure"):
+        disk.auto_exposure = False
+    _centre_to_hole(settings)
+    settings.file_version = FILE_VERSION
+    return True
+
+
+@persistent
+def migrate_on_load(_dummy: object = None) -> None:
+    """After a .blend loads, migrate every unstamped scene."""
+    for scene in bpy.data.scenes:
+        migrate(scene)
+
+
+@persistent
+def stamp_on_save(_dummy: object = None) -> None:
+    """Before a .blend is saved, stamp every scene's settings with FILE_VERSION."""
+    for scene in bpy.data.scenes:
+        settings = getattr(scene, "symray", None)
+        if settings is not None and settings.file_version != FILE_VERSION:
+            settings.file_version = FILE_VERSION
+
+
+_HANDLERS = (
+    (bpy.app.handlers.load_post, migrate_on_load),
+    (bpy.app.handlers.save_pre, stamp_on_save),
+)
+
+
+def register() -> None:
+    """Add the load and save handlers."""
+    for handlers, handler in _HANDLERS:
+        if handler not in handlers:
+            handlers.append(handler)
+
+
+def unregister() -> None:
+    """Remove the handlers."""
+    for handlers, handler in _HANDLERS:
+        if handler in handlers:
+            handlers.remove(handler)

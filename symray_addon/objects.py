@@ -1,0 +1,335 @@
+"""SymRay objects: a black hole or a refractive medium is an object of the scene.
+
+Each is an Empty marked by ``object.symray.kind`` ('BLACK_HOLE' or 'MEDIUM'), added with
+*Add › SymRay* (``bpy.ops.symray.add_black_hole()``, ``bpy.ops.symray.add_medium()``) at
+the 3D cursor, drawn at its true size (overlay.py) and set in Object Properties. With the
+scene's model *Scene Objects* (``scene.symray.model == 'OBJECTS'``, the default) what
+bends the light follows them: the black hole (one per scene), else the medium, else flat
+space. ``effective(settings)`` is what every reader of the model uses: the scene's
+settings with model, rg, spin, centre and medium box as the objects make them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import bpy
+
+KIND_ITEMS = [
+    ("NONE", "None", "An ordinary object"),
+    ("BLACK_HOLE", "Black Hole", "A black hole: its position is the hole's centre, its local "
+     "Z the spin axis"),
+    ("MEDIUM", "Medium", "A refractive volume: its cube is the medium's box, its local axes "
+     "the frame of n(x, y, z)"),
+]  # fmt: skip
+
+DISK_OUTER_SIZES = 12.0
+"""A new hole's disk reaches this many times its Size."""
+
+
+def rg_of(size: float, spin: float) -> float:
+    """rg = 2M of a hole whose horizon has Boyer–Lindquist radius ``size`` at spin a/M:
+    r₊ = M (1 + √(1 − χ²))."""
+    chi = min(abs(float(spin)), 1.0)
+    return 2.0 * float(size) / (1.0 + math.sqrt(1.0 - chi * chi))
+
+
+def size_of(rg: float, spin: float) -> float:
+    """The horizon radius r₊ of a hole of rg = 2M and spin a/M (inverse of ``rg_of``)."""
+    chi = min(abs(float(spin)), 1.0)
+    return 0.5 * float(rg) * (1.0 + math.sqrt(1.0 - chi * chi))
+
+
+def _size_changed(self: bpy.types.PropertyGroup, _context: bpy.types.Context) -> None:
+    """Size of a hole changed: its Empty draws the horizon, its disk keeps its proportions."""
+    obj = self.id_data
+    if self.kind != "BLACK_HOLE" or not isinstance(obj, bpy.types.Object):
+        return
+    old = float(obj.empty_display_size) if obj.type == "EMPTY" else 0.0
+    if obj.type == "EMPTY":
+        obj.empty_display_size = self.size
+    if old <= 0.0 or not math.isfinite(old) or old == self.size:
+        return
+    for scene in bpy.data.scenes:
+        if hole_of(scene) == obj:
+            disk = scene.symray.disk
+            disk.outer_radius *= self.size / old
+            disk.inner_radius *= self.size / old
+
+
+class SymRayObjectSettings(bpy.types.PropertyGroup):
+    """SymRay settings of one object (``object.symray``)"""
+
+    kind: bpy.props.EnumProperty(  # type: ignore[valid-type]
+        name="SymRay", items=KIND_ITEMS, default="NONE", description="What this object is to SymRay"
+    )
+    size: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Size",
+        default=1.0,
+        min=1e-6,
+        soft_max=100.0,
+        subtype="DISTANCE",
+        update=_size_changed,
+        description="Radius of the black hole's horizon, in scene units: its shadow looks "
+        "about 2.6× as large (physics: the Boyer–Lindquist horizon radius r₊; Schwarzschild "
+        "radius rg = 2GM/c² at spin 0). Scaling the object does not change it",
+    )
+    spin: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Spin",
+        default=0.6,
+        min=-1.0,
+        max=1.0,
+        soft_min=0.0,
+        subtype="FACTOR",
+        description="How fast the hole turns, 0 (still) to 1 (the fastest possible); "
+        "negative turns the other way. Physics: Kerr's a/M, about the object's local Z",
+    )
+
+
+def _kind_objects(scene: bpy.types.Scene, kind: str) -> list[bpy.types.Object]:
+    """The scene's objects of SymRay ``kind`` that render (not hidden in renders)."""
+    return [
+        obj
+        for obj in scene.objects
+        if getattr(getattr(obj, "symray", None), "kind", "NONE") == kind and not obj.hide_render
+    ]
+
+
+def hole_of(scene: bpy.types.Scene) -> bpy.types.Object | None:
+    """The scene's black hole object, if it has exactly one."""
+    holes = _kind_objects(scene, "BLACK_HOLE")
+    return holes[0] if len(holes) == 1 else None
+
+
+def objects_problem(scene: bpy.types.Scene) -> str:
+    """Why the scene's SymRay objects cannot render ("" when they can)."""
+    holes = _kind_objects(scene, "BLACK_HOLE")
+    media = _kind_objects(scene, "MEDIUM")
+    if len(holes) > 1:
+        names = ", ".join(f"'{o.name}'" for o in holes)
+        return (
+            f"The scene has {len(holes)} black holes ({names}): SymRay renders one per "
+            "scene; delete one or turn off its Render visibility"
+        )
+    if len(media) > 1:
+        names = ", ".join(f"'{o.name}'" for o in media)
+        return f"The scene has {len(media)} media ({names}): SymRay renders one per scene"
+    if holes and media:
+        return (
+            f"The scene has a black hole ('{holes[0].name}') and a medium "
+            f"('{media[0].name}'): SymRay renders one of them per scene"
+        )
+    return ""
+
+
+def medium_box(obj: bpy.types.Object) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """(min, max) of a medium's box in its local frame: its Empty's cube, scaled."""
+    half = [float(obj.empty_display_size) * abs(float(s)) for s in obj.scale]
+    return tuple(-h for h in half), tuple(half)
+
+
+class Effective:
+    """A scene's ``symray`` settings as rendered: with model 'OBJECTS', model, rg, spin,
+    centre and medium box come from the scene's hole or medium object; every other
+    setting (and everything under any other model) reads through unchanged."""
+
+    def __init__(self, settings: Any) -> None:
+        self._settings = settings
+        self.object_problem = ""
+        if getattr(settings, "model", None) != "OBJECTS":
+            return
+        scene = settings.id_data
+        self.object_problem = objects_problem(scene)
+        hole, media = hole_of(scene), _kind_objects(scene, "MEDIUM")
+        if self.object_problem or (hole is None and not media):
+            self.model, self.center = "FLAT", None
+        elif hole is not None:
+            spin = float(hole.symray.spin)
+            self.model = "KERR" if spin != 0.0 else "SCHWARZSCHILD"
+            self.rg, self.spin, self.center = rg_of(hole.symray.size, spin), spin, hole
+        else:
+            self.model, self.center = "MEDIUM", media[0]
+            self.use_medium_bounds = True
+            self.medium_min, self.medium_max = medium_box(media[0])
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._settings, name)
+
+    @property
+    def follows_objects(self) -> bool:
+        """Whether the model comes from the scene's objects (model 'OBJECTS')."""
+        return self._settings.model == "OBJECTS"
+
+
+def effective(settings: Any) -> Any:
+    """``settings`` (a scene.symray) as rendered (see Effective); itself if already so."""
+    return settings if isinstance(settings, Effective) else Effective(settings)
+
+
+def _new_empty(
+    scene: bpy.types.Scene,
+    name: str,
+    display: str,
+    size: float,
+    collection: bpy.types.Collection | None = None,
+) -> bpy.types.Object:
+    """An Empty at the scene's 3D cursor, in ``collection`` (the scene's own if None)."""
+    obj = bpy.data.objects.new(name, None)
+    obj.empty_display_type = display
+    obj.empty_display_size = size
+    obj.location = scene.cursor.location
+    (collection or scene.collection).objects.link(obj)
+    return obj
+
+
+def _make_active(context: bpy.types.Context, obj: bpy.types.Object) -> None:
+    """Select ``obj`` alone and make it the active object (as Add does)."""
+    for other in context.view_layer.objects:
+        other.select_set(False)
+    obj.select_set(True)
+    context.view_layer.objects.active = obj
+
+
+def ensure_hole(scene: bpy.types.Scene) -> bpy.types.Object:
+    """The scene's black hole object; a new one at the 3D cursor if it has none."""
+    hole = hole_of(scene)
+    if hole is None:
+        hole = _new_empty(scene, "Black Hole", "SPHERE", 1.0)
+        hole.symray.kind = "BLACK_HOLE"
+    return hole
+
+
+class SYMRAY_OT_add_black_hole(bpy.types.Operator):
+    """Add a black hole at the 3D cursor: SymRay renders the scene's light bent by it"""
+
+    bl_idname = "symray.add_black_hole"
+    bl_label = "Black Hole"
+    bl_options = {"REGISTER", "UNDO"}
+
+    size: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Size",
+        default=1.0,
+        min=1e-6,
+        soft_max=100.0,
+        subtype="DISTANCE",
+        description="Radius of the horizon, in scene units",
+    )
+    spin: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Spin",
+        default=0.6,
+        min=-1.0,
+        max=1.0,
+        soft_min=0.0,
+        subtype="FACTOR",
+        description="How fast it turns, 0 to 1 (Kerr's a/M)",
+    )
+    disk: bpy.props.BoolProperty(  # type: ignore[valid-type]
+        name="Accretion Disk",
+        default=True,
+        description="A glowing disk of gas around it, from its innermost stable orbit to "
+        f"{DISK_OUTER_SIZES:g}× its size",
+    )
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        """Add the hole; refused (with a message) when the scene has one."""
+        scene = context.scene
+        existing = _kind_objects(scene, "BLACK_HOLE")
+        if existing:
+            self.report(
+                {"ERROR"},
+                f"The scene already has a black hole ('{existing[0].name}'): SymRay renders "
+                "one per scene",
+            )
+            return {"CANCELLED"}
+        if self.disk and abs(self.spin) >= 1.0:
+            self.report({"ERROR"}, "A disk needs a spin below 1 (at 1 its inner edge meets "
+                        "the horizon): choose 0.999, or no disk")  # fmt: skip
+            return {"CANCELLED"}
+        obj = _new_empty(scene, "Black Hole", "SPHERE", self.size, context.collection)
+        _make_active(context, obj)
+        obj.symray.kind = "BLACK_HOLE"
+        obj.symray.size, obj.symray.spin = self.size, self.spin
+        settings = scene.symray
+        settings.model = "OBJECTS"
+        settings.center = None
+        disk = settings.disk
+        disk.enabled = self.disk
+        disk.use_isco = True
+        disk.outer_radius = DISK_OUTER_SIZES * self.size
+        return {"FINISHED"}
+
+
+class SYMRAY_OT_add_medium(bpy.types.Operator):
+    """Add a refractive medium at the 3D cursor: a box of air whose index n(x, y, z) bends
+    light (mirages)"""
+
+    bl_idname = "symray.add_medium"
+    bl_label = "Medium"
+    bl_options = {"REGISTER", "UNDO"}
+
+    size: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Size",
+        default=10.0,
+        min=1e-6,
+        subtype="DISTANCE",
+        description="Half the edge of the medium's box, in scene units",
+    )
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        """Add the medium; refused (with a message) when the scene has one."""
+        scene = context.scene
+        existing = _kind_objects(scene, "MEDIUM") + _kind_objects(scene, "BLACK_HOLE")
+        if existing:
+            self.report(
+                {"ERROR"},
+                f"The scene already has '{existing[0].name}': SymRay renders one black hole "
+                "or medium per scene",
+            )
+            return {"CANCELLED"}
+        obj = _new_empty(scene, "Medium", "CUBE", self.size, context.collection)
+        _make_active(context, obj)
+        obj.symray.kind = "MEDIUM"
+        scene.symray.model = "OBJECTS"
+        scene.symray.center = None
+        return {"FINISHED"}
+
+
+class VIEW3D_MT_symray_add(bpy.types.Menu):
+    """SymRay's objects in Add"""
+
+    bl_idname = "VIEW3D_MT_symray_add"
+    bl_label = "SymRay"
+
+    def draw(self, _context: bpy.types.Context) -> None:
+        """Black Hole and Medium."""
+        self.layout.operator(SYMRAY_OT_add_black_hole.bl_idname, icon="SHADING_SOLID")
+        self.layout.operator(SYMRAY_OT_add_medium.bl_idname, icon="MOD_FLUID")
+
+
+def _add_menu(self: bpy.types.Menu, _context: bpy.types.Context) -> None:
+    self.layout.menu(VIEW3D_MT_symray_add.bl_idname, icon="LIGHT_SUN")
+
+
+CLASSES = (
+    SymRayObjectSettings,
+    SYMRAY_OT_add_black_hole,
+    SYMRAY_OT_add_medium,
+    VIEW3D_MT_symray_add,
+)
+
+
+def register() -> None:
+    """Register ``object.symray``, the Add operators and the Add › SymRay menu."""
+    for cls in CLASSES:
+        bpy.utils.register_class(cls)
+    bpy.types.Object.symray = bpy.props.PointerProperty(type=SymRayObjectSettings)
+    bpy.types.VIEW3D_MT_add.append(_add_menu)
+
+
+def unregister() -> None:
+    """Remove what register() added."""
+    bpy.types.VIEW3D_MT_add.remove(_add_menu)
+    del bpy.types.Object.symray
+    for cls in reversed(CLASSES):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,163 @@
+"""First contact (issue 24): a black hole is an object of the scene.
+
+The factory scene with SymRay renders flat space and the panel says how to add a hole;
+*Add › SymRay › Black Hole* puts one of the chosen size at the 3D cursor (its shadow as
+large as Synge's formula says, where the cursor projects); one hole per scene; files saved
+before holes were objects render what they rendered.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import bpy
+import numpy as np
+import pytest
+
+DATA = Path(__file__).resolve().parent / "data"
+
+
+def f12(scene, tmp_path, name: str = "frame") -> np.ndarray:
+    """Render ``scene`` as F12 does; its float RGBA (h, w, 4), row 0 at the bottom."""
+    assert bpy.ops.render.render(scene=scene.name) == {"FINISHED"}
+    settings = scene.render.image_settings
+    settings.file_format, settings.color_depth = "OPEN_EXR", "32"
+    path = tmp_path / f"{name}.exr"
+    bpy.data.images["Render Result"].save_render(str(path), scene=scene)
+    image = bpy.data.images.load(str(path))
+    w, h = image.size
+    pixels = np.array(image.pixels[:], dtype=np.float32).reshape(h, w, 4)
+    bpy.data.images.remove(image)
+    return pixels
+
+
+def test_the_factory_scene_renders_flat_space_with_the_panels_hint(factory_scene, tmp_path):
+    scene = factory_scene
+    assert scene.symray.model == "OBJECTS" and scene.symray.quality == "PREVIEW"
+    image = f12(scene, tmp_path)
+    scene.symray.model = "FLAT"
+    flat = f12(scene, tmp_path, "flat")
+    np.testing.assert_array_equal(image, flat)  # straight rays: an ordinary render
+    world = np.array(scene.world.node_tree.nodes["Background"].inputs["Color"].default_value)
+    corner = image[-1, 0]  # top-left: the world, not the cube
+    np.testing.assert_allclose(corner[:3], world[:3], rtol=1e-6)  # Auto: the world's colour
+    # the panel's hint: test_panel.py::test_the_panel_says_how_to_add_a_black_hole
+
+
+def _look_at(obj, target) -> None:
+    """Point a camera object's -Z at ``target``, its Y up the world's Z."""
+    from mathutils import Vector
+
+    direction = Vector(target) - obj.location
+    obj.rotation_euler = direction.to_track_quat("-Z", "Y").to_euler()
+
+
+@pytest.mark.parametrize("size", [0.5, 2.0])
+def test_add_black_hole_at_the_cursor_casts_the_analytic_shadow(factory_scene, tmp_path, size):
+    scene = factory_scene
+    bpy.data.objects.remove(bpy.data.objects["Cube"])
+    scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (1, 1, 1, 1)
+    cursor = (2.0, -1.0, 0.5)
+    scene.cursor.location = cursor
+    assert bpy.ops.symray.add_black_hole(size=size, spin=0.0, disk=False) == {"FINISHED"}
+    hole = bpy.context.active_object
+    assert hole.symray.kind == "BLACK_HOLE" and tuple(hole.location) == cursor
+    camera = scene.camera
+    distance = 40.0 * size
+    camera.location = (cursor[0] + 0.3 * distance, cursor[1] - distance, cursor[2] + 0.1 * size)
+    _look_at(camera, (cursor[0] + 1.5 * size, cursor[1], cursor[2]))  # the hole off-centre
+    scene.render.resolution_x, scene.render.resolution_y = 160, 120
+    bpy.context.view_layer.update()
+    image = f12(scene, tmp_path)
+    shadow = image[..., :3].max(axis=-1) < 1e-3  # the horizon's black; the sky is white
+    # Synge: a static observer at r sees the shadow's edge at sin α = b √(1 − rg/r) / r,
+    # b = 3√3/2 rg (rg = Size at spin 0); its image radius f tan α in pixels
+    rg = size
+    r = float(np.linalg.norm(np.array(camera.location) - np.array(cursor)))
+    alpha = math.asin(1.5 * math.sqrt(3) * rg * math.sqrt(1 - rg / r) / r)
+    focal_px = camera.data.lens / camera.data.sensor_width * scene.render.resolution_x
+    expected = focal_px * math.tan(alpha)
+    measured = math.sqrt(shadow.sum() / math.pi)
+    assert abs(measured - expected) < 1.0, (measured, expected)
+    # ... centred where the cursor projects (Blender's own projection)
+    from bpy_extras.object_utils import world_to_camera_view
+
+    ndc = world_to_camera_view(scene, camera, hole.matrix_world.translation)
+    rows, cols = np.nonzero(shadow)
+    centre = (cols.mean() + 0.5, rows.mean() + 0.5)
+    where = (ndc.x * image.shape[1], ndc.y * image.shape[0])
+    assert math.dist(centre, where) < 1.0, (centre, where)
+
+
+def test_one_black_hole_per_scene(factory_scene, helpers):
+    scene = factory_scene
+    assert bpy.ops.symray.add_black_hole() == {"FINISHED"}
+    first = bpy.context.active_object
+    message = helpers.operator_error(lambda: bpy.ops.symray.add_black_hole())
+    assert f"already has a black hole ('{first.name}')" in message
+    holes = [o for o in scene.objects if o.symray.kind == "BLACK_HOLE"]
+    assert holes == [first]
+    twin = first.copy()  # a duplicate (Shift D) is refused at render, by name
+    scene.collection.objects.link(twin)
+    problems = _render_problems(scene)
+    assert any("2 black holes" in p and twin.name in p for p in problems), problems
+    twin.hide_render = True
+    assert not _render_problems(scene)
+
+
+def _render_problems(scene) -> list[str]:
+    from bl_ext.user_default.symray.symray_addon.panel import render_problems
+
+    return render_problems(scene)
+
+
+def test_a_holes_size_keeps_its_disk_in_proportion(factory_scene):
+    assert bpy.ops.symray.add_black_hole(size=0.5, spin=0.5) == {"FINISHED"}
+    hole, disk = bpy.context.active_object, factory_scene.symray.disk
+    assert disk.enabled and disk.use_isco and disk.outer_radius == pytest.approx(6.0)
+    hole.symray.size = 1.5
+    assert disk.outer_radius == pytest.approx(18.0) and hole.empty_display_size == 1.5
+
+
+def test_the_hole_is_drawn_at_its_true_size(addon):
+    overlay = addon.module("symray_addon.overlay")
+    objects = addon.module("symray_addon.objects")
+    for size, spin in [(1.0, 0.0), (0.7, 0.9), (2.0, -0.5)]:
+        lines = overlay.hole_lines(size, spin, (3.0 * size, 12.0 * size))
+        rg = objects.rg_of(size, spin)
+        a = 0.5 * rg * spin
+        # horizon: r+ = M (1 + √(1 − χ²)) on the axis; √(r+² + a²) on the equator
+        assert 0.5 * rg * (1 + math.sqrt(1 - spin**2)) == pytest.approx(size)
+        points = lines["horizon"].reshape(-1, 3)
+        assert np.abs(points[:, 2]).max() == pytest.approx(size)
+        assert np.hypot(points[:, 0], points[:, 1]).max() == pytest.approx(math.hypot(size, a))
+        ring = np.hypot(*lines["photon"].reshape(-1, 3)[:, :2].T)
+        if spin == 0.0:
+            np.testing.assert_allclose(ring, 1.5 * rg)  # the photon sphere, 3M
+        else:  # BL radii: prograde 2M(1 + cos(⅔ acos(−χ))) < 3M < retrograde <= 4M
+            r = np.sqrt(ring**2 - a * a)
+            assert r.min() < 1.5 * rg < r.max() <= 2.0 * rg + 1e-12
+        disk = np.hypot(*lines["disk"].reshape(-1, 3)[:, :2].T)
+        assert disk.max() == pytest.approx(math.hypot(12.0 * size, a))
+
+
+def test_an_old_file_with_a_centre_object_renders_unchanged(addon, tmp_path):
+    """tests/addon/data/old_centre.blend was saved, and old_centre_render.npz rendered, by
+    SymRay 470bb2e (make_old_file.py): its centre Empties become black hole objects."""
+    path = tmp_path / "old.blend"
+    shutil.copy(DATA / "old_centre.blend", path)
+    bpy.ops.wm.open_mainfile(filepath=str(path))
+    reference = np.load(DATA / "old_centre_render.npz")
+    for name in ("Scene", "Kerr"):
+        scene = bpy.data.scenes[name]
+        settings = scene.symray
+        assert settings.model == "OBJECTS" and settings.center is None
+        hole = bpy.data.objects[f"Centre {name}"]
+        assert hole.symray.kind == "BLACK_HOLE"
+        assert (settings.quality, settings.background) == ("FINAL", "PROCEDURAL")
+        image = f12(scene, tmp_path, name)
+        # rtol 1e-4: rg's round trip through Size changes its last bit; 2 of 9216 pixels
+        # then differ by 8e-5 relative (measured), every other one by less than 1e-5
+        np.testing.assert_allclose(image, reference[name], rtol=1e-4, atol=1e-5)
