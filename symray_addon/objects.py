@@ -123,6 +123,37 @@ def objects_problem(scene: bpy.types.Scene) -> str:
     return ""
 
 
+def enclosing(scene: bpy.types.Scene, hole: bpy.types.Object) -> list[str]:
+    """Names of the scene's rendered mesh objects whose bounding box holds ``hole``'s centre
+    (a hole added at the cursor inside the factory cube: the cube would hide it)."""
+    from mathutils import Vector
+
+    centre = hole.matrix_world.translation
+    names = []
+    for obj in scene.objects:
+        if obj.type != "MESH" or obj.hide_render or obj is hole:
+            continue
+        local = obj.matrix_world.inverted_safe() @ centre
+        corners = [Vector(c) for c in obj.bound_box]
+        lo = Vector(min(c[i] for c in corners) for i in range(3))
+        hi = Vector(max(c[i] for c in corners) for i in range(3))
+        if all(lo[i] <= local[i] <= hi[i] for i in range(3)):
+            names.append(obj.name)
+    return names
+
+
+def inside_warning(scene: bpy.types.Scene, hole: bpy.types.Object) -> str:
+    """A warning when the hole sits inside objects ("" when it does not)."""
+    names = enclosing(scene, hole)
+    if not names:
+        return ""
+    listed = ", ".join(f"'{name}'" for name in names)
+    return (
+        f"The black hole '{hole.name}' is inside {listed}: its surfaces hide it; move the "
+        "hole or the object (G)"
+    )
+
+
 def medium_box(obj: bpy.types.Object) -> tuple[tuple[float, ...], tuple[float, ...]]:
     """(min, max) of a medium's box in its local frame: its Empty's cube, scaled."""
     half = [float(obj.empty_display_size) * abs(float(s)) for s in obj.scale]
@@ -257,6 +288,10 @@ class SYMRAY_OT_add_black_hole(bpy.types.Operator):
         disk.enabled = self.disk
         disk.use_isco = True
         disk.outer_radius = DISK_OUTER_SIZES * self.size
+        context.view_layer.update()
+        warning = inside_warning(scene, obj)
+        if warning:
+            self.report({"WARNING"}, warning)
         return {"FINISHED"}
 
 

@@ -79,6 +79,9 @@ def prepare(
     models.check_camera(settings, model, where, np.array(kwargs["matrix_world"])[:3, 3])
 
     warnings = validation.ignored_settings(scene, depsgraph.view_layer, camera_object)
+    hole = objects.hole_of(scene) if settings.follows_objects else None
+    if hole is not None and objects.inside_warning(scene, hole):
+        warnings.append(objects.inside_warning(scene, hole))
     baked = _baked_surfaces(scene, depsgraph, warnings)
     intersector = export_meshes.build_intersector(depsgraph, baked, warnings)
     if intersector is None and model is None:

@@ -91,6 +91,21 @@ def test_add_black_hole_at_the_cursor_casts_the_analytic_shadow(factory_scene, t
     assert math.dist(centre, where) < 1.0, (centre, where)
 
 
+def test_a_hole_inside_an_object_is_named(addon, factory_scene, capfd):
+    scene = factory_scene  # the cursor at the origin: inside the factory cube
+    assert bpy.ops.symray.add_black_hole() == {"FINISHED"}
+    hole = bpy.context.active_object
+    warning = f"The black hole '{hole.name}' is inside 'Cube': its surfaces hide it"
+    assert warning in capfd.readouterr().out  # the operator's report
+    job = addon.module("symray_addon.render_job")
+    prepared = job.prepare(scene, bpy.context.evaluated_depsgraph_get())
+    assert any(w.startswith(warning) for w in prepared.warnings)  # and every render's
+    hole.location = (0.0, 0.0, 3.0)
+    bpy.context.view_layer.update()
+    prepared = job.prepare(scene, bpy.context.evaluated_depsgraph_get())
+    assert not any("is inside" in w for w in prepared.warnings)
+
+
 def test_one_black_hole_per_scene(factory_scene, helpers):
     scene = factory_scene
     assert bpy.ops.symray.add_black_hole() == {"FINISHED"}
