@@ -5,7 +5,7 @@
 
 The SymRay extension must be installed and enabled (``make render`` does both, into an
 isolated user folder). The default scene follows the seed paper's Fig. 8: a black hole
-(an Empty at the origin; Schwarzschild, or Kerr with ``--spin``) in front of the
+(Add › SymRay › Black Hole at the origin, rg = 1; spinning with ``--spin``) in front of the
 procedural sky, with a checkerboard behind it that the hole lenses into an Einstein ring.
 ``--blend FILE`` renders a saved scene instead (its own SymRay settings are kept).
 The EXR (``--exr``, default: the PNG's name with .exr) is multi-layer, with the passes
@@ -135,9 +135,10 @@ def build_scene(args: argparse.Namespace) -> bpy.types.Scene:
     scene = bpy.context.scene
     for obj in list(scene.objects):
         bpy.data.objects.remove(obj, do_unlink=True)
-    hole = bpy.data.objects.new("Black Hole", None)
-    hole.empty_display_type = "SPHERE"
-    scene.collection.objects.link(hole)
+    scene.cursor.location = (0.0, 0.0, 0.0)
+    objects = addon_module("symray_addon.objects")
+    # Add › SymRay › Black Hole at the cursor; Size is the horizon's radius (rg = 1)
+    bpy.ops.symray.add_black_hole(size=objects.size_of(1.0, args.spin), spin=args.spin, disk=False)
     board_object(scene)
     camera_data = bpy.data.cameras.new("Camera")
     camera_data.lens = 50.0
@@ -146,12 +147,7 @@ def build_scene(args: argparse.Namespace) -> bpy.types.Scene:
     camera.rotation_euler = (1.5707963267948966, 0.0, 0.0)  # look along +Y, Z up
     scene.collection.objects.link(camera)
     scene.camera = camera
-    settings = scene.symray
-    settings.model = "KERR" if args.spin else "SCHWARZSCHILD"
-    settings.spin = args.spin
-    settings.rg = 1.0
-    settings.center = hole
-    settings.background = "PROCEDURAL"
+    scene.symray.background = "PROCEDURAL"
     return scene
 
 
