@@ -12,7 +12,7 @@ export BLENDER_USER_RESOURCES ?= $(CURDIR)/.blender-user
 PYTEST_FLAGS ?= -n 2 -q
 
 .PHONY: test test-main test-oldest lint venv venv311 clean extension render figures bench \
-	bench-quick stress bench-perf bench-memory bench-honesty
+	bench-quick stress bench-perf bench-memory bench-honesty bench-presets
 
 test: lint test-main test-oldest
 
@@ -94,6 +94,14 @@ HONESTY_ARGS ?=
 
 bench-honesty: venv
 	PYTHONPATH=. $(PY) benchmarks/honesty.py $(HONESTY_ARGS)
+
+# The black hole presets' framing and their cost at 1920x1080 Preview (benchmarks/presets.py,
+# issue #24), ~2 min; PRESETS_ARGS="--size 960x540 --quality FINAL".
+PRESETS_ARGS ?=
+
+bench-presets: extension
+	$(PY) tools/install_extension.py $(EXT_ZIP)
+	$(PY) benchmarks/presets.py $(PRESETS_ARGS)
 
 # Peak memory against resolution, issue #13 (benchmarks/bench_memory.py): Preview at 1080p
 # and 4K in ~2 min; MEMORY_ARGS="--sizes 1920x1080,7680x4320 --presets preview,final".

@@ -14,12 +14,15 @@ quadtree: a block's four corners and its centre are traced; the block is
   the interpolation tolerance (over INTERPOLATION_SAFETY): the block's directions are then
   interpolated (bilinear, normalised) and each point is shaded from the background in its
   interpolated direction, so the sky's own detail is kept; or
-- all five hit the same object (never the accretion disk: its colour and g follow each
-  ray's own momentum, so its pixels are traced) and the centre's hit point is within the
-  tolerance of the corners' interpolation (the distance over the pixel footprint there:
-  what the renderer interpolates is the hit point): each point's hit point and chord direction are
+- all five hit the same object and the centre's hit point is within the tolerance of the
+  corners' interpolation (the distance over the pixel footprint there: what the renderer
+  interpolates is the hit point): each point's hit point and chord direction are
   interpolated and cast again against the scene (its texture is kept); a point whose
-  segment misses the object (an edge) is traced; or
+  segment misses the object (an edge) is traced. On an opaque accretion disk (no texture)
+  what is interpolated is its radius r and redshift g, each tested like a direction: the
+  centre's deviation from its corners' mean, as the angle the block's own gradient of r
+  (of g) needs to make it, within the tolerance; each point shows the disk's light at its
+  interpolated r and g (off the disk's radii: traced); or
 - all five were captured, kept clear of geometry as above (the shadow's inside, black).
 
 Otherwise it splits into four, down to ``FINEST``, where every pixel of a refused block is
@@ -413,7 +416,7 @@ class TileSampler:
         corners = [(bj, bi), (bj, bi + s), (bj + s, bi), (bj + s, bi + s)]
         alike = nodes.plain[cj, ci].copy()
         ending, object_id = nodes.ending[cj, ci], nodes.object_id[cj, ci]
-        alike &= object_id != DISK_ID  # its colour follows each ray's momentum: traced
+        alike &= (object_id != DISK_ID) | self._opaque_disk()
         width = s * self.pixel_angle  # the block's width, radians
         clear = CLEARANCE * width * _magnification(nodes, corners, width)
         alike &= nodes.clearance[cj, ci] > clear  # no (other) object in between
@@ -427,8 +430,56 @@ class TileSampler:
             nodes.direction[cj, ci], nodes.position[cj, ci], mean, at, ending, origins
         )  # hit points over the pixel footprint there; directions for the sky
         deviation = np.where(ending == ENDING["captured"], 0.0, deviation)
+        disk = np.flatnonzero(alike & (object_id == DISK_ID))
+        if disk.size:  # what the disk interpolates is its radius (and g): no texture
+            five = [(cj[disk], ci[disk])] + [(j[disk], i[disk]) for j, i in corners]
+            deviation[disk] = self._radius_deviation(nodes, five, width)
         accepted = alike & (INTERPOLATION_SAFETY * deviation <= self.interpolation)
         return accepted, deviation
+
+    def _disk_radius(self, position: np.ndarray) -> np.ndarray:
+        """Boyer–Lindquist radius (M,) of world points (M, 3) on the disk."""
+        light = self.tracer.disk
+        return light.model.radius_at(light.to_local(position).T)
+
+    def _radius_deviation(self, nodes: _Nodes, five, width: float) -> np.ndarray:
+        """How far (radians) the centre's disk radius and redshift g lie from their corners'
+        mean, each as the angle the block's own gradient of it takes to make that much
+        (five: centre, then corners): the disk pixel shows what a ray that far off shows."""
+        worst = np.zeros(five[0][0].shape)
+        radius = [self._disk_radius(nodes.position[j, i]) for j, i in five]
+        redshift = [nodes.redshift[j, i] for j, i in five]
+        for values in (radius, redshift):
+            corners = np.stack(values[1:])
+            spread = corners.max(axis=0) - corners.min(axis=0)
+            off = np.abs(values[0] - corners.mean(axis=0))
+            with np.errstate(invalid="ignore", divide="ignore"):
+                angle = np.where(off > 0, off * width / spread, 0.0)
+            worst = np.maximum(worst, np.where(np.isfinite(angle), angle, np.inf))
+        return worst
+
+    def _opaque_disk(self) -> bool:
+        """Whether the scene's disk can be interpolated: opaque (a translucent one shows
+        what lies behind it, ray by ray)."""
+        light = self.tracer.disk
+        return light is not None and light.disk.opacity >= 1.0
+
+    def _interpolate_disk(self, nodes: _Nodes, corners, weights, y, x):
+        """Points (y, x) inside blocks on the opaque accretion disk (``corners``: the blocks'
+        corner nodes, ``weights``: the points' bilinear weights): -> (RGB (M, 3), on (M,),
+        g, hit point, seen direction); the light at the interpolated radius and g. A point
+        whose radius falls off the disk (an edge between the nodes) is not ``on``: traced."""
+        light = self.tracer.disk
+        pairs = list(zip(weights, corners, strict=True))
+        radius = sum(wk * self._disk_radius(nodes.position[j, i]) for wk, (j, i) in pairs)
+        g = sum(wk * nodes.redshift[j, i] for wk, (j, i) in pairs)
+        position = sum(wk[:, None] * nodes.position[j, i] for wk, (j, i) in pairs)
+        on = (radius >= light.disk.r_in) & (radius <= light.disk.r_out)
+        rgb = light.disk.colour(np.where(on, g, 0.0), radius)
+        origins, _ = self.camera.rays_at(self._image_xy(y, x))
+        seen = position - origins
+        seen /= np.linalg.norm(seen, axis=1, keepdims=True)
+        return rgb, on, g, position, seen
 
     # --- pixels ------------------------------------------------------------------------
     def _pixels(self, tile: Tile, nodes: _Nodes, blocks: _Blocks, origin, cancel) -> TileResult:
@@ -521,7 +572,17 @@ class TileSampler:
         if sky.any():
             colour[sky] = self.background(d[sky])
         out.direction[rows] = np.where(sky[:, None], d, np.nan)
-        hit = np.flatnonzero(ending == ENDING["hit"])
+        disk = np.flatnonzero((ending == ENDING["hit"]) & (nodes.object_id[bj, bi] == DISK_ID))
+        if disk.size:  # the disk's light at the interpolated radius and g
+            sub = [(j[disk], i[disk]) for j, i in corners]
+            rgb, on, g, position, seen = self._interpolate_disk(
+                nodes, sub, [wk[disk] for wk in weights], y[disk], x[disk]
+            )
+            colour[disk[on], :3] = rgb[on]
+            ending[disk[~on]] = -1  # off the disk between the nodes: traced
+            at = rows[disk[on]]
+            out.redshift[at], out.position[at], out.direction[at] = g[on], position[on], seen[on]
+        hit = np.flatnonzero((ending == ENDING["hit"]) & (nodes.object_id[bj, bi] != DISK_ID))
         if hit.size:
             origins, _ = self.camera.rays_at(self._image_xy(y[hit], x[hit]))
             position = blend(nodes.position)[hit]

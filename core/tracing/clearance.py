@@ -96,7 +96,7 @@ class ClearanceBoxes:
         """(N,) each ray's clearance from everything but the object it hit (all of it for
         the rays that hit nothing)."""
         box = out.clearance_box
-        own = (box >= 0) & (out.object_id >= 0)
+        own = (box >= 0) & (out.object_id != -1)  # -1: no hit; the disk's id is negative
         own[own] = self.ids[box[own]] == out.object_id[own]
         return np.where(own, out.clearance_other, out.clearance)
 
