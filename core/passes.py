@@ -79,7 +79,8 @@ PASSES: tuple[Pass, ...] = (
          "hit nothing)", channels=3),
     Pass("redshift", np.float32, math.nan,
          "g = observed / emitted frequency where a ray ends on the accretion disk (or first "
-         "crosses a translucent one), NaN elsewhere", interpolated=False, label="Redshift"),
+         "crosses a translucent one; interpolated on an opaque one's smooth blocks), NaN "
+         "elsewhere", label="Redshift"),
 )  # fmt: skip
 """Every pass, in its one order."""
 

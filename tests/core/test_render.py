@@ -276,8 +276,8 @@ def test_progressive_tiles_carry_every_pass_of_the_final_image(options):
 def test_the_pass_table_says_which_passes_are_interpolated():
     """An adaptive Kerr frame with a disk: at the pixels it interpolates (no step of their
     own: the camera is inside the region, so every traced ray steps), the passes the table
-    marks interpolated hold values (ending, a positive error, a seen direction), and the
-    others their fill (steps 0, redshift NaN)."""
+    marks interpolated hold values (ending, a positive error, a seen direction, g on the
+    opaque disk and only there), and the others their fill (steps 0)."""
     from core.passes import ALL_PASSES, BY_NAME, STORED
 
     cam = core.Camera.perspective((0, -30, 6), (0, 0, 0), (0, 0, 1), 40, 64, 48)
@@ -289,9 +289,13 @@ def test_the_pass_table_says_which_passes_are_interpolated():
     out = core.render(scene, cam, tolerance_px=1.0, passes=ALL_PASSES, workers=1)
     between = out.passes["steps"] == 0
     assert 100 < between.sum() < between.size and np.isfinite(out.passes["redshift"]).any()
-    assert {p.name for p in STORED if not p.interpolated} == {"steps", "redshift"}
+    assert {p.name for p in STORED if not p.interpolated} == {"steps"}
     assert np.all(out.passes["steps"][between] == BY_NAME["steps"].fill)
-    assert np.all(np.isnan(out.passes["redshift"][between]))
+    g = out.passes["redshift"][between]
+    on_disk = np.isfinite(g)
+    assert on_disk.any() and np.all(g[on_disk] > 0)  # the disk's interpolated blocks
+    hit = out.passes["ending"][between] == core.ENDING["hit"]
+    assert np.all(hit[on_disk])  # NaN wherever a pixel does not end on it
     assert np.all(out.passes["ending"][between] >= 0)
     assert np.all(out.passes["error"][between] > 0)
     seen = out.passes["ending"][between] != core.ENDING["captured"]
