@@ -261,6 +261,15 @@ class Camera:
         kind = "ortho" if type == "ORTHO" else "persp"
         return cls(kind, pos, basis, window, (winx, winy), region)
 
+    def resized(
+        self, width: int, height: int, region: tuple[int, int, int, int] | None = None
+    ) -> Camera:
+        """The same view at width x height pixels: the full frame, or the part ``region``
+        of it ((x0, x1, y0, y1) in those pixels, y up, as Blender's border)."""
+        x0, x1, y0, y1 = self.window
+        return Camera(self.kind, self._position, self._basis, (x0, x1, y0, y1),
+                      (width, height), region)  # fmt: skip
+
     # -- image geometry -----------------------------------------------------------------
     @property
     def width(self) -> int:

@@ -6,12 +6,15 @@ field's beyond the region; the image interpolation's (core.sampling); +inf where
 failed), ``error_px`` (the same in pixels of this camera), ``steps``, ``ending``
 (``core.ENDING`` codes) and ``redshift`` (g = ν_obs / ν_emit of rays that end on the scene's
 accretion disk, or first cross a translucent one; NaN elsewhere; core/tracing/disklight.py;
-the pixel centre's, like the error). Failed rays are drawn in ``FAILED_COLOR`` and rays
+the pixel centre's, like the error). A disk of automatic exposure (``AccretionDisk.exposure``
+None) gets one from a small probe render first (``disk_exposure``); the summary's
+``disk_exposure`` is the exposure used. Failed rays are drawn in ``FAILED_COLOR`` and rays
 that ran out of steps in ``MAX_STEPS_COLOR``, never as a plausible colour.
 """
 
 from __future__ import annotations
 
+import copy
 import math
 import re
 import time
@@ -24,6 +27,7 @@ import numpy as np
 from . import checks
 from . import sampling as sampling_module
 from . import workers as workers_module
+from .blackbody import XYZ_FROM_RGB
 from .geometry import Intersector
 from .geometry.hits import box_corners
 from .imageio import FAILED_COLOR
@@ -58,6 +62,12 @@ TILES_PER_WORKER = 2
 """Tiles per worker (core.render's bands, _tiles_for): the work of a frame is rarely even
 over its rows (the hole, the photon ring), and a worker with a second tile to take
 evens it out; each tile costs a few batches' per-step overhead."""
+PROBE_SCALE = 1 / 16
+"""Automatic disk exposure: the probe render's size per side, relative to the frame's ..."""
+PROBE_MIN_SIDE = 64
+"""... but at least this many pixels on its longer side (at most the frame's)."""
+PROBE_DISK_PIXELS = 1500
+"""The disk pixels the probe looks for (fewer: the disk's rectangle is probed finer)."""
 
 
 @dataclass
@@ -114,6 +124,9 @@ def render(
         interpolation = (1.0 - TRACE_SHARE) * tolerance_px * pixel_angle
     options = TraceOptions(method=method, tolerance=tolerance, step=step, max_steps=max_steps)
     start_time = time.perf_counter()
+    probe = {"method": method, "step": step, "max_steps": max_steps, "workers": workers,
+             "parallel": parallel, "cores": cores, "should_cancel": should_cancel}  # fmt: skip
+    scene = disk_exposure(scene, camera, **probe)
     extent = _scene_extent(scene, camera)
     tracer = tracer_for_camera(scene, options, extent, camera.frame.position)
     if tracer.curved:
@@ -164,8 +177,60 @@ def render(
     result = image.result(camera, passes, time.perf_counter() - start_time, was_cancelled, tracer)
     result.summary["parallel"] = f"{count} {kind}" if kind != "inline" else "inline"
     result.summary["pixel_angle"] = pixel_angle
+    if scene.disk is not None:
+        result.summary["disk_exposure"] = scene.disk.exposure
     _summarise_px(result.summary, pixel_angle)
     return result
+
+
+def disk_exposure(scene: Scene, camera, **probe: Any) -> Scene:
+    """``scene`` with its disk's automatic exposure (``exposure`` None) chosen: a copy whose
+    disk has ``disk.exposure_for`` the median luminance of the disk's pixels in a probe
+    render (``scene`` itself when there is nothing to choose).
+
+    The probe sees the whole frame (whatever the camera's border region: every part of a
+    frame gets the same exposure) at PROBE_SCALE of its size per side (at least
+    PROBE_MIN_SIDE pixels on the longer side), one ray through each pixel centre at the
+    Preview tolerance (half a probe pixel), with the disk at brightness 1 and exposure 1
+    and a black sky; the disk's pixels are those with a finite redshift. Where fewer than
+    PROBE_DISK_PIXELS show the disk, the rectangle around them is probed again, finer, so
+    that about that many do (the median's sampling error, ~1/√n of the luminances'
+    spread). Deterministic: the same scene and camera give the same exposure. ``probe``:
+    the render's method, step, max_steps, workers, parallel, cores and should_cancel."""
+    disk = scene.disk
+    if disk is None or disk.exposure is not None:
+        return scene
+    seen = copy.copy(scene)
+    seen.disk = replace(disk, brightness=1.0, exposure=1.0)
+    seen.background = (0.0, 0.0, 0.0)
+    width, height = camera.full_size
+    scale = min(1.0, max(PROBE_SCALE, PROBE_MIN_SIDE / max(width, height)))
+    size = (max(1, round(width * scale)), max(1, round(height * scale)))
+    on, luminance = _probe(seen, camera.resized(*size), probe)
+    count = int(np.count_nonzero(on))
+    finer = math.ceil(math.sqrt(PROBE_DISK_PIXELS / max(count, 1)))
+    finer = min(finer, max(width // size[0], 1), max(height // size[1], 1))
+    if 0 < count < PROBE_DISK_PIXELS and finer > 1:
+        rows, cols = np.nonzero(on)  # row 0 at the top; the region counts from the bottom
+        h = size[1]
+        box = (
+            max(cols.min() - 1, 0) * finer, min(cols.max() + 2, size[0]) * finer,
+            max(h - rows.max() - 2, 0) * finer, min(h - rows.min() + 1, h) * finer,
+        )  # fmt: skip
+        on, luminance = _probe(seen, camera.resized(size[0] * finer, size[1] * finer, box), probe)
+    median = float(np.median(luminance[on])) if on.any() else math.nan
+    exposed = copy.copy(scene)
+    exposed.disk = replace(disk, exposure=disk.exposure_for(median))
+    return exposed
+
+
+def _probe(scene: Scene, camera, probe: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(disk pixels (h, w) bool, luminance (h, w)) of ``camera`` at half a pixel's
+    tolerance (core.render with ``probe``'s arguments)."""
+    angle = camera.pixel_angle(_camera_distance(scene, camera))
+    out = render(scene, camera, tolerance=TRACE_SHARE * angle, passes=("redshift",), **probe)
+    luminance = out.rgba[..., :3].astype(np.float64) @ XYZ_FROM_RGB[1]
+    return np.isfinite(out.passes["redshift"]), luminance
 
 
 def _span_work(tracer: Tracer, camera, with_error: bool, far_field: float):
@@ -488,6 +553,7 @@ _SUMMARY_FIELDS = (
     ("failed", "{} failed"),
     ("error_median", "median error {:.3g}"),
     ("error_max", "max error {:.3g}"),
+    ("disk_exposure", "disk exposure {:.3g}"),
 )
 
 

@@ -440,6 +440,7 @@ class TileSampler:
     def _disk_radius(self, position: np.ndarray) -> np.ndarray:
         """Boyer–Lindquist radius (M,) of world points (M, 3) on the disk."""
         light = self.tracer.disk
+        assert light is not None  # only blocks on the disk come here
         return light.model.radius_at(light.to_local(position).T)
 
     def _radius_deviation(self, nodes: _Nodes, five, width: float) -> np.ndarray:
@@ -470,6 +471,7 @@ class TileSampler:
         g, hit point, seen direction); the light at the interpolated radius and g. A point
         whose radius falls off the disk (an edge between the nodes) is not ``on``: traced."""
         light = self.tracer.disk
+        assert light is not None  # only blocks on the disk come here
         pairs = list(zip(weights, corners, strict=True))
         radius = sum(wk * self._disk_radius(nodes.position[j, i]) for wk, (j, i) in pairs)
         g = sum(wk * nodes.redshift[j, i] for wk, (j, i) in pairs)

@@ -9,6 +9,16 @@ from __future__ import annotations
 
 import bpy
 
+LOOK_ITEMS = [
+    ("PHYSICAL", "Physical", "The black body the gas is, with its Doppler and gravitational "
+     "shifts (beaming: the approaching side bluer and far brighter)"),
+    ("CINEMATIC", "Cinematic", "Interstellar-like: a warm orange-white glow, the Doppler "
+     "beaming reduced by Beaming"),
+    ("EHT", "EHT-like", "The Event Horizon Telescope's colours: the disk's total "
+     "brightness through their orange 'afmhot' colour map"),
+]  # fmt: skip
+"""The disk's looks (core.AccretionDisk.look); the redshift pass is the same in all."""
+
 PROFILE_ITEMS = [
     ("NOVIKOV_THORNE", "Novikov–Thorne", "Relativistic thin-disk profile (zero torque at "
      "the inner edge); Temperature is its hottest point"),
@@ -70,7 +80,43 @@ class SymRayDiskSettings(bpy.types.PropertyGroup):
         min=0.0,
         max=1e6,
         soft_max=100.0,
-        description="Luminance of a disk point at Temperature seen without shift (at most 1e6)",
+        description="Factor on the disk's light after its exposure (with Auto Exposure "
+        "off and Exposure 1: the luminance of a disk point at Temperature seen without "
+        "shift; at most 1e6)",
+    )
+    look: bpy.props.EnumProperty(  # type: ignore[valid-type]
+        name="Look",
+        items=LOOK_ITEMS,
+        default="PHYSICAL",
+        description="How the disk's light is coloured; its shifts (the SymRay Redshift "
+        "pass) are the same in every look",
+    )
+    beaming: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Beaming",
+        default=0.3,
+        min=0.0,
+        max=1.0,
+        description="Cinematic look: how much of the Doppler and gravitational shift "
+        "brightens and colours the disk (1: all of it, as Physical; 0: none, even on "
+        "both sides)",
+    )
+    auto_exposure: bpy.props.BoolProperty(  # type: ignore[valid-type]
+        name="Auto Exposure",
+        default=True,
+        description="Expose the disk so that its median pixel shows as middle grey on "
+        "screen (a quick probe render before each frame); Brightness multiplies the "
+        "result. Off: Exposure (pin the value a render reported to keep it fixed over an "
+        "animation)",
+    )
+    exposure: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Exposure",
+        default=1.0,
+        min=1e-6,
+        max=1e9,
+        soft_min=0.001,
+        soft_max=1000.0,
+        description="Factor on the disk's light when Auto Exposure is off (a factor, "
+        "not stops; 1: Brightness alone sets the light, as before looks)",
     )
     opacity: bpy.props.FloatProperty(  # type: ignore[valid-type]
         name="Opacity",

@@ -166,4 +166,7 @@ def build_disk(settings: Any) -> AccretionDisk | None:
         doppler=bool(disk.doppler),
         brightness=float(disk.brightness),
         opacity=float(disk.opacity),
+        look=disk.look.lower(),
+        beaming=float(disk.beaming),
+        exposure=None if disk.auto_exposure else float(disk.exposure),
     )

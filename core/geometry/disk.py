@@ -17,6 +17,26 @@ and brightness of the whole visible band follow from the spectrum itself (no ext
 bolometric g⁴ factor). ``brightness`` scales the result so that a disk point at the
 ``temperature`` parameter seen without shift (g = 1) has luminance Y = brightness.
 
+Looks (``look``; g itself, the redshift pass, is the same in every look; only the
+profile's shape T(r) / temperature enters the cinematic and EHT looks):
+
+- ``"physical"``: the black body at g T(r), as above.
+- ``"cinematic"`` (Interstellar-like): the same law with the shift reduced and a warm
+  palette: the black body at g**beaming T(r) x CINEMATIC_HOT / temperature (``beaming``
+  in [0, 1]: 1 = the physical shift, 0 = none), scaled so that the hottest point seen
+  without shift has luminance ``brightness``: the hot gas orange-white, cooler gas
+  deeper orange and fainter.
+- ``"eht"`` (EHT-like): the bolometric intensity I = g⁴ σ T(r)⁴ / π (I / ν⁴ integrated
+  over ν is invariant), relative to the hottest point's, v = (g T(r) / temperature)⁴ x
+  exposure, through the ``afmhot`` colour map of the EHT's 230 GHz images
+  (``eht_colour``: made scene-linear, white v beyond v = 1), times ``brightness``.
+
+``exposure`` multiplies the disk's light (EHT: v, where it falls on the colour map) and
+``brightness`` multiplies the result in every look; exposure None asks core.render for an
+automatic one (``exposure_for``: a probe render puts the median luminance of the pixels
+showing the disk, rendered at brightness 1, at its look's EXPOSURE_TARGETS, so brightness
+still scales the result: 2 = twice as bright as automatic).
+
 Geometric units: lengths in the scene's units, M = rg / 2, a = spin × M.
 """
 
@@ -34,6 +54,54 @@ from .. import blackbody, checks
 
 PROFILES = ("novikov_thorne", "power_law")
 """Temperature profiles: Novikov–Thorne, or T_in (r / r_in)^(-3/4)."""
+LOOKS = ("physical", "cinematic", "eht")
+"""How the disk's light is coloured (see the module); g is the same in all."""
+EXPOSURE_TARGETS = {"physical": 0.24, "cinematic": 0.3, "eht": 0.3}
+"""Scene-linear luminance that automatic exposure puts the disk's median pixel at, per
+look: about 0.5 on screen (Rec.709 luma of the display values) after Blender's AgX or
+Standard view transform (measured 0.48-0.52 on views from face-on to edge-on; the warm
+looks' saturated colours show darker than a grey of their luminance)."""
+CINEMATIC_HOT = 3500.0
+"""Palette temperature (K) of the cinematic look's hottest gas: an orange that Blender's
+view transforms take to white where it is bright."""
+
+
+def afmhot(v: Any) -> np.ndarray:
+    """matplotlib's ``afmhot`` colour map (..., 3) at v (clipped to [0, 1]), display
+    values: red 2v, green 2v − ½, blue 2v − 1, each clipped to [0, 1]."""
+    v = np.asarray(v, dtype=np.float64)[..., None]
+    return np.clip(2.0 * v - np.array([0.0, 0.5, 1.0]), 0.0, 1.0)
+
+
+def srgb_to_linear(c: Any) -> np.ndarray:
+    """The sRGB transfer function's inverse (IEC 61966-2-1): display values -> linear."""
+    c = np.asarray(c, dtype=np.float64)
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def eht_colour(v: Any) -> np.ndarray:
+    """Scene-linear RGB (..., 3) of the EHT look at brightness v >= 0: ``afmhot(v)`` made
+    linear (shown through Blender's Standard view transform it is afmhot itself), and
+    white v (1, 1, 1) beyond v = 1 (continuous there)."""
+    v = np.maximum(np.asarray(v, dtype=np.float64), 0.0)
+    ramp = srgb_to_linear(afmhot(v))
+    return np.where(v[..., None] > 1.0, v[..., None], ramp)
+
+
+def eht_level(luminance: float) -> float:
+    """The EHT look's brightness v whose colour has luminance Y (``eht_colour``'s
+    luminance increases with v; beyond v = 1 it is v), by bisection to float precision."""
+    if luminance >= 1.0:
+        return float(luminance)
+    weights = blackbody.XYZ_FROM_RGB[1]
+    lo, hi = 0.0, 1.0
+    for _ in range(64):  # a scalar, once per render
+        mid = 0.5 * (lo + hi)
+        if float(eht_colour(mid) @ weights) < luminance:
+            lo = mid
+        else:
+            hi = mid
+    return 0.5 * (lo + hi)
 
 
 def isco(mass: float, a: float) -> float:
@@ -104,6 +172,9 @@ class AccretionDisk:
     remains, no beaming.
     ``opacity`` in (0, 1]: below 1 a ray crossing the disk takes ``opacity`` x its light
     and goes on with (1 - opacity) of what lies behind (core/tracing/disklight.py).
+    ``look`` in LOOKS, ``beaming`` in [0, 1] (the cinematic look's share of the shift:
+    g -> g**beaming), ``exposure`` > 0 multiplies the light (after brightness; None:
+    automatic, chosen by core.render, see ``exposure_for``; a tracer used alone takes 1).
     """
 
     r_out: float = 20.0
@@ -117,6 +188,9 @@ class AccretionDisk:
     """M of the hole (set by ``bind``; 0: not bound to a model yet)."""
     spin: float = 0.0
     """a (length) of the hole (set by ``bind``)."""
+    look: str = "physical"
+    beaming: float = 0.3
+    exposure: float | None = 1.0
 
     def __post_init__(self) -> None:
         checks.check_positive("disk r_out", self.r_out)
@@ -126,6 +200,10 @@ class AccretionDisk:
             raise ValueError(f"disk profile must be one of {PROFILES}, got {self.profile!r}")
         checks.check_range("disk brightness", self.brightness, 0.0)
         checks.check_range("disk opacity", self.opacity, 0.0, 1.0, lo_open=True)
+        if self.look not in LOOKS:
+            raise ValueError(f"disk look must be one of {LOOKS}, got {self.look!r}")
+        checks.check_range("disk beaming", self.beaming, 0.0, 1.0)
+        checks.check_optional(checks.check_positive, "disk exposure", self.exposure)
 
     def bind(self, model: Any) -> AccretionDisk:
         """This disk around ``model`` (Schwarzschild or Kerr): mass, spin and r_in filled in
@@ -171,13 +249,41 @@ class AccretionDisk:
         return np.where((r >= r_in) & (r <= self.r_out), T, 0.0)
 
     def colour(self, g: Any, r: Any) -> np.ndarray:
-        """Linear Rec.709 RGB (M, 3) seen of disk points at BL radius r with redshift g: the
-        black body at g T(r) (see the module), scaled by brightness / Y(temperature).
-        Components below 0 (a black body redder than the gamut) are set to 0."""
-        shifted = np.asarray(g, dtype=np.float64) * self.temperature_at(r)
-        reference = float(blackbody.planck_xyz(self.temperature)[1])
-        rgb = blackbody.xyz_to_rgb(blackbody.planck_xyz(shifted)) * (self.brightness / reference)
+        """Linear Rec.709 RGB (M, 3) seen of disk points at BL radius r with redshift g, in
+        the disk's look (see the module): physical, the black body at g T(r) scaled by
+        brightness x exposure / Y(temperature). Components below 0 (a black body redder
+        than the gamut) are set to 0."""
+        g = np.asarray(g, dtype=np.float64)
+        exposure = 1.0 if self.exposure is None else self.exposure
+        if self.look == "eht":
+            bolometric = (g * self.temperature_at(r) / self.temperature) ** 4
+            return eht_colour(bolometric * exposure) * self.brightness
+        if self.look == "cinematic":
+            g = g**self.beaming
+            shifted = g * self.temperature_at(r) * (CINEMATIC_HOT / self.temperature)
+            reference = float(blackbody.planck_xyz(CINEMATIC_HOT)[1])
+        else:
+            shifted = g * self.temperature_at(r)
+            reference = float(blackbody.planck_xyz(self.temperature)[1])
+        rgb = blackbody.xyz_to_rgb(blackbody.planck_xyz(shifted))
+        rgb = rgb * (self.brightness * exposure / reference)
         return np.maximum(rgb, 0.0)
+
+    def exposure_for(self, median: float, target: float | None = None) -> float:
+        """The exposure that puts the median luminance of the pixels showing this disk at
+        ``target`` (None: EXPOSURE_TARGETS[look]), ``median`` being theirs rendered at
+        brightness 1 and exposure 1 (no finite positive median, no disk in sight: as if it
+        were 1, the luminance of the disk's hottest point seen without shift). Physical
+        and cinematic light is linear in the exposure; the EHT look's colour map is not,
+        but its luminance increases with v, so the median pixel stays the median one
+        (``eht_level``)."""
+        if not (math.isfinite(median) and median > 0):
+            median = 1.0
+        if target is None:
+            target = EXPOSURE_TARGETS[self.look]
+        if self.look == "eht":
+            return eht_level(target) / eht_level(median)
+        return target / median
 
 
 @functools.lru_cache(maxsize=16)

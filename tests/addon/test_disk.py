@@ -182,3 +182,77 @@ def test_transparent_film_keeps_a_translucent_disk(addon, scene, helpers, qualit
     assert sky.sum() > 100 and (
         np.all(clear_sky) if quality == "RADIANS" else clear_sky.mean() > 0.8
     )
+
+
+# --- looks and automatic exposure (issue 24) ----------------------------------------------
+
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+"""Rec.709 luma weights: the brightness of display values."""
+
+
+def _read_png(path) -> np.ndarray:
+    """A PNG's display values (h, w, 4), row 0 at the top (read as Non-Color: a 16-bit
+    PNG would otherwise be made scene-linear)."""
+    img = bpy.data.images.load(str(path))
+    img.colorspace_settings.name = "Non-Color"
+    w, h = img.size
+    flat = np.empty(w * h * 4, dtype=np.float32)
+    img.pixels.foreach_get(flat)
+    bpy.data.images.remove(img)
+    return flat.reshape(h, w, 4)[::-1]
+
+
+def test_the_look_settings_reach_the_core_disk(addon, scene, helpers):
+    """Look, Beaming and Auto Exposure / Exposure become the core disk's look, beaming and
+    exposure (None: automatic); the add-on's defaults: Physical, automatic."""
+    _disk_scene(scene, helpers)
+    models = addon.module("symray_addon.models")
+    disk = scene.symray.disk
+    assert (disk.look, disk.auto_exposure) == ("PHYSICAL", True)
+    core_disk = models.build_disk(scene.symray)
+    assert (core_disk.look, core_disk.exposure) == ("physical", None)
+    assert core_disk.beaming == pytest.approx(0.3)
+    disk.look, disk.beaming, disk.auto_exposure, disk.exposure = "EHT", 0.0, False, 2.5
+    core_disk = models.build_disk(scene.symray)
+    assert (core_disk.look, core_disk.exposure, core_disk.beaming) == ("eht", 2.5, 0.0)
+    disk.look = "CINEMATIC"
+    assert models.build_disk(scene.symray).look == "cinematic"
+
+
+@pytest.mark.parametrize("look", ["PHYSICAL", "CINEMATIC", "EHT"])
+def test_each_look_shows_the_disk_near_middle_grey(addon, scene, helpers, tmp_path, look):
+    """Acceptance (issue 24): the Kerr with Accretion Disk preset (its framing, at 160 x 90,
+    Preview) in each look, with automatic exposure, rendered by F12 and written through
+    Blender's colour management (AgX, the default view transform, and the same render
+    saved through Standard): the median brightness (Rec.709 luma of the display values) of
+    the pixels showing the disk (a finite SymRay Redshift) lies in [0.3, 0.7]."""
+    assert bpy.ops.symray.apply_preset(preset="KERR_DISK") == {"FINISHED"}
+    scene.render.resolution_x, scene.render.resolution_y = 160, 90
+    settings = scene.symray
+    settings.quality = "PREVIEW"
+    settings.disk.look = look
+    assert settings.disk.auto_exposure
+    helpers.set_world_color(scene, (0.0, 0.0, 0.0, 1.0))
+    assert scene.view_settings.view_transform == "AgX"
+    scene.render.engine = "SYMRAY"
+    image = scene.render.image_settings
+    image.file_format, image.color_mode, image.color_depth = "PNG", "RGB", "16"
+    scene.render.filepath = str(tmp_path / "look")
+    scene.render.use_file_extension = True
+    bpy.ops.render.render(write_still=True)
+    scene.view_settings.view_transform = "Standard"
+    bpy.data.images["Render Result"].save_render(str(tmp_path / "standard.png"), scene=scene)
+    job = addon.module("symray_addon.render_job")
+    reference = job.run(job.prepare(scene, bpy.context.evaluated_depsgraph_get()))
+    on = np.isfinite(reference.passes["redshift"])
+    assert on.sum() > 1000
+    assert reference.summary["disk_exposure"] > 0
+    medians = {}
+    for name in ("look.png", "standard.png"):
+        display = _read_png(tmp_path / name)
+        assert display.shape[:2] == on.shape
+        medians[name] = float(np.median(display[on, :3] @ LUMA))
+        assert 0.3 <= medians[name] <= 0.7, (look, medians)
+    exposure = reference.summary["disk_exposure"]
+    print(f"{look}: AgX {medians['look.png']:.3f}, Standard {medians['standard.png']:.3f}, "
+          f"exposure {exposure:.3g}")  # fmt: skip
