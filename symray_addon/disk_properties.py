@@ -36,9 +36,10 @@ class SymRayDiskSettings(bpy.types.PropertyGroup):
         "Keplerian orbits, with gravitational and Doppler shifts",
     )
     use_isco: bpy.props.BoolProperty(  # type: ignore[valid-type]
-        name="Inner Edge at ISCO",
+        name="Inner Edge at Innermost Orbit",
         default=True,
-        description="Start the disk at the innermost stable circular orbit of the spin",
+        description="Start the disk at the innermost orbit gas can keep around the hole "
+        "(physics: the innermost stable circular orbit, ISCO, of the spin)",
     )
     inner_radius: bpy.props.FloatProperty(  # type: ignore[valid-type]
         name="Inner Radius",
@@ -46,15 +47,17 @@ class SymRayDiskSettings(bpy.types.PropertyGroup):
         min=0.0,
         soft_max=100.0,
         subtype="DISTANCE",
-        description="Boyer–Lindquist radius of the inner edge (scene units), at least the ISCO",
+        description="Radius of the inner edge in scene units, at least the innermost orbit "
+        "(physics: Boyer–Lindquist r, at least the ISCO)",
     )
     outer_radius: bpy.props.FloatProperty(  # type: ignore[valid-type]
         name="Outer Radius",
-        default=10.0,
+        default=12.0,
         min=0.0,
         soft_max=1000.0,
         subtype="DISTANCE",
-        description="Boyer–Lindquist radius of the outer edge (scene units)",
+        description="Radius of the outer edge in scene units (Add Black Hole: 12× its size; "
+        "physics: Boyer–Lindquist r)",
     )
     profile: bpy.props.EnumProperty(  # type: ignore[valid-type]
         name="Temperature Profile", items=PROFILE_ITEMS, default="NOVIKOV_THORNE"
@@ -62,6 +65,7 @@ class SymRayDiskSettings(bpy.types.PropertyGroup):
     temperature: bpy.props.FloatProperty(  # type: ignore[valid-type]
         name="Temperature",
         default=10_000.0,
+        subtype="TEMPERATURE",
         min=100.0,
         max=1e9,
         soft_max=100_000.0,

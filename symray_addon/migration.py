@@ -3,9 +3,9 @@
 Every save stamps ``scene.symray.file_version`` (FILE_VERSION); a scene loaded with SymRay
 settings but no stamp was saved before the black hole became an object (issue 24). Its
 settings are made explicit where a default changed (model Schwarzschild, quality Final,
-Background › Auto over a plain world = the procedural sky, the disk's physical look at
-exposure 1), and a centre Empty of a Schwarzschild or Kerr model becomes the scene's
-black hole object with the same size and spin.
+Background › Auto over a plain world = the procedural sky, the disk's outer radius 10 and
+its physical look at exposure 1), and a centre Empty of a Schwarzschild or Kerr model
+becomes the scene's black hole object with the same size and spin.
 """
 
 from __future__ import annotations
@@ -65,10 +65,9 @@ def migrate(scene: bpy.types.Scene) -> bool:
     if settings.background == "AUTO" and not isinstance(world.world_background(scene, "AUTO"), str):
         settings.background = "PROCEDURAL"  # Auto showed the stars over a plain world
     disk = settings.disk
-    if hasattr(disk, "look"):
-        disk.look = "PHYSICAL"
-    if hasattr(disk, "auto_exposure"):
-        disk.auto_exposure = False
+    if not disk.is_property_set("outer_radius"):
+        disk.outer_radius = 10.0  # the default then
+    disk.look, disk.auto_exposure, disk.exposure = "PHYSICAL", False, 1.0  # no looks then
     _centre_to_hole(settings)
     settings.file_version = FILE_VERSION
     return True

@@ -264,10 +264,20 @@ def disk_settings(layout: bpy.types.UILayout, scene: bpy.types.Scene) -> None:
         isco = _length(scene, validation.inner_edge(settings))
         layout.label(text=f"Innermost stable orbit: {isco}", icon="INFO")
     layout.prop(disk, "outer_radius")
-    layout.prop(disk, "profile")
-    layout.prop(disk, "temperature")
-    layout.prop(disk, "doppler")
+    layout.prop(disk, "look")
+    row = layout.row()
+    row.active = disk.look == "CINEMATIC"
+    row.prop(disk, "beaming")
+    layout.prop(disk, "auto_exposure")
+    row = layout.row()
+    row.active = not disk.auto_exposure
+    row.prop(disk, "exposure")
     layout.prop(disk, "brightness")
+    layout.prop(disk, "profile")
+    row = layout.row()
+    row.active = disk.look == "PHYSICAL"  # the other looks keep only its profile's shape
+    row.prop(disk, "temperature")
+    layout.prop(disk, "doppler")
     layout.prop(disk, "opacity")
 
 

@@ -36,8 +36,8 @@ PRESETS: dict[str, tuple[str, str, dict[str, object]]] = {
     "KERR_DISK": (
         "Kerr with Accretion Disk",
         "A black hole spinning at 0.9, Size 1, with a hot thin disk from its innermost "
-        "stable orbit to 12× its size (Novikov–Thorne, 6000 K, Doppler), seen from 10° "
-        "above the disk, and the SymRay Redshift pass",
+        "stable orbit to 12× its size (Novikov–Thorne, 6000 K, Doppler, the Cinematic look), "
+        "seen from 10° above the disk, and the SymRay Redshift pass",
         {
             "hole.size": 1.0,
             "hole.spin": 0.9,
@@ -50,7 +50,9 @@ PRESETS: dict[str, tuple[str, str, dict[str, object]]] = {
             "disk.profile": "NOVIKOV_THORNE",
             "disk.temperature": 6000.0,
             "disk.doppler": True,
-            "disk.brightness": 0.6,
+            "disk.look": "CINEMATIC",
+            "disk.auto_exposure": True,
+            "disk.brightness": 1.0,
             "disk.opacity": 1.0,
         },
     ),

@@ -22,6 +22,7 @@ def _disk_scene(scene, helpers):
     settings.model, settings.rg, settings.spin = "KERR", 0.5, 0.9
     settings.center = helpers.add_empty(scene)
     settings.disk.outer_radius = 3.0
+    settings.disk.look, settings.disk.brightness = "PHYSICAL", 0.6  # as the tests were written
     inc = math.radians(80.0)
     cam = helpers.add_camera(scene, location=(0.0, -12 * math.sin(inc), 12 * math.cos(inc)),
                              rotation=(inc, 0.0, 0.0))  # fmt: skip
@@ -208,6 +209,8 @@ def test_the_look_settings_reach_the_core_disk(addon, scene, helpers):
     _disk_scene(scene, helpers)
     models = addon.module("symray_addon.models")
     disk = scene.symray.disk
+    rna = disk.bl_rna.properties
+    assert (rna["look"].default, rna["auto_exposure"].default) == ("PHYSICAL", True)
     assert (disk.look, disk.auto_exposure) == ("PHYSICAL", True)
     core_disk = models.build_disk(scene.symray)
     assert (core_disk.look, core_disk.exposure) == ("physical", None)
