@@ -16,10 +16,19 @@ object), the image nodes it adds to materials are removed, a copied object's ori
 hidden from rendering only while the copy bakes, and every temporary datablock is removed
 (``finally``). Bakes are cached by a key over everything that can change the light on a
 surface (every rendered object's mesh, transform and materials, the lights, the world, the
-bake settings): a new frame, camera or SymRay model reuses them, an edit bakes again.
-Cycles runs through ``bpy.ops``, so baking needs Blender's main thread: the operator,
-``blender -b`` and scripts bake; F12 in the UI renders on another thread and can only
-reuse a bake (the *Bake Lighting* button makes one).
+samples): a new frame, camera or SymRay model reuses them while they are at least as fine
+as the render asks (``bake_texels``: with *Texel Size* 0 the texels follow the object's
+size on screen), an edit bakes again. Cycles runs through ``bpy.ops``, so baking needs
+Blender's main thread: the operator, ``blender -b`` and scripts bake; F12 in the UI renders
+on another thread and can only reuse a bake (the *Bake Lighting* button makes one).
+
+Cycles samples each texel *Bake Samples* times (16 by default) and then denoises the bake
+(OpenImageDenoise, ``DENOISE_QUALITY``): in a 640x360 render of five simple objects
+under the factory light this is within 0.003 (mean absolute, linear) of a bake of 256
+samples without denoising, where 16 samples without denoising are 0.0065 off and show
+grain, and 64 samples 0.0035. The progress (object k of n) goes to ``reporting``'s
+callback and the window's progress indicator; the operators' console chatter is held back
+(``quiet``).
 """
 
 from __future__ import annotations
@@ -29,13 +38,15 @@ import math
 import os
 import threading
 from collections import OrderedDict
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import ExitStack, contextmanager
+from dataclasses import dataclass
 from typing import Any, NamedTuple
 
 import bpy
 import numpy as np
 
+from . import bake_texels, quiet
 from .export_meshes import (
     GEOMETRY_TYPES,
     BakedSurface,
@@ -47,21 +58,83 @@ from .materials import DEFAULT_COLOR, image_pixels, node_tree_of
 
 PASS_FILTER = {"EMIT", "DIRECT", "INDIRECT", "DIFFUSE"}
 """Cycles' Combined bake restricted to what does not depend on the viewing direction."""
-MIN_RESOLUTION = 8
+DENOISE = True
+"""Whether Cycles denoises a bake (OpenImageDenoise, guided by albedo and normals)."""
+DENOISE_PREFILTER = "NONE"
+DENOISE_QUALITY = "BALANCED"
+"""Cycles' denoiser settings for bakes (its guides, albedo and normals, taken as they are;
+OpenImageDenoise's balanced model). Measured on flat text lit by a Sun (exactly Lambert
+without denoising), the fraction of hits within 5 % of Lambert at the glyphs' UV island
+edges: 96 % with these, 67 % with Cycles' defaults ('ACCURATE', 'HIGH'; three times the
+time), 49 % with the 'FAST' prefilter."""
 MARGIN = 4
 """Texels the bake extends past the UV islands (bilinear sampling reads one beyond)."""
 CACHE_BYTES = 512 * 2**20
 """Baked pixels kept between renders, at most (least recently used go first)."""
 TEMP_NAME = "SymRay Bake"
 
-_cache: OrderedDict[str, BakedSurface] = OrderedDict()
+Progress = Callable[[int, int, str], None]
+"""progress(done, total, name): ``done`` of ``total`` objects baked, ``name`` baking next
+(empty when all are done)."""
+
+
+@dataclass
+class Baked(BakedSurface):
+    """A cached bake: the surface, and the world units its UV square spans."""
+
+    extent: float = 0.0
+    """Root of the surface's world area over the UV area it covers."""
+
+
+_cache: OrderedDict[str, Baked] = OrderedDict()
 stats = {"baked": 0, "reused": 0}
 """Objects baked and bakes reused since the add-on loaded (for tests and the console)."""
+_reporters: list[Progress] = []
+COARSE_WARNING = (
+    "The lighting was baked for a smaller image or a farther camera than this render's: "
+    "press Bake Lighting in the SymRay panel again for sharper surfaces"
+)
 
 
 def clear_cache() -> None:
     """Forget every cached bake."""
     _cache.clear()
+
+
+@contextmanager
+def reporting(progress: Progress) -> Iterator[None]:
+    """Send the progress of the bakes made in the block to ``progress`` too (a render
+    engine's status line); the innermost reporter is told."""
+    _reporters.append(progress)
+    try:
+        yield
+    finally:
+        _reporters.remove(progress)
+
+
+@contextmanager
+def _progress(total: int) -> Iterator[Progress]:
+    """A progress(done, total, name) that tells the innermost ``reporting`` callback and,
+    in Blender's UI, the window's progress indicator (ended however the block ends)."""
+    window_manager = None
+    if not bpy.app.background and threading.current_thread() is threading.main_thread():
+        window_manager = getattr(bpy.context, "window_manager", None)
+    if window_manager is not None and bpy.context.window is not None:
+        window_manager.progress_begin(0, max(total, 1))
+    else:
+        window_manager = None
+
+    def tell(done: int, count: int, name: str) -> None:
+        if window_manager is not None:
+            window_manager.progress_update(done)
+        if _reporters:
+            _reporters[-1](done, count, name)
+
+    try:
+        yield tell
+    finally:
+        if window_manager is not None:
+            window_manager.progress_end()
 
 
 def scene_has_lights(depsgraph: bpy.types.Depsgraph) -> bool:
@@ -84,28 +157,38 @@ def bake_surfaces(
 ) -> dict[str, BakedSurface]:
     """Baked radiance of every rendered (non-instanced) object with faces, by object name.
 
-    Reuses cached bakes; bakes the others with Cycles (main thread only). An object with
-    non-finite vertices is left out (and out of the others' bakes), named in ``warnings``.
-    Raises ValueError when Cycles is missing, a bake fails, or one is needed off the main
-    thread.
+    Reuses cached bakes at least as fine as asked; bakes the others with Cycles (main
+    thread only; off it, a coarser cached bake is used, with COARSE_WARNING). An object
+    with non-finite vertices is left out (and out of the others' bakes), named in
+    ``warnings``. Raises ValueError when Cycles is missing, a bake fails, or one is needed
+    off the main thread.
     """
     settings = scene.symray
-    targets, keys, missing, broken = _lookup(scene, depsgraph)
+    targets, keys, missing, broken, texels = _lookup(scene, depsgraph)
     for obj in broken:
-        if warnings is not None and non_finite_warning(obj.name) not in warnings:
-            warnings.append(non_finite_warning(obj.name))
+        _note(warnings, non_finite_warning(obj.name))
     if missing and threading.current_thread() is not threading.main_thread():
-        raise ValueError(
-            "Surface lighting is baked by Cycles on Blender's main thread, which F12 does "
-            "not run on: press Bake Lighting in the SymRay panel first (or use Render "
-            "SymRay Image), or set Surface Lighting to Unlit"
-        )
+        if any(keys[obj.name] not in _cache for obj in missing):
+            raise ValueError(
+                "Surface lighting is baked by Cycles on Blender's main thread, which F12 "
+                "does not run on: press Bake Lighting in the SymRay panel first (or use "
+                "Render SymRay Image), or set Surface Lighting to Unlit"
+            )
+        _note(warnings, COARSE_WARNING)
+        missing = []
     baking = {obj.name for obj in missing}
-    found = {obj.name: _cache[keys[obj.name]] for obj in targets if obj.name not in baking}
+    found: dict[str, Baked] = {
+        obj.name: _cache[keys[obj.name]] for obj in targets if obj.name not in baking
+    }
     if missing:
-        with _bake_scene(scene, depsgraph) as temp, _hidden(obj.original for obj in broken):
-            for obj in missing:
-                found[obj.name] = _bake_object(temp, depsgraph, obj, settings)
+        with ExitStack() as stack:
+            tell = stack.enter_context(_progress(len(missing)))
+            temp = stack.enter_context(_bake_scene(scene, depsgraph))
+            stack.enter_context(_hidden(obj.original for obj in broken))
+            for done, obj in enumerate(missing):
+                tell(done, len(missing), obj.name)
+                found[obj.name] = _bake_object(temp, depsgraph, obj, settings, texels[obj.name])
+            tell(len(missing), len(missing), "")
     for obj in targets:
         _remember(keys[obj.name], found[obj.name])
     stats["baked"] += len(missing)
@@ -114,22 +197,71 @@ def bake_surfaces(
 
 
 def can_bake_now(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> bool:
-    """Whether bake_surfaces would succeed here: on the main thread, or all bakes cached."""
+    """Whether bake_surfaces would succeed here: on the main thread, or all bakes cached
+    (finely enough or not)."""
     if threading.current_thread() is threading.main_thread():
         return True
-    return not _lookup(scene, depsgraph)[2]
+    plan = _lookup(scene, depsgraph)
+    return all(plan.keys[obj.name] in _cache for obj in plan.missing)
 
 
-def _lookup(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph):
-    """(objects to bake, their cache keys by name, those not in the cache, objects left
-    out for non-finite vertices)."""
+def _note(warnings: list[str] | None, text: str) -> None:
+    """Add ``text`` to ``warnings`` (when given) unless it is there already."""
+    if warnings is not None and text not in warnings:
+        warnings.append(text)
+
+
+def automatic(settings: Any) -> bool:
+    """Whether the texel size follows the objects' size on screen (Texel Size 0)."""
+    return float(settings.bake_texel_size) == 0.0
+
+
+class _Plan(NamedTuple):
+    """What a render's bakes are: found in the cache, or to be made."""
+
+    targets: list[bpy.types.Object]
+    """The objects to bake (rendered, with faces, finite)."""
+    keys: dict[str, str]
+    """Their cache keys, by name."""
+    missing: list[bpy.types.Object]
+    """Those without a cached bake as fine as asked."""
+    broken: list[bpy.types.Object]
+    """Objects left out for non-finite vertices."""
+    texels: dict[str, float | None]
+    """The texel size asked for each target (None: automatic without a camera)."""
+
+
+def _lookup(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> _Plan:
+    """Which objects a render bakes, their keys, and which are not cached finely enough."""
+    settings = scene.symray
+    auto = automatic(settings)
+    camera = bake_texels.scene_camera(scene, depsgraph) if auto else None
     candidates = _candidates(depsgraph)
-    meshes = {obj.name: _mesh_key(obj) for obj in candidates}
+    meshes = {obj.name: _mesh_key(obj, camera) for obj in candidates}
     targets = [obj for obj in candidates if meshes[obj.name].faces and meshes[obj.name].finite]
     broken = [obj for obj in candidates if meshes[obj.name].faces and not meshes[obj.name].finite]
     base = _scene_key(scene, depsgraph, meshes)
     keys = {obj.name: _digest(base, obj.name) for obj in targets}
-    return targets, keys, [obj for obj in targets if keys[obj.name] not in _cache], broken
+    texels: dict[str, float | None] = {}
+    for obj in targets:
+        footprint = meshes[obj.name].footprint
+        if not auto:
+            texels[obj.name] = float(settings.bake_texel_size)
+        elif footprint is not None:
+            texels[obj.name] = bake_texels.TEXEL_PIXELS * footprint
+        else:
+            texels[obj.name] = None
+    max_resolution = int(settings.bake_max_resolution)
+
+    def fine_enough(obj: bpy.types.Object) -> bool:
+        baked = _cache.get(keys[obj.name])
+        if baked is None:
+            return False
+        wanted = bake_texels.side(baked.extent, texels[obj.name], max_resolution, auto)
+        return baked.pixels.shape[0] >= wanted
+
+    missing = [obj for obj in targets if not fine_enough(obj)]
+    return _Plan(targets, keys, missing, broken, texels)
 
 
 def _candidates(depsgraph: bpy.types.Depsgraph) -> list[bpy.types.Object]:
@@ -155,7 +287,7 @@ def _hidden(objects: Iterable[bpy.types.Object]) -> Iterator[None]:
         yield
 
 
-def _remember(key: str, surface: BakedSurface) -> None:
+def _remember(key: str, surface: Baked) -> None:
     """Keep ``surface`` under ``key``, dropping the least recently used past CACHE_BYTES."""
     _cache[key] = surface
     _cache.move_to_end(key)
@@ -242,10 +374,13 @@ class _Mesh(NamedTuple):
     """Whether it has a surface (a path or a wire has none: nothing to bake or hit)."""
     finite: bool
     """Whether its world-space vertices are all finite numbers."""
+    footprint: float | None = None
+    """World size of a pixel of the camera over its surface (None: no camera asked)."""
 
 
-def _mesh_key(obj: bpy.types.Object) -> _Mesh:
-    """The cache's view of an evaluated object's mesh (an empty one if it has none)."""
+def _mesh_key(obj: bpy.types.Object, camera: Any = None) -> _Mesh:
+    """The cache's view of an evaluated object's mesh (an empty one if it has none), with
+    its on-screen pixel size through ``camera`` (a core.Camera) when one is given."""
     try:
         mesh = obj.to_mesh()
     except RuntimeError:
@@ -262,8 +397,13 @@ def _mesh_key(obj: bpy.types.Object) -> _Mesh:
     for array in (*arrays, normals):
         h.update(np.ascontiguousarray(array).tobytes())
     co, tri = arrays[0], arrays[1]
-    finite = bool(np.all(np.isfinite(co)) and np.all(np.isfinite(np.array(obj.matrix_world))))
-    return _Mesh(h.hexdigest(), len(tri) > 0, finite)
+    matrix = np.array(obj.matrix_world, dtype=np.float64)
+    finite = bool(np.all(np.isfinite(co)) and np.all(np.isfinite(matrix)))
+    footprint = None
+    if camera is not None and finite and len(tri) > 0:
+        world = (co @ matrix[:3, :3].T + matrix[:3, 3])[tri]
+        footprint = bake_texels.pixel_footprint(camera, world)
+    return _Mesh(h.hexdigest(), len(tri) > 0, finite, footprint)
 
 
 OBJECT_FLAGS = (
@@ -332,10 +472,11 @@ def _scene_key(
     """One key over everything that can change the light on any surface, and the settings.
     ``meshes``: the objects' meshes known so far by name (the others are added)."""
     settings = scene.symray
-    parts: list[Any] = [
-        settings.bake_texel_size,
-        settings.bake_max_resolution,
+    parts: list[Any] = [  # the texel size is not here: a finer bake serves a coarser ask
         settings.bake_samples,
+        DENOISE,
+        DENOISE_PREFILTER,
+        DENOISE_QUALITY,
         bpy.app.version,
     ]
     for inst in depsgraph.object_instances:
@@ -428,6 +569,12 @@ def _bake_scene(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> Itera
         temp.render.threads = scene.render.threads
         temp.cycles.device = "CPU"
         temp.cycles.samples = int(scene.symray.bake_samples)
+        # adaptive sampling stopped no texel early at 16 samples (measured): fixed counts
+        temp.cycles.use_adaptive_sampling = False
+        temp.cycles.use_denoising = DENOISE
+        temp.cycles.denoising_input_passes = "RGB_ALBEDO_NORMAL"
+        temp.cycles.denoising_prefilter = DENOISE_PREFILTER
+        temp.cycles.denoising_quality = DENOISE_QUALITY
         temp.frame_set(scene.frame_current, subframe=scene.frame_subframe)
         _copy_view_layer(scene, depsgraph, temp)
         yield temp
@@ -436,11 +583,10 @@ def _bake_scene(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> Itera
         _sync_view_layers()
 
 
-def resolution(area: float, uv_area: float, texel: float, max_resolution: int) -> int:
-    """Side of a square bake image giving ``texel`` world units per texel (clamped)."""
-    uv_area = min(max(uv_area, 1e-6), 1.0)
-    side = math.ceil(math.sqrt(max(area, 0.0) / uv_area) / texel) if texel > 0 else 0
-    return int(min(max(side, MIN_RESOLUTION), max_resolution))
+def extent(area: float, uv_area: float) -> float:
+    """World units the UV square spans: the root of a surface's ``area`` over the UV area
+    it covers (at least 1e-6 of it, at most all)."""
+    return math.sqrt(max(area, 0.0) / min(max(uv_area, 1e-6), 1.0))
 
 
 def _areas(mesh: bpy.types.Mesh, matrix: Any, loop_uv: np.ndarray | None) -> tuple[float, float]:
@@ -486,9 +632,14 @@ def _unique_uvs(mesh: bpy.types.Mesh) -> bool:
 
 
 def _bake_object(
-    temp: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, obj: bpy.types.Object, settings: Any
-) -> BakedSurface:
-    """Bake one evaluated object in the temporary scene; everything added is removed."""
+    temp: bpy.types.Scene,
+    depsgraph: bpy.types.Depsgraph,
+    obj: bpy.types.Object,
+    settings: Any,
+    texel: float | None,
+) -> Baked:
+    """Bake one evaluated object in the temporary scene at ``texel`` world units a texel
+    (None: automatic without a camera); everything added is removed."""
     with ExitStack() as stack:
         target, loop_uv = None, None
         if not _needs_copy(obj):
@@ -499,10 +650,8 @@ def _bake_object(
         if target is None:
             target = _temporary_copy(stack, temp, depsgraph, obj)
             mesh, loop_uv = target.data, _loop_uv(target.data)
-        area, uv_area = _areas(mesh, obj.matrix_world, loop_uv)
-        side = resolution(
-            area, uv_area, float(settings.bake_texel_size), int(settings.bake_max_resolution)
-        )
+        span = extent(*_areas(mesh, obj.matrix_world, loop_uv))
+        side = bake_texels.side(span, texel, int(settings.bake_max_resolution), automatic(settings))
         image = bpy.data.images.new(TEMP_NAME, side, side, alpha=True, float_buffer=True)
         stack.callback(bpy.data.images.remove, image)
         _add_image_nodes(stack, target, image)
@@ -512,7 +661,7 @@ def _bake_object(
             raise ValueError(f"Cycles baked no pixels for '{obj.name}'")
         pixels = pixels.copy()
         pixels[..., 3] = 1.0
-    return BakedSurface(pixels, loop_uv)
+    return Baked(pixels, loop_uv, span)
 
 
 def _loop_uv(mesh: bpy.types.Mesh) -> np.ndarray:
@@ -602,15 +751,16 @@ def _smart_project(obj: bpy.types.Object) -> None:
     scratch = bpy.data.scenes.new(TEMP_NAME)
     try:
         scratch.collection.objects.link(obj)
-        with _context(scratch, obj):
-            bpy.ops.object.mode_set(mode="EDIT")
-        try:
-            with _context(scratch, obj, editing=True):
-                bpy.ops.mesh.select_all(action="SELECT")
-                bpy.ops.uv.smart_project(island_margin=0.02)
-        finally:
-            with _context(scratch, obj, editing=True):
-                bpy.ops.object.mode_set(mode="OBJECT")
+        with quiet.silenced():
+            with _context(scratch, obj):
+                bpy.ops.object.mode_set(mode="EDIT")
+            try:
+                with _context(scratch, obj, editing=True):
+                    bpy.ops.mesh.select_all(action="SELECT")
+                    bpy.ops.uv.smart_project(island_margin=0.02)
+            finally:
+                with _context(scratch, obj, editing=True):
+                    bpy.ops.object.mode_set(mode="OBJECT")
     finally:
         bpy.data.scenes.remove(scratch)
 
@@ -641,7 +791,7 @@ def _remove_node(tree: bpy.types.NodeTree, node: bpy.types.Node, previous: Any) 
 def _run_bake(temp: bpy.types.Scene, obj: bpy.types.Object) -> None:
     """Cycles' Combined bake (diffuse direct + indirect, emission) of ``obj`` in ``temp``."""
     try:
-        with _context(temp, obj):
+        with quiet.silenced(), _context(temp, obj):
             bpy.ops.object.bake(
                 type="COMBINED",
                 pass_filter=PASS_FILTER,

@@ -17,7 +17,7 @@ import bpy
 import numpy as np
 
 from ..core import passes as core_passes
-from . import output, render_job
+from . import bake, output, render_job
 
 PASSES = tuple((p.name, p.layer, p.toggle) for p in core_passes.PASSES if p.label)
 """(core pass, Blender pass name, scene.symray toggle) of the add-on's passes, in the core
@@ -71,9 +71,10 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
         scene = depsgraph.scene
         baking = "" if scene.symray.lighting == "UNLIT" else " (Cycles bakes the lighting)"
         self.update_stats("", f"SymRay: reading the scene{baking}")
-        job = render_job.prepare(
-            scene, depsgraph, use_border=True, camera_object=self.camera_override
-        )
+        with bake.reporting(self._bake_progress):
+            job = render_job.prepare(
+                scene, depsgraph, use_border=True, camera_object=self.camera_override
+            )
         for warning in job.warnings:
             if warning not in _warned:  # once per render job: an animation's frames repeat them
                 _warned.add(warning)
@@ -101,6 +102,17 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
         self.update_stats("", f"SymRay: {text}")
         if bpy.app.background:
             print(f"SymRay: frame {scene.frame_current}: {text}")
+
+    def _bake_progress(self, done: int, total: int, name: str) -> None:
+        """The progress bar and status line while Cycles bakes the lighting (bake.py)."""
+        if total > 0:
+            self.update_progress(min(done / total, 1.0))
+        if name:
+            self.update_stats(
+                "", f"SymRay: baking the lighting of '{name}' ({done + 1} of {total})"
+            )
+        else:
+            self.update_stats("", f"SymRay: lighting of {total} objects baked")
 
     def _progress_callback(self):
         """progress(done, total) for core.render: the progress bar and a status line."""

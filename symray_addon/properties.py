@@ -373,26 +373,29 @@ class SymRaySettings(bpy.types.PropertyGroup):
     )
     bake_texel_size: bpy.props.FloatProperty(  # type: ignore[valid-type]
         name="Texel Size",
-        default=0.05,
-        min=1e-5,
+        default=0.0,
+        min=0.0,
         soft_max=1.0,
         subtype="DISTANCE",
         description="Size of one baked texel on a surface, in scene units (smaller = sharper "
-        "shadows, longer bakes)",
+        "shadows and textures, longer bakes). 0 = automatic: about 1.5 pixels of the render "
+        "where the object is seen through the scene camera",
     )
     bake_max_resolution: bpy.props.IntProperty(  # type: ignore[valid-type]
         name="Max Resolution",
-        default=1024,
+        default=512,
         min=8,
         max=8192,
-        description="Largest side of an object's baked texture, in texels",
+        description="Largest side of an object's baked texture, in texels (bounds the time "
+        "a bake of a large or close object takes)",
     )
     bake_samples: bpy.props.IntProperty(  # type: ignore[valid-type]
         name="Bake Samples",
-        default=64,
+        default=16,
         min=1,
         max=1 << 20,
-        description="Cycles samples per texel of a bake (more = less noise)",
+        description="Cycles samples per texel of a bake, which Cycles then denoises "
+        "(more = less noise, longer bakes)",
     )
     file_version: bpy.props.IntProperty(  # type: ignore[valid-type]
         name="File Version",

@@ -248,7 +248,7 @@ def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
         lambda: _check_split(settings.method, model, settings.spin),
     ]
     if settings.lighting != "UNLIT":
-        found.append(lambda: checks.check_positive("Texel Size", settings.bake_texel_size))
+        found.append(lambda: checks.check_range("Texel Size", settings.bake_texel_size, 0.0))
         found.append(lambda: checks.check_int("Max Resolution", settings.bake_max_resolution, 8))
         found.append(lambda: checks.check_int("Bake Samples", settings.bake_samples))
     if traits.mass:
@@ -305,9 +305,12 @@ def _disk_checks(settings: Any) -> list[Callable[[], Any]]:
         lambda: checks.check_range("Disk Temperature", disk.temperature, 100.0, 1e9),
         lambda: checks.check_range("Disk Brightness", disk.brightness, *DISK_BRIGHTNESS),
         lambda: checks.check_range("Disk Opacity", disk.opacity, 0.0, 1.0, lo_open=True),
+        lambda: checks.check_range("Disk Beaming", disk.beaming, 0.0, 1.0),
     ]
     if settings.model == "KERR" and not spin_problem(settings.spin):
         found.append(lambda: check_spin(settings.spin, "Spin"))
+    if not disk.auto_exposure:
+        found.append(lambda: checks.check_positive("Disk Exposure", disk.exposure))
     if not disk.use_isco:
         found.append(
             lambda: checks.check_range(

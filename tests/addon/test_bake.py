@@ -8,6 +8,7 @@ bakes of at most 64x64 texels) to keep the suite quick on 2 cores.
 from __future__ import annotations
 
 import math
+import os
 import threading
 
 import bpy
@@ -334,7 +335,7 @@ def _try(bake, scene, depsgraph):
     "name, value, words",
     [
         ("bake_texel_size", float("nan"), "Texel Size must be"),
-        ("bake_texel_size", 0.0, "Texel Size must be"),
+        ("bake_texel_size", -1.0, "Texel Size must be"),  # 0 is automatic
     ],
 )
 def test_bad_bake_settings_are_refused(addon, scene, helpers, name, value, words):
@@ -580,8 +581,9 @@ def test_a_faceless_curve_in_the_factory_scene(addon, factory_scene):
 def test_text_is_drawn_once_with_its_bake(addon, scene, helpers):
     """A Text object is one surface: drawn once, with its baked light (no 'instanced'
     warning). Flat text facing a Sun straight above: Lambert 0.8 E / pi (the median hit
-    within 2 %; texels on the glyphs' edges mix the glyph with the bake's margin, so 60 %
-    of hits, not all, are within 5 %: 67 % measured)."""
+    within 2 %; Cycles' denoiser changes texels on the glyphs' UV island edges a little,
+    so 90 % of hits, not all, are within 5 %: 96 % measured, 67 % with Cycles' default
+    denoiser settings)."""
     bpy.ops.object.text_add()
     bpy.context.object.data.body = "Sym"
     _sunlit(scene, helpers, 1.0, (0.0, 0.0, 0.0), ((0.8, 0.35, 3.0), (0.0, 0.0, 0.0)), 0.02)
@@ -594,7 +596,7 @@ def test_text_is_drawn_once_with_its_bake(addon, scene, helpers):
     red = result.rgba[hit][:, 0]
     lambert = 0.8 * 1.0 / np.pi
     assert np.median(red) == pytest.approx(lambert, rel=0.02)
-    assert np.mean(np.abs(red / lambert - 1.0) < 0.05) > 0.6
+    assert np.mean(np.abs(red / lambert - 1.0) < 0.05) > 0.9
 
 
 def test_edit_mode_is_kept_and_its_edits_are_rendered(addon, scene, helpers):
@@ -616,3 +618,123 @@ def test_edit_mode_is_kept_and_its_edits_are_rendered(addon, scene, helpers):
     want = _fresh(addon, scene)
     assert _hit(addon, want).sum() > 200
     np.testing.assert_array_equal(result.rgba, want.rgba)
+
+
+# -- how fine a bake is, and what it tells the user (issue #24) ----------------------------
+
+
+def _square(d: float, half: float, facing) -> np.ndarray:
+    """Two triangles of a square of half side ``half`` centred at ``d`` on the -Z axis
+    (a camera at the origin looks down -Z), with normal ``facing``."""
+    corners = np.array([[-half, -half], [half, -half], [half, half], [-half, half]])
+    if facing == "z":
+        quad = np.column_stack([corners, np.full(4, -d)])
+    else:  # seen edge-on but tilted 60 degrees: normal in the YZ plane
+        quad = np.column_stack([corners[:, 0], corners[:, 1] * 0.5, -d + corners[:, 1] * 0.866])
+    return quad[[[0, 1, 2], [0, 2, 3]]]
+
+
+def test_a_pixel_footprint_is_a_pixel_on_the_surface(addon):
+    """The texel of an automatic bake is TEXEL_PIXELS times the world size of a pixel on
+    the surface. A square facing a pinhole camera at distance d: d x the window width of a
+    pixel, wherever it lies in the frame; tilted by 60 degrees: the pixel's area over
+    cos 60, so sqrt(2) times as wide; behind the camera: as if the camera faced it; an
+    orthographic camera: its width over the image's, at any distance."""
+    texels = addon.module("symray_addon.bake_texels")
+    camera = addon.core.Camera.perspective((0, 0, 0), (0, 0, -1), (0, 1, 0), 60.0, 640, 360)
+    pixel = 2.0 * math.tan(math.radians(30.0)) / 640  # window width of a pixel
+    for d in (2.0, 10.0, 50.0):
+        assert texels.pixel_footprint(camera, _square(d, 0.1 * d, "z")) == pytest.approx(
+            d * pixel, rel=1e-9
+        )
+    tilted = texels.pixel_footprint(camera, _square(10.0, 0.01, "tilted"))
+    assert tilted == pytest.approx(10.0 * pixel * math.sqrt(2.0), rel=1e-2)
+    behind = texels.pixel_footprint(camera, _square(-10.0, 0.01, "z"))
+    assert behind == pytest.approx(10.0 * pixel, rel=1e-3)
+    ortho = addon.core.Camera.orthographic((0, 0, 0), (0, 0, -1), (0, 1, 0), 8.0, 640, 360)
+    for d in (2.0, 50.0):
+        assert texels.pixel_footprint(ortho, _square(d, 1.0, "z")) == pytest.approx(
+            8.0 / 640, rel=1e-9
+        )
+
+
+def _cube_side(bake, scene) -> int:
+    """Side of the factory cube's bake for the scene as it is now."""
+    return bake.bake_surfaces(scene, bpy.context.evaluated_depsgraph_get())["Cube"].pixels.shape[0]
+
+
+def test_automatic_texels_follow_the_size_on_screen(addon, factory_scene):
+    """Texel Size 0 (the default): the cube's bake has twice the side at twice the
+    resolution, and half the side with the camera twice as far; a bake at least as fine
+    as asked is reused (a smaller image, a camera moved a little), a finer one is made
+    when asked (a bigger image). F12 in the UI, which cannot bake, uses a coarser bake
+    and says so."""
+    scene = factory_scene
+    assert scene.symray.bake_texel_size == 0.0
+    scene.symray.bake_samples = 4
+    bake = addon.module("symray_addon.bake")
+    bake.clear_cache()
+    small = _cube_side(bake, scene)
+    scene.render.resolution_x, scene.render.resolution_y = 128, 96
+    baked = bake.stats["baked"]
+    big = _cube_side(bake, scene)
+    assert bake.stats["baked"] - baked == 1 and abs(big - 2 * small) <= 1
+    camera = bpy.data.objects["Camera"]
+    camera.location *= 1.05  # a little farther: the finer bake serves
+    bpy.context.view_layer.update()
+    assert _cube_side(bake, scene) == big and bake.stats["baked"] - baked == 1
+    camera.location *= 2.0 / 1.05
+    bpy.context.view_layer.update()
+    bake.clear_cache()
+    assert abs(_cube_side(bake, scene) - small) <= 1
+    scene.render.resolution_x, scene.render.resolution_y = 256, 192  # finer than cached
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    outcome: list = []
+    warnings: list[str] = []
+    thread = threading.Thread(
+        target=lambda: outcome.append(bake.bake_surfaces(scene, depsgraph, warnings))
+    )
+    thread.start()
+    thread.join()
+    assert abs(outcome[0]["Cube"].pixels.shape[0] - small) <= 1
+    assert warnings == [bake.COARSE_WARNING]
+
+
+def test_a_bake_reports_progress_and_no_blender_chatter(addon, factory_scene, capfd):
+    """Bake Lighting tells a progress callback each object before it bakes (k of n) and
+    the end; Cycles' "Baking map saved to internal image" (one per object) and Blender's
+    "Fra:" status lines never reach the console."""
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.5, location=(0.0, 0.0, 2.0))
+    factory_scene.symray.bake_samples = 4
+    bake = addon.module("symray_addon.bake")
+    bake.clear_cache()
+    seen: list[tuple] = []
+    capfd.readouterr()
+    with bake.reporting(lambda *args: seen.append(args)):
+        assert bpy.ops.symray.bake_lighting() == {"FINISHED"}
+    out, err = capfd.readouterr()
+    assert "Baking map saved" not in out + err
+    assert not [line for line in (out + err).splitlines() if line.startswith("Fra:")]
+    assert [(done, total) for done, total, _name in seen] == [(0, 2), (1, 2), (2, 2)]
+    assert sorted(name for _done, _total, name in seen) == ["", "Cube", "Sphere"]
+
+
+def test_held_back_output_is_given_back(addon, capfd):
+    """quiet.silenced() holds back C- and Python-level output of its block, restores the
+    console however the block ends (an error here), drops Blender's chatter and writes
+    anything else out again."""
+    quiet = addon.module("symray_addon.quiet")
+    capfd.readouterr()
+    with pytest.raises(RuntimeError, match="boom"), quiet.silenced() as held:
+        os.write(1, b"Info: Baking map saved to internal image, save it externally\n")
+        os.write(1, b"Fra:1 Mem:13.38M (Peak 13.38M) | Synchronizing object | Cube\n")
+        os.write(2, b"Error: a real problem\n")
+        print("Info: Baking map saved to internal image (Python's stdout)")
+        raise RuntimeError("boom")
+    os.write(1, b"after\n")
+    print("printed after")
+    out, err = capfd.readouterr()
+    assert "Baking map saved" not in out + err and "Fra:" not in out + err
+    assert "Error: a real problem" in err
+    assert "after\n" in out and "printed after" in out
+    assert len(held) == 4
