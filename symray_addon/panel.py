@@ -296,6 +296,8 @@ class RENDER_PT_symray_lighting(SymRayPanelMixin, bpy.types.Panel):
         col = layout.column()
         col.active = settings.lighting != "UNLIT"
         col.prop(settings, "bake_texel_size")
+        if settings.bake_texel_size == 0.0:
+            col.label(text="Texel Size 0: automatic, ~1.5 px of the render", icon="INFO")
         col.prop(settings, "bake_max_resolution")
         col.prop(settings, "bake_samples")
         notes = col.column(align=True)
