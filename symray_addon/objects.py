@@ -66,7 +66,7 @@ class SymRayObjectSettings(bpy.types.PropertyGroup):
     )
     size: bpy.props.FloatProperty(  # type: ignore[valid-type]
         name="Size",
-        default=1.0,
+        default=0.5,
         min=1e-6,
         soft_max=100.0,
         subtype="DISTANCE",
@@ -240,7 +240,7 @@ class SYMRAY_OT_add_black_hole(bpy.types.Operator):
 
     size: bpy.props.FloatProperty(  # type: ignore[valid-type]
         name="Size",
-        default=1.0,
+        default=0.5,
         min=1e-6,
         soft_max=100.0,
         subtype="DISTANCE",
@@ -259,7 +259,7 @@ class SYMRAY_OT_add_black_hole(bpy.types.Operator):
         name="Accretion Disk",
         default=True,
         description="A glowing disk of gas around it, from its innermost stable orbit to "
-        f"{DISK_OUTER_SIZES:g}× its size",
+        f"{DISK_OUTER_SIZES:g}× its size (the Cinematic look)",
     )
 
     def execute(self, context: bpy.types.Context) -> set[str]:
@@ -288,6 +288,7 @@ class SYMRAY_OT_add_black_hole(bpy.types.Operator):
         disk.enabled = self.disk
         disk.use_isco = True
         disk.outer_radius = DISK_OUTER_SIZES * self.size
+        disk.look, disk.auto_exposure = "CINEMATIC", True  # the glow people know
         context.view_layer.update()
         warning = inside_warning(scene, obj)
         if warning:
