@@ -324,7 +324,7 @@ def _disk_checks(settings: Any) -> list[Callable[[], Any]]:
     elif math.isfinite(float(settings.rg)) and float(settings.rg) > 0:
         found.append(
             lambda: checks.check_range(
-                "Disk Outer Radius (beyond the ISCO)",
+                "Disk Outer Radius (beyond the innermost orbit)",
                 disk.outer_radius,
                 inner_edge(settings),
                 lo_open=True,

@@ -188,3 +188,31 @@ def test_an_old_file_with_a_centre_object_renders_unchanged(addon, tmp_path):
         hole.symray.kind = "NONE"
         explicit = f12(scene, tmp_path, f"{name}_explicit")
         np.testing.assert_allclose(image, explicit, rtol=1e-4, atol=1e-5)
+
+
+def test_add_medium_renders_its_box(addon, scene, helpers):
+    """Add › SymRay › Medium: the Empty's cube (display size × scale) is the medium's box,
+    its local axes n's frame: the image is the explicit Medium model's with that box."""
+    helpers.add_camera(scene, location=(0.0, -20.0, 0.0))
+    helpers.add_cube(scene, "Far", size=4.0, location=(0.0, 12.0, 0.0),
+                     material=helpers.solid_material("Red", (0.8, 0.1, 0.1, 1.0)))  # fmt: skip
+    scene.cursor.location = (0.5, 0.0, 0.2)
+    assert bpy.ops.symray.add_medium(size=3.0) == {"FINISHED"}
+    medium = bpy.context.active_object
+    medium.scale = (1.0, 2.0, 1.0)
+    bpy.context.view_layer.update()
+    settings = scene.symray
+    settings.refractive_index = "1 + 0.05*z"
+    effective = addon.module("symray_addon.objects").effective(settings)
+    assert (effective.model, effective.center) == ("MEDIUM", medium)
+    assert effective.medium_min == (-3.0, -6.0, -3.0) and effective.medium_max == (3.0, 6.0, 3.0)
+    job = addon.module("symray_addon.render_job")
+    image = job.run(job.prepare(scene, bpy.context.evaluated_depsgraph_get())).rgba
+    medium.symray.kind = "NONE"  # the same medium as an explicit model at the Empty
+    settings.model, settings.center, settings.use_medium_bounds = "MEDIUM", medium, True
+    settings.medium_min, settings.medium_max = (-3.0, -6.0, -3.0), (3.0, 6.0, 3.0)
+    explicit = job.run(job.prepare(scene, bpy.context.evaluated_depsgraph_get())).rgba
+    np.testing.assert_array_equal(image, explicit)
+    settings.model = "FLAT"
+    flat = job.run(job.prepare(scene, bpy.context.evaluated_depsgraph_get())).rgba
+    assert np.abs(image - flat).max() > 0.1  # the medium bends the light
