@@ -1,7 +1,8 @@
 """Write old_centre.blend and old_centre_render.npz: a file saved by SymRay 470bb2e (before
 the black hole became an object, issue 24) and what that version rendered of it.
 
-Run once with that version's extension installed (the bpy wheel):
+Run once with that version's extension installed, in the oldest supported Blender (the
+bpy 4.2 wheel, .venv311: 5.x reads 4.2 files, not the other way round):
     BLENDER_USER_RESOURCES=<folder with symray 470bb2e installed> python make_old_file.py
 Two scenes: "Kerr" (model KERR set explicitly, a centre Empty off the origin, tilted, a
 disk in scene units) and "Scene" (the model left at that version's default, Schwarzschild,
