@@ -157,7 +157,7 @@ def hole_settings(layout: bpy.types.UILayout, hole: bpy.types.Object) -> None:
     layout.prop(hole.symray, "spin")
     rg = objects.rg_of(hole.symray.size, hole.symray.spin)
     shadow = 1.5 * math.sqrt(3.0) * rg  # seen from afar, at spin 0 (Kerr: within ~7 %)
-    layout.label(text=f"Shadow: about {_length(hole, shadow)} across", icon="INFO")
+    layout.label(text=f"Its shadow's radius: about {_length(hole, shadow)}", icon="INFO")
 
 
 def medium_settings(layout: bpy.types.UILayout, settings: bpy.types.PropertyGroup) -> None:
