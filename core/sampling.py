@@ -225,6 +225,7 @@ class _Nodes:
         self.position = np.zeros(shape + (3,))  # hit points (world)
         self.tangent = np.zeros(shape + (3,))  # the hitting chords' directions
         self.redshift = np.full(shape, np.nan)  # g on the accretion disk
+        self.radius = np.full(shape, np.nan)  # Boyer–Lindquist r of a hit on the disk
         self.flipped = np.zeros(shape, dtype=bool)  # two of its runs ended on different things
 
 
@@ -321,6 +322,10 @@ class TileSampler:
         nodes.position[jj, ii] = rays.position
         nodes.tangent[jj, ii] = rays.tangent
         nodes.redshift[jj, ii] = rays.redshift
+        on_disk = np.flatnonzero(hit & (rays.object_id == DISK_ID))
+        nodes.radius[jj, ii] = np.nan
+        if on_disk.size:
+            nodes.radius[jj[on_disk], ii[on_disk]] = self._disk_radius(rays.position[on_disk])
         err = np.zeros(jj.size) if error is None else error
         nodes.flipped[jj, ii] |= err >= FLIP  # once two runs ended apart, it stays a flip
         err = np.where(nodes.flipped[jj, ii], np.maximum(err, FLIP), err)
@@ -448,15 +453,14 @@ class TileSampler:
         mean, each as the angle the block's own gradient of it takes to make that much
         (five: centre, then corners): the disk pixel shows what a ray that far off shows."""
         worst = np.zeros(five[0][0].shape)
-        radius = [self._disk_radius(nodes.position[j, i]) for j, i in five]
-        redshift = [nodes.redshift[j, i] for j, i in five]
-        for values in (radius, redshift):
+        for field in (nodes.radius, nodes.redshift):
+            values = [field[j, i] for j, i in five]
             corners = np.stack(values[1:])
             spread = corners.max(axis=0) - corners.min(axis=0)
             off = np.abs(values[0] - corners.mean(axis=0))
             with np.errstate(invalid="ignore", divide="ignore"):
-                angle = np.where(off > 0, off * width / spread, 0.0)
-            worst = np.maximum(worst, np.where(np.isfinite(angle), angle, np.inf))
+                angle = np.where(off == 0, 0.0, off * width / spread)
+            worst = np.maximum(worst, np.where(np.isfinite(angle), angle, np.inf))  # NaN: no
         return worst
 
     def _opaque_disk(self) -> bool:
@@ -473,7 +477,7 @@ class TileSampler:
         light = self.tracer.disk
         assert light is not None  # only blocks on the disk come here
         pairs = list(zip(weights, corners, strict=True))
-        radius = sum(wk * self._disk_radius(nodes.position[j, i]) for wk, (j, i) in pairs)
+        radius = sum(wk * nodes.radius[j, i] for wk, (j, i) in pairs)
         g = sum(wk * nodes.redshift[j, i] for wk, (j, i) in pairs)
         position = sum(wk[:, None] * nodes.position[j, i] for wk, (j, i) in pairs)
         on = (radius >= light.disk.r_in) & (radius <= light.disk.r_out)

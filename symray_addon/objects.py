@@ -58,36 +58,44 @@ def _size_changed(self: bpy.types.PropertyGroup, _context: bpy.types.Context) ->
             disk.inner_radius *= self.size / old
 
 
+SIZE_TEXT = (
+    "Radius of the black hole's horizon, in scene units: its shadow looks about 2.6× as large "
+    "(physics: the Boyer–Lindquist horizon radius r₊; Schwarzschild radius rg = 2GM/c² at "
+    "spin 0). Scaling the object does not change it"
+)
+SPIN_TEXT = (
+    "How fast the hole turns, 0 (still) to 1 (the fastest possible); negative turns the "
+    "other way. Physics: Kerr's a/M, about the object's local Z"
+)
+
+
+def size_property(**extra: Any) -> Any:
+    """The hole's Size (object setting and Add operator option alike)."""
+    return bpy.props.FloatProperty(
+        name="Size", default=0.5, min=1e-6, soft_max=100.0, subtype="DISTANCE",
+        description=SIZE_TEXT, **extra,
+    )  # fmt: skip
+
+
+def spin_property() -> Any:
+    """The hole's Spin (object setting and Add operator option alike)."""
+    return bpy.props.FloatProperty(
+        name="Spin", default=0.6, min=-1.0, max=1.0, soft_min=0.0, subtype="FACTOR",
+        description=SPIN_TEXT,
+    )  # fmt: skip
+
+
 class SymRayObjectSettings(bpy.types.PropertyGroup):
     """SymRay settings of one object (``object.symray``)"""
 
     kind: bpy.props.EnumProperty(  # type: ignore[valid-type]
         name="SymRay", items=KIND_ITEMS, default="NONE", description="What this object is to SymRay"
     )
-    size: bpy.props.FloatProperty(  # type: ignore[valid-type]
-        name="Size",
-        default=0.5,
-        min=1e-6,
-        soft_max=100.0,
-        subtype="DISTANCE",
-        update=_size_changed,
-        description="Radius of the black hole's horizon, in scene units: its shadow looks "
-        "about 2.6× as large (physics: the Boyer–Lindquist horizon radius r₊; Schwarzschild "
-        "radius rg = 2GM/c² at spin 0). Scaling the object does not change it",
-    )
-    spin: bpy.props.FloatProperty(  # type: ignore[valid-type]
-        name="Spin",
-        default=0.6,
-        min=-1.0,
-        max=1.0,
-        soft_min=0.0,
-        subtype="FACTOR",
-        description="How fast the hole turns, 0 (still) to 1 (the fastest possible); "
-        "negative turns the other way. Physics: Kerr's a/M, about the object's local Z",
-    )
+    size: size_property(update=_size_changed)  # type: ignore[valid-type]
+    spin: spin_property()  # type: ignore[valid-type]
 
 
-def _kind_objects(scene: bpy.types.Scene, kind: str) -> list[bpy.types.Object]:
+def of_kind(scene: bpy.types.Scene, kind: str) -> list[bpy.types.Object]:
     """The scene's objects of SymRay ``kind`` that render (not hidden in renders)."""
     return [
         obj
@@ -98,14 +106,14 @@ def _kind_objects(scene: bpy.types.Scene, kind: str) -> list[bpy.types.Object]:
 
 def hole_of(scene: bpy.types.Scene) -> bpy.types.Object | None:
     """The scene's black hole object, if it has exactly one."""
-    holes = _kind_objects(scene, "BLACK_HOLE")
+    holes = of_kind(scene, "BLACK_HOLE")
     return holes[0] if len(holes) == 1 else None
 
 
 def objects_problem(scene: bpy.types.Scene) -> str:
     """Why the scene's SymRay objects cannot render ("" when they can)."""
-    holes = _kind_objects(scene, "BLACK_HOLE")
-    media = _kind_objects(scene, "MEDIUM")
+    holes = of_kind(scene, "BLACK_HOLE")
+    media = of_kind(scene, "MEDIUM")
     if len(holes) > 1:
         names = ", ".join(f"'{o.name}'" for o in holes)
         return (
@@ -172,7 +180,7 @@ class Effective:
             return
         scene = settings.id_data
         self.object_problem = objects_problem(scene)
-        hole, media = hole_of(scene), _kind_objects(scene, "MEDIUM")
+        hole, media = hole_of(scene), of_kind(scene, "MEDIUM")
         if self.object_problem or (hole is None and not media):
             self.model, self.center = "FLAT", None
         elif hole is not None:
@@ -225,10 +233,32 @@ def _make_active(context: bpy.types.Context, obj: bpy.types.Object) -> None:
 def ensure_hole(scene: bpy.types.Scene) -> bpy.types.Object:
     """The scene's black hole object; a new one at the 3D cursor if it has none."""
     hole = hole_of(scene)
-    if hole is None:
-        hole = _new_empty(scene, "Black Hole", "SPHERE", 1.0)
-        hole.symray.kind = "BLACK_HOLE"
+    return hole if hole is not None else _new_hole(scene, 1.0)
+
+
+def _new_hole(
+    scene: bpy.types.Scene, size: float, collection: bpy.types.Collection | None = None
+) -> bpy.types.Object:
+    """A black hole object of ``size`` at the 3D cursor (its Empty's sphere: the horizon)."""
+    hole = _new_empty(scene, "Black Hole", "SPHERE", size, collection)
+    hole.symray.size = size  # before its kind: no disk to rescale yet
+    hole.symray.kind = "BLACK_HOLE"
     return hole
+
+
+def _refused_second(operator: bpy.types.Operator, scene: bpy.types.Scene, kinds) -> bool:
+    """Report (an error) and True when ``scene`` already has an object of ``kinds``: SymRay
+    renders one black hole or medium per scene."""
+    existing = [obj for kind in kinds for obj in of_kind(scene, kind)]
+    if not existing:
+        return False
+    label = {"BLACK_HOLE": "a black hole", "MEDIUM": "a medium"}[existing[0].symray.kind]
+    operator.report(
+        {"ERROR"},
+        f"The scene already has {label} ('{existing[0].name}'): SymRay renders one black "
+        "hole or medium per scene",
+    )
+    return True
 
 
 class SYMRAY_OT_add_black_hole(bpy.types.Operator):
@@ -238,23 +268,8 @@ class SYMRAY_OT_add_black_hole(bpy.types.Operator):
     bl_label = "Black Hole"
     bl_options = {"REGISTER", "UNDO"}
 
-    size: bpy.props.FloatProperty(  # type: ignore[valid-type]
-        name="Size",
-        default=0.5,
-        min=1e-6,
-        soft_max=100.0,
-        subtype="DISTANCE",
-        description="Radius of the horizon, in scene units",
-    )
-    spin: bpy.props.FloatProperty(  # type: ignore[valid-type]
-        name="Spin",
-        default=0.6,
-        min=-1.0,
-        max=1.0,
-        soft_min=0.0,
-        subtype="FACTOR",
-        description="How fast it turns, 0 to 1 (Kerr's a/M)",
-    )
+    size: size_property()  # type: ignore[valid-type]
+    spin: spin_property()  # type: ignore[valid-type]
     disk: bpy.props.BoolProperty(  # type: ignore[valid-type]
         name="Accretion Disk",
         default=True,
@@ -265,22 +280,15 @@ class SYMRAY_OT_add_black_hole(bpy.types.Operator):
     def execute(self, context: bpy.types.Context) -> set[str]:
         """Add the hole; refused (with a message) when the scene has one."""
         scene = context.scene
-        existing = _kind_objects(scene, "BLACK_HOLE")
-        if existing:
-            self.report(
-                {"ERROR"},
-                f"The scene already has a black hole ('{existing[0].name}'): SymRay renders "
-                "one per scene",
-            )
+        if _refused_second(self, scene, ("BLACK_HOLE",)):
             return {"CANCELLED"}
         if self.disk and abs(self.spin) >= 1.0:
             self.report({"ERROR"}, "A disk needs a spin below 1 (at 1 its inner edge meets "
                         "the horizon): choose 0.999, or no disk")  # fmt: skip
             return {"CANCELLED"}
-        obj = _new_empty(scene, "Black Hole", "SPHERE", self.size, context.collection)
+        obj = _new_hole(scene, self.size, context.collection)
         _make_active(context, obj)
-        obj.symray.kind = "BLACK_HOLE"
-        obj.symray.size, obj.symray.spin = self.size, self.spin
+        obj.symray.spin = self.spin
         settings = scene.symray
         settings.model = "OBJECTS"
         settings.center = None
@@ -313,15 +321,9 @@ class SYMRAY_OT_add_medium(bpy.types.Operator):
     )
 
     def execute(self, context: bpy.types.Context) -> set[str]:
-        """Add the medium; refused (with a message) when the scene has one."""
+        """Add the medium; refused (with a message) when the scene has a hole or medium."""
         scene = context.scene
-        existing = _kind_objects(scene, "MEDIUM") + _kind_objects(scene, "BLACK_HOLE")
-        if existing:
-            self.report(
-                {"ERROR"},
-                f"The scene already has '{existing[0].name}': SymRay renders one black hole "
-                "or medium per scene",
-            )
+        if _refused_second(self, scene, ("MEDIUM", "BLACK_HOLE")):
             return {"CANCELLED"}
         obj = _new_empty(scene, "Medium", "CUBE", self.size, context.collection)
         _make_active(context, obj)

@@ -137,7 +137,7 @@ def _scene_objects(layout: bpy.types.UILayout, scene: bpy.types.Scene) -> None:
     """What the scene's SymRay objects make of the model: the hole's or medium's settings,
     or how to add one."""
     hole = objects.hole_of(scene)
-    media = [o for o in scene.objects if o.symray.kind == "MEDIUM" and not o.hide_render]
+    media = objects.of_kind(scene, "MEDIUM")
     if hole is not None:
         hole_settings(layout, hole)
     elif len(media) == 1:

@@ -80,8 +80,9 @@ def prepare(
 
     warnings = validation.ignored_settings(scene, depsgraph.view_layer, camera_object)
     hole = objects.hole_of(scene) if settings.follows_objects else None
-    if hole is not None and objects.inside_warning(scene, hole):
-        warnings.append(objects.inside_warning(scene, hole))
+    inside = objects.inside_warning(scene, hole) if hole is not None else ""
+    if inside:
+        warnings.append(inside)
     baked = _baked_surfaces(scene, depsgraph, warnings)
     intersector = export_meshes.build_intersector(depsgraph, baked, warnings)
     if intersector is None and model is None:

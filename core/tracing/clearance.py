@@ -31,7 +31,11 @@ shapes whose box is loose (a sphere's corners reach 0.7 of its radius beyond it;
 annulus's box holds its hole, where rays pass the accretion disk's shadow)."""
 Bound = tuple[np.ndarray, np.ndarray, "Distance | None", int]
 """(lo, hi, distance, object id): an object's world box, where known its exact distance,
-and the id its hits report (Hits.object_id; -2 for a volume)."""
+and the id its hits report (Hits.object_id; VOLUME_ID for a volume)."""
+
+VOLUME_ID = -3
+"""The id of a volume's bound: no hit reports it (-1 is no hit, -2 the accretion disk's
+DISK_ID), so a volume is never taken for the object a ray hit."""
 
 
 def shape_distance(obj: Any) -> Distance | None:
@@ -96,7 +100,7 @@ class ClearanceBoxes:
         """(N,) each ray's clearance from everything but the object it hit (all of it for
         the rays that hit nothing)."""
         box = out.clearance_box
-        own = (box >= 0) & (out.object_id != -1)  # -1: no hit; the disk's id is negative
+        own = (box >= 0) & (out.object_id != -1)  # -1: no hit (the disk's id is -2)
         own[own] = self.ids[box[own]] == out.object_id[own]
         return np.where(own, out.clearance_other, out.clearance)
 

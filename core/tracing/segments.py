@@ -13,7 +13,7 @@ import numpy as np
 
 from ..geometry import Hits, Intersector, segment_overlaps
 from ..geometry.hits import box_corners
-from .clearance import Bound, shape_distance
+from .clearance import VOLUME_ID, Bound, shape_distance
 from .scene import ENDING
 
 
@@ -136,10 +136,10 @@ class SceneGeometry:
     def boxes(self) -> list[Bound]:
         """World (lo, hi, distance, object id) of each object (each member of a Group) and
         volume (core.tracing.clearance: the distance from a sphere or an annulus, else
-        None; the id its hits report, -2 for a volume)."""
+        None; the id its hits report, clearance.VOLUME_ID for a volume)."""
         members = getattr(self.objects, "objects", [self.objects])
         ids = getattr(self.objects, "ids", [None] * len(members))
-        boxes: list[Bound] = [(np.asarray(v.lo, float), np.asarray(v.hi, float), None, -2)
+        boxes: list[Bound] = [(np.asarray(v.lo, float), np.asarray(v.hi, float), None, VOLUME_ID)
                               for v in self.volumes]  # fmt: skip
         for obj, oid in zip(members, ids, strict=True):
             lo, hi = (np.asarray(x, float) for x in obj.bounds)

@@ -216,3 +216,34 @@ def test_add_medium_renders_its_box(addon, scene, helpers):
     settings.model = "FLAT"
     flat = job.run(job.prepare(scene, bpy.context.evaluated_depsgraph_get())).rgba
     assert np.abs(image - flat).max() > 0.1  # the medium bends the light
+
+
+@pytest.mark.parametrize("preset", ["KERR_DISK", "KERR", "SCHWARZSCHILD_LENS"])
+def test_a_black_hole_preset_frames_its_camera(addon, factory_scene, preset):
+    """The preset puts the camera where Blender's own projection (world_to_camera_view)
+    sees the disk's outer edge across ~70 % of the frame's width, or (no disk) twice the
+    shadow's diameter (b = 3√3/2 rg either side) across ~70 % of its height."""
+    from bpy_extras.object_utils import world_to_camera_view
+    from mathutils import Vector
+
+    scene = factory_scene
+    scene.render.resolution_x, scene.render.resolution_y = 1920, 1080
+    assert bpy.ops.symray.apply_preset(preset=preset) == {"FINISHED"}
+    bpy.context.view_layer.update()
+    hole = next(o for o in scene.objects if o.symray.kind == "BLACK_HOLE")
+    centre, camera = hole.matrix_world.translation, scene.camera
+    t = np.linspace(0.0, 2.0 * np.pi, 721)
+    if scene.symray.disk.enabled:
+        r = scene.symray.disk.outer_radius
+        points = [centre + Vector((r * math.cos(a), r * math.sin(a), 0.0)) for a in t]
+        axis = 0  # across the width
+    else:
+        rg = addon.module("symray_addon.objects").rg_of(hole.symray.size, hole.symray.spin)
+        extent = 2.0 * 1.5 * math.sqrt(3.0) * rg
+        points = [centre + Vector((0.0, 0.0, s * extent)) for s in (-1.0, 1.0)]
+        axis = 1  # across the height (the camera looks level at the hole)
+    ndc = np.array([tuple(world_to_camera_view(scene, camera, p)) for p in points])
+    assert np.all(ndc[:, 2] > 0)  # in front of the camera
+    span = ndc[:, axis].max() - ndc[:, axis].min()
+    assert 0.65 <= span <= 0.78, span
+    assert abs(0.5 * (ndc[:, axis].max() + ndc[:, axis].min()) - 0.5) < 0.05  # centred
