@@ -157,11 +157,12 @@ def test_error_pass_tells_the_truth_on_a_small_frame():
     with a far region: of the pixels whose true error exceeds a tenth of the tolerance, >= 90 %
     are estimated within 3x; fewer than 2 % of all pixels are under-reported by > 3x (the
     issue's 1 % is met on the benchmark's larger frame, benchmarks/image_quality.py; a
-    48x27 frame has few pixels to spread the interpolated edge pixels over); a pixel that
+    small frame has few pixels to spread the interpolated edge pixels over); a pixel that
     ends apart from the reference reports a flip (error_px >= 1). A hit's error is its hit
     point's distance over the pixel footprint (tolerance_px's measure), not the direction
-    to it: measured so, 39 of 42 pixels above a tenth of the tolerance are within 3x."""
-    scene, cam = _kerr_board(), _hole_camera(48, 27)
+    to it: measured so, 33 of 34 pixels above a tenth of the tolerance are within 3x. (At
+    48x27 only 8 pixels are above it since blocks test their edges' midpoints: too few.)"""
+    scene, cam = _kerr_board(), _hole_camera(64, 36)
     passes = ("error_px", "ending", "direction", "position")
     ref = core.render(scene, cam, method="dopri5", tolerance=1e-11, passes=passes,
                       max_steps=10**6)  # fmt: skip
@@ -170,13 +171,62 @@ def test_error_pass_tells_the_truth_on_a_small_frame():
     est = run.passes["error_px"].astype(float)
     seen = np.isfinite(truth)
     big = seen & (truth > 0.1)
-    assert big.sum() > 30
+    assert big.sum() > 25
     within = (est[big] <= 3 * truth[big]) & (est[big] >= truth[big] / 3)
     assert within.mean() >= 0.9
     assert np.count_nonzero(seen & (est < truth / 3)) / truth.size < 0.02
     apart = np.isinf(truth)
     assert np.count_nonzero(apart) <= 2  # at most a grazing pixel or two ends apart
     assert np.all(est[apart] >= 1.0)
+
+
+def test_a_lens_maps_interpolation_error_is_not_hidden_by_its_harmonic_part():
+    """A lens map's deflection is a potential's gradient, so its components are nearly
+    harmonic: f_xx + f_yy ~ 0, and a block's centre deviates little from its corners' mean
+    while its edges bend (f = x^2 - y^2: the centre exact, each edge's midpoint off by a
+    quarter). The blocks measure their edges' midpoints: the estimate is the bilinear error
+    there, and the centre's alone would have missed it."""
+    x, y = np.meshgrid([0.0, 0.5, 1.0], [0.0, 0.5, 1.0])
+    saddle = x**2 - y**2  # rows: y; columns: x
+    nine = [(0, 0), (0, 2), (2, 0), (2, 2), (0, 1), (2, 1), (1, 0), (1, 2), (1, 1)]
+
+    def apart(k, ends):
+        value = saddle[nine[k]]
+        return np.array([abs(value - np.mean([saddle[nine[e]] for e in ends]))])
+
+    deviation = sampling._edge_deviations(apart)
+    np.testing.assert_allclose(deviation[0], [0.25, 0.25, 0.25, 0.25, 0.0])
+    centre_alone = abs(saddle[1, 1] - np.mean([saddle[p] for p in nine[:4]]))
+    assert centre_alone == 0.0
+    # the estimate at (u, v) against the bilinear interpolation's true error there: equal
+    # on the edges, a bound inside (it adds the two directions' parts, which cancel here)
+    u, v = np.array([0.5, 0.0, 0.25, 0.5, 0.5]), np.array([0.0, 0.5, 0.25, 0.75, 0.5])
+    bilinear = u * (1 - v) * 1.0 + (1 - u) * v * -1.0
+    true = np.abs(u**2 - v**2 - bilinear)
+    estimate = sampling._error_shape(u, v) @ deviation[0]
+    np.testing.assert_allclose(estimate[:2], true[:2])
+    assert np.all(estimate >= true - 1e-12)
+    assert sampling._worst(deviation)[0] == 0.5
+
+
+def test_interpolated_sky_around_a_lens_is_not_under_reported():
+    """Schwarzschild from 30 rg, the procedural sky only, 1 px (Preview), against dopri5 at
+    1e-10 rad: of the interpolated pixels whose true error exceeds a tenth of the tolerance,
+    none is estimated below a third of it (27 of 1895 were, the centre alone measured),
+    and no pixel exceeds the tolerance."""
+    cam = _hole_camera(96, 54)
+    scene = core.Scene(model=hm.schwarzschild(rg=1.0), background="procedural")
+    ref = core.render(scene, cam, method="dopri5", tolerance=1e-10, max_steps=10**6,
+                      passes=("ending", "direction", "position"))  # fmt: skip
+    passes = ("ending", "direction", "position", "error_px", "steps")
+    run = core.render(scene, cam, tolerance_px=1.0, passes=passes)
+    truth = true_error_px(ref, run, cam.frame.position)
+    est = run.passes["error_px"].astype(float)
+    seen = np.isfinite(truth)
+    interpolated = seen & (run.passes["steps"] == 0) & (truth > 0.1)
+    assert interpolated.sum() > 100
+    assert np.count_nonzero(est[interpolated] < truth[interpolated] / 3) == 0
+    assert np.all(truth[seen] <= 1.0)
 
 
 def test_tiles_shown_progressively_are_the_image():
