@@ -398,6 +398,10 @@ class Tracer:
         ~ r / M, so far from a small hole one step can jump past it (or back out of the
         region), and the cubic is then no path at all. A ray's step grows back (doubling)
         after steps clear of both by a factor 4; its heading follows its accepted chords.
+        A run at another step than the rule's (the error pass's companion, a retrace) has
+        its limits scaled with it (the turn as the step, the bend as its square), so near
+        geometry its steps stay in the ratio of its start's: two runs halved to the same
+        steps there would agree on an error they share, and Richardson would see none.
         None with an explicit ``TraceOptions.step`` (step studies) or an adaptive method
         (its own control)."""
         h, h0, heading = arrays["h"], arrays["h0"], arrays["heading"]
@@ -405,10 +409,12 @@ class Tracer:
             return np.zeros(h.shape, dtype=bool)  # a step given is taken as given; dopri5
         near = np.zeros(h.shape, dtype=bool)
         near[paths.rows] = True
-        bent = near & (turn > TURN_LIMIT)
-        bent[paths.rows] |= paths.deviation > BEND_LIMIT * paths.allowed
-        close = near & (turn > 0.25 * TURN_LIMIT)
-        close[paths.rows] |= paths.deviation > 0.25 * BEND_LIMIT * paths.allowed
+        scale = h0 / self.step  # a run at r x the rule's step keeps r x its steps here
+        turn_limit, bend_limit = TURN_LIMIT * scale, BEND_LIMIT * scale[paths.rows] ** 2
+        bent = near & (turn > turn_limit)
+        bent[paths.rows] |= paths.deviation > bend_limit * paths.allowed
+        close = near & (turn > 0.25 * turn_limit)
+        close[paths.rows] |= paths.deviation > 0.25 * bend_limit * paths.allowed
         redo = ok & bent & (h > h0 * 0.5**MAX_HALVINGS)
         h[redo] *= 0.5
         grow = ok & ~redo & ~close & (h < h0)
