@@ -33,8 +33,8 @@ measures the map's second derivative along that edge, the centre's alone only th
 field). For a quadratic map, at block coordinates (u, v) in [0, 1]^2 the bilinear error is
 4 u (1 - u) d_x + 4 v (1 - v) d_y, d_x a midpoint's deviation along x (the top and bottom
 edges' blended by v), d_y along y (left and right, blended by u); what the centre deviates
-beyond that is a higher order, added as 16 u (1 - u) v (1 - v) d_c (_error_shape). The error pass
-reports that estimate; a block is accepted when its largest value, times
+beyond that is a higher order, added as 16 u (1 - u) v (1 - v) d_c (_error_shape). The
+error pass reports that estimate; a block is accepted when its largest value, times
 INTERPOLATION_SAFETY, is within the tolerance. Interpolation never crosses an ending
 change: a block is accepted only when all nine rays end the same way (the same object, for
 hits).
@@ -93,7 +93,7 @@ CLEARANCE = 1.0
 object's bounds (a hit's: of every object but its own) by more than CLEARANCE x the
 block's spread (its width as seen from the camera, times how much its rays spread apart
 on the way: _magnification): every point of a block lies within half a block width of one
-of its five traced rays, so an object cannot reach an untraced ray there without passing
+of its nine traced rays, so an object cannot reach an untraced ray there without passing
 within that of a traced one."""
 INTERPOLATION_SAFETY = 1.0
 """A block is interpolated only where its estimated interpolation error (_worst) is at most
