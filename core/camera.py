@@ -261,6 +261,26 @@ class Camera:
         kind = "ortho" if type == "ORTHO" else "persp"
         return cls(kind, pos, basis, window, (winx, winy), region)
 
+    @classmethod
+    def from_view(
+        cls, view_matrix: Any, window_matrix: Any, width: int, height: int
+    ) -> Camera:
+        """The camera of a 3D view (Blender's RegionView3D): its world-to-view matrix and
+        its projection (perspective or orthographic, OpenGL convention) at width x height
+        pixels. The window is read off the projection: x in [-1, 1] of clip space spans
+        [xmin, xmax] at distance 1 (perspective) or in world units (orthographic)."""
+        w, h = _check_size(width, height)
+        view = np.asarray(view_matrix, dtype=np.float64).reshape(4, 4)
+        proj = np.asarray(window_matrix, dtype=np.float64).reshape(4, 4)
+        if not (np.all(np.isfinite(view)) and np.all(np.isfinite(proj))):
+            raise ValueError("view and window matrices must be finite 4x4 matrices")
+        pos, basis = _matrix_basis(np.linalg.inv(view))
+        ortho = proj[3, 3] == 1.0
+        shift = (proj[0, 3], proj[1, 3]) if ortho else (-proj[0, 2], -proj[1, 2])
+        xmin, xmax = (-1.0 - shift[0]) / proj[0, 0], (1.0 - shift[0]) / proj[0, 0]
+        ymin, ymax = (-1.0 - shift[1]) / proj[1, 1], (1.0 - shift[1]) / proj[1, 1]
+        return cls("ortho" if ortho else "persp", pos, basis, (xmin, xmax, ymin, ymax), (w, h))
+
     def resized(
         self, width: int, height: int, region: tuple[int, int, int, int] | None = None
     ) -> Camera:
@@ -340,6 +360,28 @@ class Camera:
         """Origins (M, 3) and unit directions (M, 3) through image points xy (M, 2) (x =
         column, y = row from the top, in pixels; pixel centres at +0.5)."""
         return self.rays_at_window(self.image_window_coords(xy))
+
+    def image_points(self, directions: np.ndarray) -> np.ndarray:
+        """Image points xy (M, 2) (as ``rays_at`` takes them) whose rays leave the camera
+        along unit world ``directions`` (M, 3): the inverse of rays_at; NaN for directions
+        no pixel of the (full) frame's plane looks along (behind a perspective camera; any
+        of an orthographic one's but its own)."""
+        c = np.asarray(directions, dtype=np.float64).reshape(-1, 3) @ self._basis  # r, u, b
+        with np.errstate(all="ignore"):
+            if self.kind == "persp":
+                ahead = -c[:, 2]
+                s = np.where((ahead > 0)[:, None], c[:, :2] / ahead[:, None], np.nan)
+            elif self.kind == "pano":
+                lon = np.arctan2(c[:, 0], -c[:, 2])
+                s = np.stack([lon, np.arcsin(np.clip(c[:, 1], -1.0, 1.0))], axis=1)
+            else:
+                return np.full((c.shape[0], 2), np.nan)
+        xmin, xmax, ymin, ymax = self.window
+        winx, winy = self.full_size
+        x0, _, _, y1 = self.region
+        xb = (s[:, 0] - xmin) / (xmax - xmin) * winx
+        yb = (s[:, 1] - ymin) / (ymax - ymin) * winy
+        return np.stack([xb - x0, y1 - yb], axis=1)
 
     def rays_at_window(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Origins (M, 3) and unit directions (M, 3) for window coordinates s (M, 2)."""

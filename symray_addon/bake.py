@@ -153,7 +153,10 @@ def wants_baking(settings: Any, depsgraph: bpy.types.Depsgraph) -> bool:
 
 
 def bake_surfaces(
-    scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, warnings: list[str] | None = None
+    scene: bpy.types.Scene,
+    depsgraph: bpy.types.Depsgraph,
+    warnings: list[str] | None = None,
+    bake: bool = True,
 ) -> dict[str, BakedSurface]:
     """Baked radiance of every rendered (non-instanced) object with faces, by object name.
 
@@ -161,13 +164,13 @@ def bake_surfaces(
     thread only; off it, a coarser cached bake is used, with COARSE_WARNING). An object
     with non-finite vertices is left out (and out of the others' bakes), named in
     ``warnings``. Raises ValueError when Cycles is missing, a bake fails, or one is needed
-    off the main thread.
+    off the main thread. ``bake`` False (the viewport): as off the main thread, never bake.
     """
     settings = scene.symray
     targets, keys, missing, broken, texels = _lookup(scene, depsgraph)
     for obj in broken:
         _note(warnings, non_finite_warning(obj.name))
-    if missing and threading.current_thread() is not threading.main_thread():
+    if missing and (not bake or threading.current_thread() is not threading.main_thread()):
         if any(keys[obj.name] not in _cache for obj in missing):
             raise ValueError(
                 "Surface lighting is baked by Cycles on Blender's main thread, which F12 "
@@ -201,6 +204,12 @@ def can_bake_now(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> bool
     (finely enough or not)."""
     if threading.current_thread() is threading.main_thread():
         return True
+    return all_cached(scene, depsgraph)
+
+
+def all_cached(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph) -> bool:
+    """Whether every object to bake has a cached bake (finely enough or not): bake_surfaces
+    would then bake nothing off the main thread (the viewport's condition)."""
     plan = _lookup(scene, depsgraph)
     return all(plan.keys[obj.name] in _cache for obj in plan.missing)
 

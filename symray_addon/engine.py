@@ -17,7 +17,7 @@ import bpy
 import numpy as np
 
 from ..core import passes as core_passes
-from . import bake, output, render_job
+from . import bake, output, render_job, viewport
 
 PASSES = tuple((p.name, p.layer, p.toggle) for p in core_passes.PASSES if p.label)
 """(core pass, Blender pass name, scene.symray toggle) of the add-on's passes, in the core
@@ -35,9 +35,20 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
     bl_idname = "SYMRAY"
     bl_label = "SymRay"
     bl_use_postprocess = True
-    bl_use_preview = False
+    bl_use_preview = False  # material previews stay off (README: the Rendered viewport)
     bl_use_shading_nodes_custom = False
-    bl_use_eevee_viewport = True
+    bl_use_eevee_viewport = True  # Material Preview shading is EEVEE's; Rendered is SymRay's
+
+    def __del__(self) -> None:
+        viewport.free(self)
+
+    def view_update(self, context: bpy.types.Context, depsgraph: bpy.types.Depsgraph) -> None:
+        """The scene changed: the Rendered viewport reads it again (symray_addon/viewport)."""
+        viewport.update(self, context, depsgraph)
+
+    def view_draw(self, context: bpy.types.Context, depsgraph: bpy.types.Depsgraph) -> None:
+        """Draw the Rendered viewport's latest image (following a change of the view)."""
+        viewport.draw(self, context, depsgraph)
 
     def update_render_passes(
         self, scene: bpy.types.Scene | None = None, renderlayer: bpy.types.ViewLayer | None = None

@@ -54,36 +54,43 @@ def prepare(
     depsgraph: bpy.types.Depsgraph,
     use_border: bool = False,
     camera_object: bpy.types.Object | None = None,
+    view_camera: Any = None,
 ) -> RenderJob:
     """Check the inputs and build core.Scene, core.Camera and the render options.
 
-    ``camera_object`` overrides the scene camera. Raises ValueError (bad settings, no
-    camera, camera inside a horizon, nothing to render).
+    ``camera_object`` overrides the scene camera; ``view_camera`` (a core.Camera: the
+    viewport's own view) replaces any camera, and the surfaces' lighting is then only
+    what is cached (a viewport never bakes: UNBAKED_WARNING without a bake). Raises
+    ValueError (bad settings, no camera, camera inside a horizon, nothing to render).
     """
     settings = objects.effective(scene.symray)
     problems = validation.settings_problems(settings)
     if problems:
         raise ValueError(problems[0])
-    camera_object = camera_object or scene.camera
-    if camera_object is None:
-        raise ValueError("The scene has no active camera: add one or set Scene > Camera")
-    camera_object = _evaluated(camera_object, depsgraph)
-    kwargs = export_camera.camera_kwargs(scene, camera_object, use_border=use_border)
-    camera = core.Camera.blender(**kwargs)
+    if view_camera is not None:
+        camera, camera_object, position = view_camera, None, view_camera.frame.position
+    else:
+        camera_object = camera_object or scene.camera
+        if camera_object is None:
+            raise ValueError("The scene has no active camera: add one or set Scene > Camera")
+        camera_object = _evaluated(camera_object, depsgraph)
+        kwargs = export_camera.camera_kwargs(scene, camera_object, use_border=use_border)
+        camera = core.Camera.blender(**kwargs)
+        position = np.array(kwargs["matrix_world"])[:3, 3]
 
     center_matrix = None
     if settings.center is not None:
         center_matrix = _evaluated(settings.center, depsgraph).matrix_world
     where = models.placement(center_matrix)
     model = models.build_model(settings, properties.metric_source(settings))
-    models.check_camera(settings, model, where, np.array(kwargs["matrix_world"])[:3, 3])
+    models.check_camera(settings, model, where, position)
 
     warnings = validation.ignored_settings(scene, depsgraph.view_layer, camera_object)
     hole = objects.hole_of(scene) if settings.follows_objects else None
     inside = objects.inside_warning(scene, hole) if hole is not None else ""
     if inside:
         warnings.append(inside)
-    baked = _baked_surfaces(scene, depsgraph, warnings)
+    baked = _baked_surfaces(scene, depsgraph, warnings, cached_only=view_camera is not None)
     intersector = export_meshes.build_intersector(depsgraph, baked, warnings)
     if intersector is None and model is None:
         raise ValueError(
@@ -129,17 +136,24 @@ UNBAKED_WARNING = (
 )
 
 
-def _baked_surfaces(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, warnings: list):
+def _baked_surfaces(
+    scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph, warnings: list,
+    cached_only: bool = False,
+):  # fmt: skip
     """Baked surfaces when the settings ask for them (bake.py), else None. Automatic
     lighting that cannot bake here (F12's render thread, nothing cached) renders unlit
-    with UNBAKED_WARNING; Baked lighting then refuses (ValueError)."""
+    with UNBAKED_WARNING; Baked lighting then refuses (ValueError). ``cached_only`` (the
+    viewport): the cached bakes if every object has one, else unlit with the warning."""
     settings = scene.symray
     if not bake.wants_baking(settings, depsgraph):
+        return None
+    if cached_only and not bake.all_cached(scene, depsgraph):
+        warnings.append(UNBAKED_WARNING)
         return None
     if settings.lighting == "AUTO" and not bake.can_bake_now(scene, depsgraph):
         warnings.append(UNBAKED_WARNING)
         return None
-    return bake.bake_surfaces(scene, depsgraph, warnings)
+    return bake.bake_surfaces(scene, depsgraph, warnings, bake=not cached_only)
 
 
 def run(

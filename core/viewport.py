@@ -1,0 +1,312 @@
+"""An interactive view of a scene: rendered coarse to fine off the caller's thread, and
+what a change can reuse instead of tracing again (the add-on's Rendered viewport).
+
+A view is rendered in LEVELS: first at 1/8 of its size per side at *Preview* accuracy (one
+pixel of that coarse image), then 1/4 and 1/2 (Preview), then the full size at the scene's
+own quality (``Quality``). Each level is a ``core.render`` of ``Camera.resized``, run by
+``ProgressiveView`` in a daemon thread; ``cancel()`` stops it within a tile (core.render's
+``should_cancel``). A change starts a new view; what it may reuse from the last image:
+
+- ``reshade``: a change of the disk's look only (look, beaming, exposure, brightness,
+  temperature, profile): every pixel whose centre sees the opaque disk is recoloured from
+  its redshift g and radius r (``AccretionDisk.colour``), nothing is traced. Exact for
+  one ray per pixel (samples 1: *Preview*); with anti-aliasing, a pixel on the disk's
+  edge keeps its old share of the disk's colour until the view is rendered again.
+- ``resample``: the view turned or zoomed at the same position (a camera's orientation
+  and lens): the light arriving at the observer depends only on its direction there, so
+  the last image is a *direction map*. Each new pixel's direction is projected into the
+  old image; inside a cell whose four pixel centres end alike (all escaped, or all on the
+  same kind of thing) it is interpolated: escaped rays by their final directions (the sky
+  looked up again at the interpolated direction: as sharp as a fresh render), the disk by
+  its g and r, surfaces by colour. Pixels outside the old image, or in a cell across an
+  edge, are marked uncovered: a fresh render of the view replaces them.
+
+Anything else (the observer moved, an object, a material, the model) renders again from
+the coarsest level.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from .camera import Camera
+from .render import TRACE_SHARE, RenderResult, disk_exposure, render
+from .sky import Background
+from .tracing import ENDING, Scene
+
+LEVELS = (8, 4, 2, 1)
+"""Downscale factors per side of a view's successive images (the last: full size)."""
+VIEW_PASSES = ("ending", "direction", "position", "redshift")
+"""What a view keeps per pixel: enough to resample and reshade it."""
+DISK_LOOK = ("look", "beaming", "exposure", "brightness", "temperature", "profile")
+"""AccretionDisk fields a reshade follows (the rest change where the disk is: retrace)."""
+SAME_POSITION = 1e-9
+"""Relative distance below which two observers stand at the same place (resample)."""
+
+
+@dataclass(frozen=True)
+class Quality:
+    """How finely a view's last level is rendered (core.render's tolerance_px, samples)."""
+
+    tolerance_px: float = 1.0
+    samples: int = 1
+
+
+PREVIEW = Quality()
+"""The coarse levels' accuracy: one pixel of the level's own image, one sample."""
+
+
+@dataclass
+class ViewImage:
+    """One level of a view: its image (row 0 at the top), passes and camera."""
+
+    level: int
+    camera: Camera
+    rgba: np.ndarray
+    passes: dict
+    seconds: float
+    final: bool = False
+    summary: dict = field(default_factory=dict)
+
+
+def level_camera(camera: Camera, level: int) -> Camera:
+    """``camera`` at 1 / ``level`` of its size per side (at least one pixel)."""
+    width, height = camera.full_size
+    return camera.resized(max(1, math.ceil(width / level)), max(1, math.ceil(height / level)))
+
+
+def render_level(
+    scene: Scene,
+    camera: Camera,
+    level: int,
+    quality: Quality,
+    should_cancel: Callable[[], bool] | None = None,
+    **options: Any,
+) -> ViewImage | None:
+    """One level of a view (None when cancelled). Below full size, *Preview* accuracy the
+    quickest way: every pixel centre traced at half a (coarse) pixel's tolerance, no error
+    pass, no sampler (which pays its per-step overhead per block round: 3-4x slower on
+    an image of ~10^4 pixels); at full size, core.render with ``quality`` (as F12).
+    ``options``: core.render's (workers, parallel, cores, method, max_steps, ...)."""
+    seen = level_camera(camera, level)
+    final = level == 1
+    start = time.perf_counter()
+    if final:
+        accuracy = {"tolerance_px": quality.tolerance_px, "samples": quality.samples}
+    else:
+        distance = float(np.linalg.norm(seen.frame.position - np.asarray(scene.center)))
+        accuracy = {"tolerance": TRACE_SHARE * seen.pixel_angle(max(distance, 1e-9))}
+    out = render(scene, seen, passes=VIEW_PASSES, should_cancel=should_cancel, **accuracy,
+                 **options)  # fmt: skip
+    if out.cancelled:
+        return None
+    return _image(out, level, seen, time.perf_counter() - start, final)
+
+
+def _image(out: RenderResult, level: int, camera: Camera, seconds: float, final: bool):
+    """A level's ViewImage from core.render's result (passes as (h, w) or (h, w, 3))."""
+    h, w = camera.height, camera.width
+    passes = {}
+    for name in VIEW_PASSES:
+        data = np.asarray(out.passes[name])
+        passes[name] = data.reshape(h, w) if data.size == h * w else data.reshape(h, w, -1)
+    return ViewImage(level, camera, out.rgba.reshape(h, w, 4), passes, seconds, final, out.summary)
+
+
+class ProgressiveView:
+    """Renders one view level by level (LEVELS) in a daemon thread. ``latest`` is the
+    finest image so far; ``on_image(image)`` is called from the thread with each one.
+    A change of anything: ``cancel()`` this view and start another."""
+
+    def __init__(
+        self,
+        scene: Scene,
+        camera: Camera,
+        quality: Quality = PREVIEW,
+        on_image: Callable[[ViewImage], None] | None = None,
+        levels: tuple[int, ...] = LEVELS,
+        **options: Any,
+    ) -> None:
+        self.scene, self.camera, self.quality = scene, camera, quality
+        self.levels, self.options, self.on_image = levels, options, on_image
+        self.latest: ViewImage | None = None
+        self.error: BaseException | None = None
+        self._cancel = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="symray-view", daemon=True)
+
+    def start(self) -> ProgressiveView:
+        """Begin rendering (returns at once)."""
+        self._thread.start()
+        return self
+
+    def cancel(self) -> None:
+        """Stop the work in flight (the thread ends within a tile)."""
+        self._cancel.set()
+
+    @property
+    def cancelled(self) -> bool:
+        """Whether cancel() was called."""
+        return self._cancel.is_set()
+
+    @property
+    def done(self) -> bool:
+        """Whether the thread has ended (finished, cancelled or failed)."""
+        return self._thread.ident is not None and not self._thread.is_alive()
+
+    def wait(self, timeout: float | None = None) -> bool:
+        """Wait for the thread to end; -> whether it has."""
+        self._thread.join(timeout)
+        return not self._thread.is_alive()
+
+    def _run(self) -> None:
+        # one level per pass, each pass cancellable; a failure is kept for the caller.
+        # An automatic disk exposure is chosen once, as F12 chooses it for this view
+        try:
+            probe = _probe_options({**self.options, "should_cancel": self._cancel.is_set})
+            scene = disk_exposure(self.scene, self.camera, **probe)
+            for level in self.levels:
+                if self._cancel.is_set():
+                    return
+                image = render_level(scene, self.camera, level, self.quality,
+                                     self._cancel.is_set, **self.options)  # fmt: skip
+                if image is None or self._cancel.is_set():
+                    return
+                self.latest = image
+                if self.on_image is not None:
+                    self.on_image(image)
+        except BaseException as err:  # noqa: BLE001 - the caller reports it
+            self.error = err
+
+
+# -- reuse ---------------------------------------------------------------------------------
+
+
+def look_only_change(old: Scene, new: Scene) -> bool:
+    """Whether ``new`` differs from ``old`` only in its disk's look (DISK_LOOK): everything
+    else the same objects, model, centre, background."""
+    if old.disk is None or new.disk is None:
+        return False
+    keep = {name: getattr(old.disk, name) for name in DISK_LOOK}
+    if dataclasses.replace(new.disk, **keep) != old.disk:
+        return False
+    fields = ("model", "center", "objects", "background", "volumes")
+    return all(getattr(old, name) is getattr(new, name) or _same(getattr(old, name),
+               getattr(new, name)) for name in fields)  # fmt: skip
+
+
+def _same(a: Any, b: Any) -> bool:
+    try:
+        return bool(np.all(a == b))
+    except Exception:  # noqa: BLE001 - incomparable: not the same
+        return False
+
+
+def reshade(
+    image: ViewImage, scene: Scene, camera: Camera | None = None, **options: Any
+) -> np.ndarray:
+    """``image``'s RGBA with its disk's pixels recoloured by ``scene``'s disk (its look:
+    ``look_only_change``), nothing traced. An automatic exposure is chosen again as a
+    render of the view ``camera`` (default: the image's) would (``disk_exposure``'s
+    probe; ``options`` are core.render's)."""
+    disk = scene.disk
+    rgba = image.rgba.copy()
+    if disk is None or disk.opacity < 1.0:
+        return rgba
+    exposed = disk_exposure(scene, camera or image.camera, **_probe_options(options)).disk
+    assert exposed is not None
+    g = np.asarray(image.passes["redshift"], dtype=np.float64)
+    on = np.isfinite(g) & (image.passes["ending"] == ENDING["hit"])
+    if on.any():
+        radius = _disk_radius(scene, image.passes["position"][on])
+        rgba[on, :3] = exposed.colour(g[on], radius)
+    return rgba
+
+
+def _probe_options(options: dict) -> dict:
+    names = ("method", "step", "max_steps", "workers", "parallel", "cores", "should_cancel")
+    probe = {name: options.get(name) for name in names}
+    probe["max_steps"] = probe["max_steps"] or 20_000
+    probe["parallel"] = probe["parallel"] or "auto"
+    return probe
+
+
+def _disk_radius(scene: Scene, world: np.ndarray) -> np.ndarray:
+    """Boyer–Lindquist radius of world points on the disk (the tracer's local frame)."""
+    local = (np.asarray(world, dtype=np.float64) - scene.center) @ scene.frame()
+    return scene.model.for_backward_tracing().radius_at(local.T)
+
+
+def same_position(a: Camera, b: Camera) -> bool:
+    """Whether two cameras stand at the same place (a resample can serve)."""
+    pa, pb = a.frame.position, b.frame.position
+    scale = max(float(np.linalg.norm(pa)), float(np.linalg.norm(pb)), 1.0)
+    return bool(np.linalg.norm(pa - pb) <= SAME_POSITION * scale)
+
+
+def resample(image: ViewImage, camera: Camera, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """(RGBA (h, w, 4), covered (h, w)) of ``camera``'s view read from ``image``'s
+    direction map (both cameras at the same place: ``same_position``); uncovered pixels
+    are black (see the module docstring)."""
+    h, w = camera.height, camera.width
+    rows, cols = np.mgrid[0:h, 0:w]
+    xy = np.stack([cols.ravel() + 0.5, rows.ravel() + 0.5], axis=1)
+    _, directions = camera.rays_at(xy)
+    at = image.camera.image_points(directions)  # (M, 2) in the old image, NaN off it
+    rgba = np.zeros((h * w, 4), dtype=np.float32)
+    covered = np.zeros(h * w, dtype=bool)
+    x, y = at[:, 0] - 0.5, at[:, 1] - 0.5  # in pixel-centre units
+    old_h, old_w = image.rgba.shape[:2]
+    inside = np.isfinite(x) & (x >= 0) & (y >= 0) & (x <= old_w - 1) & (y <= old_h - 1)
+    idx = np.flatnonzero(inside)
+    if idx.size:
+        colour, ok = _interpolate(image, x[idx], y[idx], scene)
+        rgba[idx[ok]] = colour[ok]
+        covered[idx[ok]] = True
+    return rgba.reshape(h, w, 4), covered.reshape(h, w)
+
+
+def _interpolate(image: ViewImage, x, y, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """Colour (M, 4) at old-image points (x, y) (pixel-centre units) and whether their
+    cell's four centres end alike (else not ok)."""
+    old_h, old_w = image.rgba.shape[:2]
+    i0 = np.clip(np.floor(x).astype(np.int64), 0, max(old_w - 2, 0))
+    j0 = np.clip(np.floor(y).astype(np.int64), 0, max(old_h - 2, 0))
+    i1, j1 = np.minimum(i0 + 1, old_w - 1), np.minimum(j0 + 1, old_h - 1)
+    u, v = x - i0, y - j0
+    corners = [(j0, i0), (j0, i1), (j1, i0), (j1, i1)]
+    weights = [(1 - u) * (1 - v), u * (1 - v), (1 - u) * v, u * v]
+
+    def blend(field: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        parts = [w[rows] * field[j[rows], i[rows]].T for w, (j, i) in zip(weights, corners,
+                 strict=True)]  # fmt: skip
+        return np.asarray(sum(parts), dtype=np.float64).T
+
+    ending = image.passes["ending"]
+    g = np.asarray(image.passes["redshift"], dtype=np.float64)
+    first, on_disk = ending[j0, i0], np.isfinite(g[j0, i0])
+    alike = np.ones(x.shape, dtype=bool)
+    for j, i in corners[1:]:
+        alike &= (ending[j, i] == first) & (np.isfinite(g[j, i]) == on_disk)
+    every = np.arange(x.size)
+    colour = blend(image.rgba, every)
+    escaped = np.flatnonzero(alike & (first == ENDING["escaped"]))
+    if escaped.size:
+        d = blend(image.passes["direction"], escaped)
+        sky = scene.background
+        sky = sky if isinstance(sky, Background) else Background(sky)
+        colour[escaped] = sky(d / np.linalg.norm(d, axis=1, keepdims=True))
+    disk = np.flatnonzero(alike & on_disk & (first == ENDING["hit"]))
+    if disk.size and scene.disk is not None and scene.disk.opacity >= 1.0:
+        exposure = image.summary.get("disk_exposure", scene.disk.exposure)
+        bound = dataclasses.replace(scene.disk, exposure=exposure)
+        radius = _disk_radius(scene, blend(image.passes["position"], disk))
+        colour[disk, :3] = bound.colour(blend(g, disk), radius)
+    return colour.astype(np.float32), alike
