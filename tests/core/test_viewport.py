@@ -1,0 +1,191 @@
+"""core.viewport: the Rendered viewport's progressive job and what a change reuses, each
+against a fresh render of the changed view (the reference), and the view camera."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+import threading
+
+import numpy as np
+import pytest
+
+import core
+from core import hamiltonians as hm
+from core import viewport
+from core.render import disk_exposure
+
+WIDTH, HEIGHT = 128, 72
+
+
+def _disk_scene() -> core.Scene:
+    """Kerr a/M 0.9 (Kerr–Schild) with an opaque Novikov–Thorne disk, automatic exposure."""
+    disk = core.AccretionDisk(r_out=12.0, temperature=8000.0)
+    return core.Scene(model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"), disk=disk)
+
+
+def _camera(look_at=(0.0, 0.0, 0.0), fov=40.0, size=(WIDTH, HEIGHT)) -> core.Camera:
+    inc = math.radians(75.0)
+    position = (0.0, -30.0 * math.sin(inc), 30.0 * math.cos(inc))
+    return core.Camera.perspective(position, look_at, (0, 0, 1), fov, *size)
+
+
+@pytest.fixture(scope="module")
+def finished() -> viewport.ViewImage:
+    """The disk scene's view rendered through every level."""
+    seen = []
+    view = viewport.ProgressiveView(_disk_scene(), _camera(), on_image=seen.append).start()
+    assert view.wait(300)
+    assert view.error is None
+    assert [image.level for image in seen] == list(viewport.LEVELS)
+    return seen[-1]
+
+
+def test_levels_go_coarse_to_fine_and_end_as_f12(finished):
+    """Each level is 1/k of the view per side; the last is the view at full size, the same
+    pixels as core.render at the same quality (what F12 renders)."""
+    camera = _camera()
+    for k in viewport.LEVELS:
+        assert viewport.level_camera(camera, k).full_size == (
+            math.ceil(WIDTH / k),
+            math.ceil(HEIGHT / k),
+        )
+    assert finished.final and finished.rgba.shape == (HEIGHT, WIDTH, 4)
+    scene = _disk_scene()
+    f12 = core.render(scene, camera, tolerance_px=1.0, samples=1)
+    assert f12.summary["disk_exposure"] == pytest.approx(finished.summary["disk_exposure"])
+    np.testing.assert_array_equal(finished.rgba, f12.rgba.reshape(HEIGHT, WIDTH, 4))
+
+
+def test_a_coarse_level_traces_every_pixel_within_its_own_pixel():
+    """Below full size every pixel centre is traced at half a coarse pixel's tolerance:
+    against dopri5 at 1e-10 rad, every escaped pixel's direction within that pixel."""
+    scene, camera = _disk_scene(), _camera()
+    image = viewport.render_level(scene, camera, 8, viewport.PREVIEW)
+    coarse = viewport.level_camera(camera, 8)
+    ref = core.render(scene, coarse, method="dopri5", tolerance=1e-10, max_steps=10**6,
+                      passes=("ending", "direction"))  # fmt: skip
+    pixel = coarse.pixel_angle()
+    escaped = (image.passes["ending"] == core.ENDING["escaped"]).ravel()
+    ref_escaped = ref.passes["ending"].ravel() == core.ENDING["escaped"]
+    both = escaped & ref_escaped
+    assert both.sum() > 0.25 * both.size  # 16 x 9 pixels: the disk fills much of it
+    a = image.passes["direction"].reshape(-1, 3)[both]
+    b = ref.passes["direction"].reshape(-1, 3)[both]
+    angle = np.arccos(np.clip(np.einsum("ij,ij->i", a, b), -1, 1))
+    assert angle.max() < pixel
+    assert np.count_nonzero(escaped != ref_escaped) <= 0.01 * escaped.size
+
+
+def test_cancel_stops_the_work_and_keeps_no_later_image():
+    """A change cancels the view in flight: its thread ends without a further level."""
+    started = threading.Event()
+    seen = []
+
+    def on_image(image):
+        seen.append(image.level)
+        started.set()
+
+    view = viewport.ProgressiveView(_disk_scene(), _camera(size=(320, 180)), on_image=on_image)
+    view.start()
+    assert started.wait(120)
+    view.cancel()
+    assert view.wait(60)
+    assert view.cancelled and view.error is None
+    assert seen[0] == viewport.LEVELS[0] and len(seen) < len(viewport.LEVELS)
+    assert view.latest is not None and view.latest.level == seen[-1]
+
+
+def test_a_disk_look_change_is_reshaded_to_a_fresh_renders_pixels(finished):
+    """Reshade (nothing traced) against a fresh render of the new look: every pixel not on
+    the disk, and every disk pixel whose centre was traced, identical within float32; the
+    interpolated disk pixels take r from their hit point (the render: from its nodes'
+    radii), so a few differ: none by more than 0.1 on more than 0.2 % of the image."""
+    scene = _disk_scene()
+    for look in ("cinematic", "eht"):
+        new = copy.copy(scene)
+        new.disk = dataclasses.replace(scene.disk, look=look, beaming=0.5)
+        assert viewport.look_only_change(scene, new)
+        shaded = viewport.reshade(finished, new, _camera())
+        fresh = core.render(new, _camera(), tolerance_px=1.0, passes=("steps",))
+        fresh_rgba = fresh.rgba.reshape(HEIGHT, WIDTH, 4)
+        traced = fresh.passes["steps"].reshape(HEIGHT, WIDTH) > 0
+        np.testing.assert_allclose(shaded[traced], fresh_rgba[traced], atol=1e-5)
+        off = np.abs(shaded - fresh_rgba).max(axis=-1) > 0.1
+        assert off.mean() <= 0.002, look
+
+
+def test_other_changes_are_not_look_only():
+    scene = _disk_scene()
+    moved = copy.copy(scene)
+    moved.disk = dataclasses.replace(scene.disk, r_out=10.0)
+    assert not viewport.look_only_change(scene, moved)
+    other = copy.copy(scene)
+    other.background = (0.1, 0.2, 0.3)
+    assert not viewport.look_only_change(scene, other)
+
+
+@pytest.mark.parametrize("turn", [(1.5, 0.0, 0.0), (0.0, 0.0, 1.0)])
+def test_a_turn_at_the_same_position_is_resampled_within_the_tolerance(finished, turn):
+    """The view turned at the same place: the old image read as a direction map. Against a
+    fresh render of the turned view: most pixels covered; there, the sky looked up at the
+    interpolated direction within a pixel of the fresh render's direction (colour off by
+    > 0.1 on <= 0.2 % of the covered pixels), the rest left for the new render."""
+    scene = disk_exposure(_disk_scene(), _camera())
+    turned = _camera(look_at=turn)
+    assert viewport.same_position(turned, _camera())
+    rgba, covered = viewport.resample(finished, turned, scene)
+    assert covered.mean() > 0.8
+    fresh = core.render(scene, turned, tolerance_px=1.0)
+    off = np.abs(rgba - fresh.rgba.reshape(HEIGHT, WIDTH, 4)).max(axis=-1) > 0.1
+    assert np.count_nonzero(off & covered) <= 0.002 * covered.sum()
+    assert not rgba[~covered].any()
+
+
+def test_a_zoom_is_resampled_and_a_move_is_not(finished):
+    """A narrower lens at the same place is a resample too; a camera moved is not."""
+    scene = disk_exposure(_disk_scene(), _camera())
+    zoomed = _camera(fov=30.0)
+    rgba, covered = viewport.resample(finished, zoomed, scene)
+    assert covered.mean() > 0.95
+    fresh = core.render(scene, zoomed, tolerance_px=1.0)
+    off = np.abs(rgba - fresh.rgba.reshape(HEIGHT, WIDTH, 4)).max(axis=-1) > 0.1
+    assert np.count_nonzero(off & covered) <= 0.005 * covered.sum()
+    moved = core.Camera.perspective((0.0, -29.0, 8.0), (0, 0, 0), (0, 0, 1), 40.0, WIDTH, HEIGHT)
+    assert not viewport.same_position(moved, _camera())
+
+
+def _gl_matrices(camera: core.Camera, near=0.1, far=100.0):
+    """The OpenGL view and projection matrices of a perspective camera (as Blender's)."""
+    frame = camera.frame
+    world = np.eye(4)
+    world[:3, :3] = np.stack([frame.right, frame.up, -frame.forward], axis=1)
+    world[:3, 3] = frame.position
+    xmin, xmax, ymin, ymax = camera.window
+    proj = np.zeros((4, 4))
+    proj[0, 0], proj[0, 2] = 2 / (xmax - xmin), (xmax + xmin) / (xmax - xmin)
+    proj[1, 1], proj[1, 2] = 2 / (ymax - ymin), (ymax + ymin) / (ymax - ymin)
+    proj[2, 2], proj[2, 3], proj[3, 2] = (
+        -(far + near) / (far - near),
+        -2 * far * near / (far - near),
+        -1,
+    )
+    return np.linalg.inv(world), proj
+
+
+def test_a_view_camera_from_its_matrices_casts_the_same_rays():
+    """Camera.from_view of a camera's OpenGL matrices (shifted off axis too) gives its rays
+    to 1e-12; image_points inverts rays_at to 1e-9 px."""
+    base = core.Camera.perspective((1.0, -8.0, 3.0), (0, 0, 0), (0, 0, 1), 50.0, 64, 36)
+    shifted = core.Camera(base.kind, base.frame.position,
+                          np.stack([base.frame.right, base.frame.up, -base.frame.forward], axis=1),
+                          tuple(np.add(base.window, (0.1, 0.1, -0.05, -0.05))), (64, 36))  # fmt: skip
+    for camera in (base, shifted):
+        view = core.Camera.from_view(*_gl_matrices(camera), 64, 36)
+        np.testing.assert_allclose(view.rays()[1], camera.rays()[1], atol=1e-12)
+        np.testing.assert_allclose(view.rays()[0], camera.rays()[0], atol=1e-12)
+    xy = np.random.default_rng(1).uniform((0, 0), (64, 36), size=(50, 2))
+    _, directions = base.rays_at(xy)
+    np.testing.assert_allclose(base.image_points(directions), xy, atol=1e-9)
+    assert np.isnan(base.image_points(-directions)).all()  # behind the camera
