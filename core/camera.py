@@ -262,9 +262,7 @@ class Camera:
         return cls(kind, pos, basis, window, (winx, winy), region)
 
     @classmethod
-    def from_view(
-        cls, view_matrix: Any, window_matrix: Any, width: int, height: int
-    ) -> Camera:
+    def from_view(cls, view_matrix: Any, window_matrix: Any, width: int, height: int) -> Camera:
         """The camera of a 3D view (Blender's RegionView3D): its world-to-view matrix and
         its projection (perspective or orthographic, OpenGL convention) at width x height
         pixels. The window is read off the projection: x in [-1, 1] of clip space spans

@@ -100,7 +100,10 @@ def render_level(
     final = level == 1
     start = time.perf_counter()
     if final:
-        accuracy = {"tolerance_px": quality.tolerance_px, "samples": quality.samples}
+        accuracy: dict[str, Any] = {
+            "tolerance_px": quality.tolerance_px,
+            "samples": quality.samples,
+        }
     else:
         distance = float(np.linalg.norm(seen.frame.position - np.asarray(scene.center)))
         accuracy = {"tolerance": TRACE_SHARE * seen.pixel_angle(max(distance, 1e-9))}

@@ -112,7 +112,7 @@ def update(engine: Any, context: Any, depsgraph: Any) -> None:
     for warning in job.warnings:
         engine.update_stats("", f"SymRay: {warning}")
     image = session.view.latest if session.view is not None else None
-    look_only = old is not None and core_viewport.look_only_change(old.scene, job.scene)
+    look_only = old is not None and _look_only(old, job, depsgraph)
     if image is not None and look_only:
         session.stop()
         session.shown = core_viewport.reshade(image, job.scene, camera)
@@ -122,6 +122,23 @@ def update(engine: Any, context: Any, depsgraph: Any) -> None:
         return
     session.restart(camera)
     _poll(engine)
+
+
+def _look_only(old: Any, new: Any, depsgraph: Any) -> bool:
+    """Whether the change from job ``old`` to ``new`` is the disk's look alone: only the
+    Scene ID updated (no object, mesh, material or world), the same options and model
+    (its parameters), and core.viewport.look_only_change on the scenes with the old
+    objects (the meshes are rebuilt at every read). ``new.scene`` keeps ``old``'s."""
+    for update in getattr(depsgraph, "updates", ()):
+        if not isinstance(update.id, bpy.types.Scene) or update.is_updated_geometry:
+            return False
+    if old.options != new.options or repr(old.scene.model) != repr(new.scene.model):
+        return False
+    candidate = dataclasses.replace(new.scene, objects=old.scene.objects, model=old.scene.model)
+    if not core_viewport.look_only_change(old.scene, candidate):
+        return False
+    new.scene = candidate
+    return True
 
 
 def draw(engine: Any, context: Any, depsgraph: Any) -> None:

@@ -178,9 +178,9 @@ def test_a_view_camera_from_its_matrices_casts_the_same_rays():
     """Camera.from_view of a camera's OpenGL matrices (shifted off axis too) gives its rays
     to 1e-12; image_points inverts rays_at to 1e-9 px."""
     base = core.Camera.perspective((1.0, -8.0, 3.0), (0, 0, 0), (0, 0, 1), 50.0, 64, 36)
-    shifted = core.Camera(base.kind, base.frame.position,
-                          np.stack([base.frame.right, base.frame.up, -base.frame.forward], axis=1),
-                          tuple(np.add(base.window, (0.1, 0.1, -0.05, -0.05))), (64, 36))  # fmt: skip
+    basis = np.stack([base.frame.right, base.frame.up, -base.frame.forward], axis=1)
+    window = tuple(np.add(base.window, (0.1, 0.1, -0.05, -0.05)))
+    shifted = core.Camera(base.kind, base.frame.position, basis, window, (64, 36))
     for camera in (base, shifted):
         view = core.Camera.from_view(*_gl_matrices(camera), 64, 36)
         np.testing.assert_allclose(view.rays()[1], camera.rays()[1], atol=1e-12)
