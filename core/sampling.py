@@ -507,13 +507,29 @@ class TileSampler:
         pairs = list(zip(weights, corners, strict=True))
         radius = sum(wk * nodes.radius[j, i] for wk, (j, i) in pairs)
         g = sum(wk * nodes.redshift[j, i] for wk, (j, i) in pairs)
-        position = sum(wk[:, None] * nodes.position[j, i] for wk, (j, i) in pairs)
+        position = self._on_disk_at(sum(wk[:, None] * nodes.position[j, i] for wk, (j, i)
+                                        in pairs), radius)  # fmt: skip
         on = (radius >= light.disk.r_in) & (radius <= light.disk.r_out)
         rgb = light.disk.colour(np.where(on, g, 0.0), radius)
         origins, _ = self.camera.rays_at(self._image_xy(y, x))
         seen = position - origins
         seen /= np.linalg.norm(seen, axis=1, keepdims=True)
         return rgb, on, g, position, seen
+
+    def _on_disk_at(self, position: np.ndarray, radius: np.ndarray) -> np.ndarray:
+        """World points (M, 3) on the disk's plane at BL ``radius`` (Cartesian √(r² + a²))
+        in the direction of the blended hit points ``position``: the hit point pass then
+        holds the radius the pixel is shaded at (a blend of the nodes' points lies inside
+        the circle their radii span)."""
+        light = self.tracer.disk
+        assert light is not None
+        local = light.to_local(position)
+        across = np.linalg.norm(local[:, :2], axis=1)
+        with np.errstate(all="ignore"):
+            scale = np.hypot(radius, light.disk.spin) / across
+        local[:, :2] *= np.where(np.isfinite(scale), scale, 1.0)[:, None]
+        local[:, 2] = 0.0
+        return self.tracer._to_world(local)
 
     # --- pixels ------------------------------------------------------------------------
     def _pixels(self, tile: Tile, nodes: _Nodes, blocks: _Blocks, origin, cancel) -> TileResult:

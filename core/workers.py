@@ -30,7 +30,7 @@ from concurrent.futures import (
     ThreadPoolExecutor,
     wait,
 )
-from typing import Any, TypeVar
+from typing import Any, Self, TypeVar
 
 import numpy as np
 
@@ -115,6 +115,50 @@ class CancelLatch:
                 if self._poll():
                     self._event.set()
         return self._event.is_set()
+
+
+class BackgroundTask:
+    """Work run once in a daemon thread, cancellable: a subclass's ``_work()`` (which checks
+    ``cancelled`` or hands ``self._cancel.is_set`` to core.render); an exception it raises
+    is kept in ``error`` for the caller (the add-on's render operator, the viewport)."""
+
+    def __init__(self, name: str) -> None:
+        self.error: BaseException | None = None
+        self._cancel = threading.Event()
+        self._thread = threading.Thread(target=self._guarded, name=name, daemon=True)
+
+    def _work(self) -> None:
+        raise NotImplementedError
+
+    def _guarded(self) -> None:
+        try:
+            self._work()
+        except Exception as err:  # handed to the caller's thread, which decides what to do
+            self.error = err
+
+    def start(self) -> Self:
+        """Start the work in its thread (returns at once, with the task)."""
+        self._thread.start()
+        return self
+
+    def cancel(self) -> None:
+        """Ask the work to stop at its next check."""
+        self._cancel.set()
+
+    @property
+    def cancelled(self) -> bool:
+        """Whether cancel() was called."""
+        return self._cancel.is_set()
+
+    @property
+    def finished(self) -> bool:
+        """Whether the thread has ended (finished, cancelled or failed; False before start)."""
+        return self._thread.ident is not None and not self._thread.is_alive()
+
+    def join(self, timeout: float | None = None) -> bool:
+        """Wait for the thread to end; -> whether it has."""
+        self._thread.join(timeout)
+        return not self._thread.is_alive()
 
 
 def run_chunks(

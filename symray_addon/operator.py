@@ -9,62 +9,35 @@ starts (``render_job.prepare``) and the image/EXR written after it ends.
 
 from __future__ import annotations
 
-import threading
 from typing import Any, ClassVar
 
 import bpy
 
+from ..core import workers
 from . import bake, output, render_job
 
 
-class RenderTask:
+class RenderTask(workers.BackgroundTask):
     """A core render in a worker thread, with progress and cancellation for the UI."""
 
     def __init__(self, job: render_job.RenderJob) -> None:
         """Wrap ``job``; call start() to begin."""
+        super().__init__("SymRay render")
         self.job = job
         self.done = 0
         self.total = 0
         self.result: Any = None
-        self.error: BaseException | None = None
-        self._cancel = threading.Event()
-        self._thread = threading.Thread(target=self._work, name="SymRay render", daemon=True)
-
-    def start(self) -> None:
-        """Start tracing in the worker thread."""
-        self._thread.start()
 
     def _progress(self, done: int, total: int) -> None:
         self.done, self.total = int(done), int(total)
 
     def _work(self) -> None:
-        try:
-            self.result = render_job.run(self.job, self._progress, self._cancel.is_set)
-        except Exception as err:  # handed to the main thread, which decides what to do
-            self.error = err
-
-    def cancel(self) -> None:
-        """Ask the core to stop at its next check."""
-        self._cancel.set()
-
-    @property
-    def cancelled(self) -> bool:
-        """Whether cancel() was called."""
-        return self._cancel.is_set()
-
-    @property
-    def finished(self) -> bool:
-        """Whether the worker thread has ended."""
-        return not self._thread.is_alive()
+        self.result = render_job.run(self.job, self._progress, self._cancel.is_set)
 
     @property
     def fraction(self) -> float:
         """Progress in [0, 1]."""
         return min(self.done / self.total, 1.0) if self.total > 0 else 0.0
-
-    def join(self, timeout: float | None = None) -> None:
-        """Wait for the worker thread to end."""
-        self._thread.join(timeout)
 
     def collect(self) -> Any:
         """After the worker ended: its result, None if cancelled; re-raises its error."""

@@ -201,6 +201,6 @@ def _poll(engine: Any) -> None:
                 engine.tag_redraw()
         except ReferenceError:  # the engine was freed
             return None
-        return None if view.done or view.cancelled else POLL_SECONDS
+        return None if view.finished or view.cancelled else POLL_SECONDS
 
     bpy.app.timers.register(tick, first_interval=POLL_SECONDS)
