@@ -12,7 +12,8 @@ export BLENDER_USER_RESOURCES ?= $(CURDIR)/.blender-user
 PYTEST_FLAGS ?= -n 2 -q
 
 .PHONY: test test-main test-oldest lint venv venv311 clean extension render figures bench \
-	bench-quick stress bench-perf bench-memory bench-honesty bench-presets
+	bench-quick stress bench-perf bench-memory bench-honesty bench-presets \
+	bench-viewport
 
 test: lint test-main test-oldest
 
@@ -102,6 +103,13 @@ PRESETS_ARGS ?=
 bench-presets: extension
 	$(PY) tools/install_extension.py $(EXT_ZIP)
 	$(PY) benchmarks/presets.py $(PRESETS_ARGS)
+
+# The Rendered viewport's costs against issue 25's targets (benchmarks/viewport.py): the
+# Kerr-with-disk preset in a 960x540 view; VIEWPORT_ARGS="--size 1920x1080 --turns 1,5".
+VIEWPORT_ARGS ?=
+bench-viewport: extension
+	$(PY) tools/install_extension.py $(EXT_ZIP)
+	$(PY) benchmarks/viewport.py $(VIEWPORT_ARGS)
 
 # Peak memory against resolution, issue #13 (benchmarks/bench_memory.py): Preview at 1080p
 # and 4K in ~2 min; MEMORY_ARGS="--sizes 1920x1080,7680x4320 --presets preview,final".

@@ -11,6 +11,7 @@ the batch, so the work per step shrinks as the image resolves.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -37,9 +38,15 @@ from .steps import (
     solver_tolerance,
 )
 
-CROSSING_SHARE, CROSSING_ITERATIONS = 1e-6, 4
+CROSSING_SHARE, CROSSING_ITERATIONS = 1e-3, 4
 """The disk's crossing is found to |z| <= CROSSING_SHARE x tolerance x |X| (a share of the
 integration's own error there) in at most CROSSING_ITERATIONS Newton steps."""
+CROSSING_REACH = 0.1
+"""A crossing's last Newton step is taken along the velocity instead of by the method
+(one partial step fewer: each costs a whole step's per-call overhead, ~45 % of a disk
+scene's time before) where it moves the point by at most CROSSING_REACH x sqrt(allowed
+share) x |X|: the path's curvature (radius ~|X|) then puts the straight step off by at most
+CROSSING_REACH^2 x the allowance."""
 _FAR = 1e12  # length of the straight segment cast after a ray leaves the model's region
 BEND_LIMIT = 64.0
 """A step near geometry whose cubic path deviates from its chord by more than BEND_LIMIT
@@ -623,19 +630,31 @@ class _StepEnds:
         u = np.asarray(u, dtype=np.float64).copy()
         X = np.full((3, rows.size), np.nan)
         ok = np.zeros(rows.size, dtype=bool)
-        allowed = CROSSING_SHARE * tracer.options.tolerance
+        share = CROSSING_SHARE * tracer.options.tolerance
+        reach = CROSSING_REACH * math.sqrt(share)
+        todo = np.arange(rows.size)  # the rays not yet there
         with np.errstate(all="ignore"):
             for _ in range(CROSSING_ITERATIONS):
-                state, good = method.step(K, method.init(K, Q0.copy(), P0.copy()), u * h)
+                Kt = K.subset(todo) if todo.size < rows.size else K
+                ht = h if np.ndim(h) == 0 else h[todo]
+                start = method.init(Kt, Q0[:, todo].copy(), P0[:, todo].copy())
+                state, good = method.step(Kt, start, u[todo] * ht)
                 Q, P = method.qp(state)
-                X = tracer.chart.to_cartesian(Q[tracer.chart.offset :])
-                V = self._velocity(K, Q, P)
-                du = -X[2] / (h * V[2])
-                size = np.linalg.norm(X, axis=0)
-                ok = good & np.isfinite(du) & (np.abs(X[2]) <= allowed * size)
-                if ok.all():
+                Xt = tracer.chart.to_cartesian(Q[tracer.chart.offset :])
+                V = self._velocity(Kt, Q, P)
+                du = -Xt[2] / (ht * V[2])
+                move = du * ht * V
+                size = np.linalg.norm(Xt, axis=0)
+                finite = good & np.isfinite(du) & np.isfinite(move).all(axis=0)
+                there = finite & (np.abs(Xt[2]) <= share * size)
+                close = finite & ~there & (np.linalg.norm(move, axis=0) <= reach * size)
+                Xt[:, close] += move[:, close]
+                X[:, todo], ok[todo] = Xt, there | close
+                left = ~ok[todo]
+                u[todo[left]] = np.clip(u[todo[left]] + np.where(finite, du, 0.0)[left], 0, 1)
+                todo = todo[left]
+                if todo.size == 0:
                     break
-                u = np.clip(u + np.where(np.isfinite(du), du, 0.0), 0.0, 1.0)
         return X, ok
 
     def _velocity(self, K: Any, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
