@@ -62,8 +62,9 @@ TILES_PER_WORKER = 2
 """Tiles per worker (core.render's bands, _tiles_for): the work of a frame is rarely even
 over its rows (the hole, the photon ring), and a worker with a second tile to take
 evens it out; each tile costs a few batches' per-step overhead."""
-PROBE_SCALE = 1 / 16
-"""Automatic disk exposure: the probe render's size per side, relative to the frame's ..."""
+PROBE_SCALE = 1 / 8
+"""Automatic disk exposure: the probe render's size per side, relative to the frame's
+(rounded up: the Rendered viewport's first level, core.viewport, is this probe) ..."""
 PROBE_MIN_SIDE = 64
 """... but at least this many pixels on its longer side (at most the frame's)."""
 PROBE_DISK_PIXELS = 1500
@@ -186,27 +187,68 @@ def render(
 def disk_exposure(scene: Scene, camera, **probe: Any) -> Scene:
     """``scene`` with its disk's automatic exposure (``exposure`` None) chosen: a copy whose
     disk has ``disk.exposure_for`` the median luminance of the disk's pixels in a probe
-    render (``scene`` itself when there is nothing to choose).
+    render (``scene`` itself when there is nothing to choose): ``exposure_probe``'s
+    ``exposed``. ``probe``: the render's method, step, max_steps, workers, parallel, cores
+    and should_cancel."""
+    found = exposure_probe(scene, camera, **probe)
+    return scene if found is None else found.exposed(scene)
+
+
+@dataclass(frozen=True)
+class ExposureProbe:
+    """The disk's pixels in disk_exposure's probe render: their redshift g, Boyer–Lindquist
+    radius and luminance (at brightness 1 and exposure 1)."""
+
+    g: np.ndarray
+    radius: np.ndarray
+    luminance: np.ndarray
+
+    def exposed(self, scene: Scene) -> Scene:
+        """``scene`` (its disk's automatic exposure, in its look) with the exposure chosen
+        from these pixels: an opaque disk's luminance is the colour of its g and r in
+        ``scene``'s look (a change of look needs no new probe), a translucent one's as
+        rendered."""
+        disk = scene.disk
+        if disk is None or disk.exposure is not None:
+            return scene
+        luminance = self.luminance
+        if disk.opacity >= 1.0 and self.g.size:
+            seen = replace(disk, brightness=1.0, exposure=1.0)
+            luminance = seen.colour(self.g, self.radius) @ XYZ_FROM_RGB[1]
+        median = float(np.median(luminance)) if luminance.size else math.nan
+        exposed = copy.copy(scene)
+        exposed.disk = replace(disk, exposure=disk.exposure_for(median))
+        return exposed
+
+
+def exposure_probe(
+    scene: Scene, camera, first: tuple | None = None, **probe: Any
+) -> ExposureProbe | None:
+    """The probe render of an automatic disk exposure (None: the scene has no disk, or its
+    exposure is set).
 
     The probe sees the whole frame (whatever the camera's border region: every part of a
     frame gets the same exposure) at PROBE_SCALE of its size per side (at least
-    PROBE_MIN_SIDE pixels on the longer side), one ray through each pixel centre at the
-    Preview tolerance (half a probe pixel), with the disk at brightness 1 and exposure 1
-    and a black sky; the disk's pixels are those with a finite redshift. Where fewer than
-    PROBE_DISK_PIXELS show the disk, the rectangle around them is probed again, finer, so
-    that about that many do (the median's sampling error, ~1/√n of the luminances'
-    spread). Deterministic: the same scene and camera give the same exposure. ``probe``:
-    the render's method, step, max_steps, workers, parallel, cores and should_cancel."""
+    PROBE_MIN_SIDE pixels on the longer side; ``probe_camera``), one ray through each pixel
+    centre at the Preview tolerance (half a probe pixel), with the disk at brightness 1 and
+    exposure 1 and a black sky; the disk's pixels are those with a finite redshift. Where
+    fewer than PROBE_DISK_PIXELS show the disk, the rectangle around them is probed again,
+    finer, so that about that many do (the median's sampling error, ~1/√n of the
+    luminances' spread). Deterministic: the same scene and camera give the same pixels.
+    ``first``: the first probe's (disk pixels, g, hit points, luminance) when the caller
+    has rendered probe_camera's view already (each (h, w) or (h, w, 3); an opaque disk's
+    luminance is not used)."""
     disk = scene.disk
     if disk is None or disk.exposure is not None:
-        return scene
+        return None
     seen = copy.copy(scene)
     seen.disk = replace(disk, brightness=1.0, exposure=1.0)
     seen.background = (0.0, 0.0, 0.0)
     width, height = camera.full_size
-    scale = min(1.0, max(PROBE_SCALE, PROBE_MIN_SIDE / max(width, height)))
-    size = (max(1, round(width * scale)), max(1, round(height * scale)))
-    on, luminance = _probe(seen, camera.resized(*size), probe)
+    stage = probe_camera(camera)
+    size = stage.full_size
+    found = first if first is not None else _probe(seen, stage, probe)
+    on = found[0]
     count = int(np.count_nonzero(on))
     finer = math.ceil(math.sqrt(PROBE_DISK_PIXELS / max(count, 1)))
     finer = min(finer, max(width // size[0], 1), max(height // size[1], 1))
@@ -217,20 +259,38 @@ def disk_exposure(scene: Scene, camera, **probe: Any) -> Scene:
             max(cols.min() - 1, 0) * finer, min(cols.max() + 2, size[0]) * finer,
             max(h - rows.max() - 2, 0) * finer, min(h - rows.min() + 1, h) * finer,
         )  # fmt: skip
-        on, luminance = _probe(seen, camera.resized(size[0] * finer, size[1] * finer, box), probe)
-    median = float(np.median(luminance[on])) if on.any() else math.nan
-    exposed = copy.copy(scene)
-    exposed.disk = replace(disk, exposure=disk.exposure_for(median))
-    return exposed
+        found = _probe(seen, camera.resized(size[0] * finer, size[1] * finer, box), probe)
+    on, g, position, luminance = found
+    return ExposureProbe(g[on], disk_radius(scene, position[on]), luminance[on])
 
 
-def _probe(scene: Scene, camera, probe: dict) -> tuple[np.ndarray, np.ndarray]:
-    """(disk pixels (h, w) bool, luminance (h, w)) of ``camera`` at half a pixel's
-    tolerance (core.render with ``probe``'s arguments)."""
+def probe_camera(camera):
+    """The camera of exposure_probe's first render: the whole frame at PROBE_SCALE of its
+    size per side, rounded up (at least PROBE_MIN_SIDE on the longer side)."""
+    width, height = camera.full_size
+    scale = min(1.0, max(PROBE_SCALE, PROBE_MIN_SIDE / max(width, height)))
+    return camera.resized(max(1, math.ceil(width * scale)), max(1, math.ceil(height * scale)))
+
+
+def _probe(scene: Scene, camera, probe: dict) -> tuple[np.ndarray, ...]:
+    """(disk pixels (h, w) bool, g (h, w), hit points (h, w, 3), luminance (h, w)) of
+    ``camera`` at half a pixel's tolerance (core.render with ``probe``'s arguments)."""
     angle = camera.pixel_angle(_camera_distance(scene, camera))
-    out = render(scene, camera, tolerance=TRACE_SHARE * angle, passes=("redshift",), **probe)
+    out = render(scene, camera, tolerance=TRACE_SHARE * angle, passes=("redshift", "position"),
+                 **probe)  # fmt: skip
     luminance = out.rgba[..., :3].astype(np.float64) @ XYZ_FROM_RGB[1]
-    return np.isfinite(out.passes["redshift"]), luminance
+    g = np.asarray(out.passes["redshift"], dtype=np.float64)
+    position = np.asarray(out.passes["position"], dtype=np.float64).reshape(g.shape + (3,))
+    return np.isfinite(g), g, position, luminance
+
+
+def disk_radius(scene: Scene, world: np.ndarray) -> np.ndarray:
+    """Boyer–Lindquist radius of world points (..., 3) on the scene's disk (the tracer's
+    local frame)."""
+    world = np.asarray(world, dtype=np.float64)
+    local = (world.reshape(-1, 3) - scene.center) @ scene.frame()
+    radius = scene.model.for_backward_tracing().radius_at(local.T)
+    return np.asarray(radius).reshape(world.shape[:-1])
 
 
 def _span_work(tracer: Tracer, camera, with_error: bool, far_field: float):

@@ -30,6 +30,7 @@ the coarsest level.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 import time
@@ -41,7 +42,15 @@ import numpy as np
 
 from . import workers
 from .camera import Camera
-from .render import TRACE_SHARE, RenderResult, disk_exposure, render
+from .render import (
+    TRACE_SHARE,
+    ExposureProbe,
+    RenderResult,
+    disk_radius,
+    exposure_probe,
+    probe_camera,
+    render,
+)
 from .sky import Background
 from .tracing import ENDING, Scene
 
@@ -134,8 +143,9 @@ def _image(out: RenderResult, level: int, camera: Camera, seconds: float, final:
 
 class ProgressiveView(workers.BackgroundTask):
     """Renders one view level by level (LEVELS) in a daemon thread. ``latest`` is the
-    finest image so far; ``on_image(image)`` is called from the thread with each one.
-    A change of anything: ``cancel()`` this view and start another."""
+    finest image so far; ``on_image(image)`` is called from the thread with each one;
+    ``probe`` is the automatic disk exposure's probe once it has run (``reshade`` reuses
+    it). A change of anything: ``cancel()`` this view and start another."""
 
     def __init__(
         self,
@@ -150,22 +160,59 @@ class ProgressiveView(workers.BackgroundTask):
         self.scene, self.camera, self.quality = scene, camera, quality
         self.levels, self.options, self.on_image = levels, options, on_image
         self.latest: ViewImage | None = None
+        self.probe: ExposureProbe | None = None
 
     def _work(self) -> None:
         # one level per pass, each pass cancellable. An automatic disk exposure is chosen
-        # once, as F12 chooses it for this view
-        probe = _probe_options({**self.options, "should_cancel": self._cancel.is_set})
-        scene = disk_exposure(self.scene, self.camera, **probe)
+        # once, as F12 chooses it for this view: its probe runs beside the first level
+        # (which an opaque disk lets re-shade once the exposure is known)
+        scene, first = self._first_level()
         for level in self.levels:
             if self.cancelled:
                 return
-            image = render_level(scene, self.camera, level, self.quality, self._cancel.is_set,
-                                 **self.options)  # fmt: skip
+            image = first if level == self.levels[0] else None
+            if image is None:
+                image = render_level(scene, self.camera, level, self.quality,
+                                     self._cancel.is_set, **self.options)  # fmt: skip
             if image is None or self.cancelled:
                 return
             self.latest = image
             if self.on_image is not None:
                 self.on_image(image)
+
+    def _first_level(self) -> tuple[Scene, ViewImage | None]:
+        """(the scene with its disk's exposure chosen, the first level when it was
+        rendered for the exposure's probe, else None). An opaque disk's first level at
+        exposure 1 is the probe's first render (probe_camera) where their sizes agree:
+        re-shaded once the exposure is known."""
+        probe = _probe_options({**self.options, "should_cancel": self._cancel.is_set})
+        disk = self.scene.disk
+        if disk is None or disk.exposure is not None:
+            return self.scene, None
+        shared = (
+            probe_camera(self.camera).full_size
+            == level_camera(self.camera, self.levels[0]).full_size
+        )
+        if disk.opacity < 1.0 or not shared:
+            self.probe = exposure_probe(self.scene, self.camera, **probe)
+            return self._exposed(), None
+        unexposed = copy.copy(self.scene)
+        unexposed.disk = dataclasses.replace(disk, brightness=1.0, exposure=1.0)
+        first = render_level(unexposed, self.camera, self.levels[0], self.quality,
+                             self._cancel.is_set, **self.options)  # fmt: skip
+        if first is None:
+            return self.scene, None
+        g = np.asarray(first.passes["redshift"], dtype=np.float64)
+        stage = (np.isfinite(g), g, first.passes["position"], np.zeros(g.shape))
+        self.probe = exposure_probe(self.scene, self.camera, stage, **probe)
+        scene = self._exposed()
+        assert scene.disk is not None
+        first.rgba = _recolour(first, scene)
+        first.summary["disk_exposure"] = scene.disk.exposure
+        return scene, first
+
+    def _exposed(self) -> Scene:
+        return self.scene if self.probe is None else self.probe.exposed(self.scene)
 
 
 # -- reuse ---------------------------------------------------------------------------------
@@ -192,23 +239,35 @@ def _same(a: Any, b: Any) -> bool:
 
 
 def reshade(
-    image: ViewImage, scene: Scene, camera: Camera | None = None, **options: Any
+    image: ViewImage,
+    scene: Scene,
+    camera: Camera | None = None,
+    probe: ExposureProbe | None = None,
+    **options: Any,
 ) -> np.ndarray:
     """``image``'s RGBA with its disk's pixels recoloured by ``scene``'s disk (its look:
     ``look_only_change``), nothing traced. An automatic exposure is chosen again as a
-    render of the view ``camera`` (default: the image's) would (``disk_exposure``'s
-    probe; ``options`` are core.render's)."""
+    render of the view ``camera`` (default: the image's) would: from ``probe`` (the
+    view's: ProgressiveView.probe), else from a new probe (``options``: core.render's)."""
     disk = scene.disk
-    rgba = image.rgba.copy()
     if disk is None or disk.opacity < 1.0:
-        return rgba
-    exposed = disk_exposure(scene, camera or image.camera, **_probe_options(options)).disk
-    assert exposed is not None
+        return image.rgba.copy()
+    if probe is None:
+        probe = exposure_probe(scene, camera or image.camera, **_probe_options(options))
+    return _recolour(image, scene if probe is None else probe.exposed(scene))
+
+
+def _recolour(image: ViewImage, scene: Scene) -> np.ndarray:
+    """``image``'s RGBA with the pixels whose centre sees the disk coloured by ``scene``'s
+    disk (opaque, its exposure chosen) from their g and r."""
+    disk = scene.disk
+    assert disk is not None
+    rgba = image.rgba.copy()
     g = np.asarray(image.passes["redshift"], dtype=np.float64)
     on = np.isfinite(g) & (image.passes["ending"] == ENDING["hit"])
     if on.any():
-        radius = _disk_radius(scene, image.passes["position"][on])
-        rgba[on, :3] = exposed.colour(g[on], radius)
+        radius = disk_radius(scene, image.passes["position"][on])
+        rgba[on, :3] = disk.colour(g[on], radius)
     return rgba
 
 
@@ -218,12 +277,6 @@ def _probe_options(options: dict) -> dict:
     probe["max_steps"] = probe["max_steps"] or 20_000
     probe["parallel"] = probe["parallel"] or "auto"
     return probe
-
-
-def _disk_radius(scene: Scene, world: np.ndarray) -> np.ndarray:
-    """Boyer–Lindquist radius of world points on the disk (the tracer's local frame)."""
-    local = (np.asarray(world, dtype=np.float64) - scene.center) @ scene.frame()
-    return scene.model.for_backward_tracing().radius_at(local.T)
 
 
 def same_position(a: Camera, b: Camera) -> bool:
@@ -297,6 +350,6 @@ def _interpolate(image: ViewImage, x, y, scene: Scene) -> tuple[np.ndarray, np.n
         bound = dataclasses.replace(scene.disk, exposure=exposure)
         on = np.isfinite(g)  # the radius is blended as the sampler blends it, not the points
         radius = np.full(g.shape, np.nan)
-        radius[on] = _disk_radius(scene, image.passes["position"][on])
+        radius[on] = disk_radius(scene, image.passes["position"][on])
         colour[disk, :3] = bound.colour(blend(g, disk), blend(radius, disk))
     return colour.astype(np.float32), alike

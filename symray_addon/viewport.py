@@ -115,7 +115,7 @@ def update(engine: Any, context: Any, depsgraph: Any) -> None:
     look_only = old is not None and _look_only(old, job, depsgraph)
     if image is not None and look_only:
         session.stop()
-        session.shown = core_viewport.reshade(image, job.scene, camera)
+        session.shown = core_viewport.reshade(image, job.scene, camera, session.view.probe)
         session.shown_from, session.texture = image, None
         image.rgba = session.shown
         engine.tag_redraw()

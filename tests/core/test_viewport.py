@@ -15,7 +15,7 @@ from scipy import ndimage
 import core
 from core import hamiltonians as hm
 from core import viewport
-from core.render import disk_exposure
+from core.render import disk_exposure, probe_camera
 
 WIDTH, HEIGHT = 128, 72
 
@@ -33,14 +33,41 @@ def _camera(look_at=(0.0, 0.0, 0.0), fov=40.0, size=(WIDTH, HEIGHT)) -> core.Cam
 
 
 @pytest.fixture(scope="module")
-def finished() -> viewport.ViewImage:
-    """The disk scene's view rendered through every level."""
-    seen = []
+def view() -> viewport.ProgressiveView:
+    """The disk scene's view rendered through every level (``view.seen``: its images)."""
+    seen: list[viewport.ViewImage] = []
     view = viewport.ProgressiveView(_disk_scene(), _camera(), on_image=seen.append).start()
     assert view.join(300)
     assert view.error is None
     assert [image.level for image in seen] == list(viewport.LEVELS)
-    return seen[-1]
+    view.seen = seen
+    return view
+
+
+@pytest.fixture(scope="module")
+def finished(view) -> viewport.ViewImage:
+    """The view's last level."""
+    return view.seen[-1]
+
+
+@pytest.mark.parametrize("size", [(WIDTH, HEIGHT), (512, 288)])
+def test_the_first_level_is_exposed_as_f12(size):
+    """A view's first level, with the automatic exposure F12 chooses for the view
+    (disk_exposure, a probe of its own): the same pixels (to float32 rounding) as that
+    level rendered with it. At 512 x 288 it is itself the exposure's first probe
+    (core.render.probe_camera), traced at exposure 1 and re-shaded; at 128 x 72 the probe
+    (64 x 36) runs first."""
+    camera = _camera(size=size)
+    shared = probe_camera(camera).full_size == viewport.level_camera(camera, 8).full_size
+    assert shared == (size[0] == 512)
+    view = viewport.ProgressiveView(_disk_scene(), camera, levels=(8,)).start()
+    assert view.join(120) and view.error is None
+    first = view.latest
+    scene = disk_exposure(_disk_scene(), camera)
+    assert first.summary["disk_exposure"] == pytest.approx(scene.disk.exposure, rel=1e-6)
+    alone = viewport.render_level(scene, camera, 8, viewport.PREVIEW)
+    np.testing.assert_allclose(first.rgba, alone.rgba, rtol=1e-5, atol=1e-6)
+    assert np.isfinite(first.passes["redshift"]).mean() > 0.2  # the disk is in the picture
 
 
 def test_levels_go_coarse_to_fine_and_end_as_f12(finished):
@@ -98,17 +125,20 @@ def test_cancel_stops_the_work_and_keeps_no_later_image():
     assert view.latest is not None and view.latest.level == seen[-1]
 
 
-def test_a_disk_look_change_is_reshaded_to_a_fresh_renders_pixels(finished):
+def test_a_disk_look_change_is_reshaded_to_a_fresh_renders_pixels(view, finished):
     """Reshade (nothing traced) against a fresh render of the new look: every pixel not on
     the disk, and every disk pixel whose centre was traced, identical within float32; the
     interpolated disk pixels take r from their hit point (the render: from its nodes'
-    radii), so a few differ: none by more than 0.1 on more than 0.2 % of the image."""
+    radii), so a few differ: none by more than 0.1 on more than 0.2 % of the image. The
+    view's own exposure probe, re-shaded in the new look, gives what a new probe does."""
     scene = _disk_scene()
     for look in ("cinematic", "eht"):
         new = copy.copy(scene)
         new.disk = dataclasses.replace(scene.disk, look=look, beaming=0.5)
         assert viewport.look_only_change(scene, new)
         shaded = viewport.reshade(finished, new, _camera())
+        again = viewport.reshade(finished, new, _camera(), view.probe)  # no probe traced
+        np.testing.assert_allclose(again, shaded, rtol=1e-6)
         fresh = core.render(new, _camera(), tolerance_px=1.0, passes=("steps",))
         fresh_rgba = fresh.rgba.reshape(HEIGHT, WIDTH, 4)
         traced = fresh.passes["steps"].reshape(HEIGHT, WIDTH) > 0
