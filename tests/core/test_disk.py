@@ -289,6 +289,25 @@ def test_planckian_locus(T, xy):
     assert blackbody.chromaticity(blackbody.planck_xyz(T)) == pytest.approx(xy, abs=3e-4)
 
 
+def test_planck_xyz_table_against_the_sum():
+    """planck_xyz interpolates a table (log XYZ in log T): against the Planck spectrum
+    summed here over the CIE table at 5 nm, within 3e-6 relative from 1 K to 1e7 K (the
+    table spans 400 K - 1e6 K; outside, the sum), 0 at T <= 0; far above the visible
+    (Rayleigh-Jeans) XYZ grows as T."""
+    T = np.concatenate([np.geomspace(1.0, 1e7, 20001), [400.0, 1e6, 6500.0]])
+    lam = blackbody.WAVELENGTHS_NM * 1e-9
+    c2 = 6.62607015e-34 * 299_792_458.0 / 1.380649e-23
+    with np.errstate(over="ignore"):
+        summed = ((lam / 555e-9) ** -5 / np.expm1(c2 / (lam * T[:, None]))) @ blackbody.CMF
+    seen = summed[:, 1] > 1e-300
+    got = blackbody.planck_xyz(T)
+    assert np.all(np.abs(got[seen] - summed[seen]) <= 3e-6 * summed[seen])
+    assert np.all(blackbody.planck_xyz(np.array([0.0, -5.0])) == 0.0)
+    assert blackbody.planck_xyz(6500.0).shape == (3,)
+    ratio = blackbody.planck_xyz(4e7) / blackbody.planck_xyz(2e7)
+    assert ratio == pytest.approx([2, 2, 2], rel=2e-3)
+
+
 def test_blackbody_colours():
     # equal-energy white is x = y = 1/3; D65 white is (1, 1, 1) in linear sRGB
     assert blackbody.chromaticity(blackbody.CMF.sum(axis=0)) == pytest.approx(
