@@ -65,6 +65,8 @@ SKY_SPREAD = 4.0
 within this many of the old image's pixel angles of the first's: next to the shadow rays
 one pixel apart leave radians apart, and a blend of them is no direction (sky pixels 0.23
 rad off at the 99.5th percentile past a Schwarzschild hole without it)."""
+RESAMPLE_CHUNK = 1 << 16
+"""Pixels a resample works on at once (its memory does not grow with the view's size)."""
 SAME_POSITION = 1e-9
 """Relative distance below which two observers stand at the same place (resample)."""
 
@@ -92,6 +94,8 @@ class ViewImage:
     seconds: float
     final: bool = False
     summary: dict = field(default_factory=dict)
+    derived: dict = field(default_factory=dict)
+    """What a resample computes once from the image (the disk's radius map)."""
 
 
 def level_camera(camera: Camera, level: int) -> Camera:
@@ -176,6 +180,8 @@ class ProgressiveView(workers.BackgroundTask):
                                      self._cancel.is_set, **self.options)  # fmt: skip
             if image is None or self.cancelled:
                 return
+            if scene.disk is not None:
+                _radius_map(image, scene)  # here, not in the first resample's redraw
             self.latest = image
             if self.on_image is not None:
                 self.on_image(image)
@@ -289,22 +295,23 @@ def same_position(a: Camera, b: Camera) -> bool:
 def resample(image: ViewImage, camera: Camera, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
     """(RGBA (h, w, 4), covered (h, w)) of ``camera``'s view read from ``image``'s
     direction map (both cameras at the same place: ``same_position``); uncovered pixels
-    are black (see the module docstring)."""
+    are black (see the module docstring). In chunks of RESAMPLE_CHUNK pixels."""
     h, w = camera.height, camera.width
-    rows, cols = np.mgrid[0:h, 0:w]
-    xy = np.stack([cols.ravel() + 0.5, rows.ravel() + 0.5], axis=1)
-    _, directions = camera.rays_at(xy)
-    at = image.camera.image_points(directions)  # (M, 2) in the old image, NaN off it
     rgba = np.zeros((h * w, 4), dtype=np.float32)
     covered = np.zeros(h * w, dtype=bool)
-    x, y = at[:, 0] - 0.5, at[:, 1] - 0.5  # in pixel-centre units
-    old_h, old_w = image.rgba.shape[:2]
-    inside = np.isfinite(x) & (x >= 0) & (y >= 0) & (x <= old_w - 1) & (y <= old_h - 1)
-    idx = np.flatnonzero(inside)
-    if idx.size:
-        colour, ok = _interpolate(image, x[idx], y[idx], scene)
-        rgba[idx[ok]] = colour[ok]
-        covered[idx[ok]] = True
+    for start in range(0, h * w, RESAMPLE_CHUNK):
+        pixels = np.arange(start, min(start + RESAMPLE_CHUNK, h * w))
+        row, col = np.divmod(pixels, w)
+        _, directions = camera.rays_at(np.stack([col + 0.5, row + 0.5], axis=1))
+        at = image.camera.image_points(directions)  # (M, 2) in the old image, NaN off it
+        x, y = at[:, 0] - 0.5, at[:, 1] - 0.5  # in pixel-centre units
+        old_h, old_w = image.rgba.shape[:2]
+        inside = np.isfinite(x) & (x >= 0) & (y >= 0) & (x <= old_w - 1) & (y <= old_h - 1)
+        idx = np.flatnonzero(inside)
+        if idx.size:
+            colour, ok = _interpolate(image, x[idx], y[idx], scene)
+            rgba[pixels[idx[ok]]] = colour[ok]
+            covered[pixels[idx[ok]]] = True
     return rgba.reshape(h, w, 4), covered.reshape(h, w)
 
 
@@ -314,42 +321,56 @@ def _interpolate(image: ViewImage, x, y, scene: Scene) -> tuple[np.ndarray, np.n
     old_h, old_w = image.rgba.shape[:2]
     i0 = np.clip(np.floor(x).astype(np.int64), 0, max(old_w - 2, 0))
     j0 = np.clip(np.floor(y).astype(np.int64), 0, max(old_h - 2, 0))
-    i1, j1 = np.minimum(i0 + 1, old_w - 1), np.minimum(j0 + 1, old_h - 1)
     u, v = x - i0, y - j0
-    corners = [(j0, i0), (j0, i1), (j1, i0), (j1, i1)]
+    first = j0 * old_w + i0  # flat indices of the cells' four centres
+    right, down = np.minimum(i0 + 1, old_w - 1) - i0, (np.minimum(j0 + 1, old_h - 1) - j0) * old_w
+    corners = [first, first + right, first + down, first + down + right]
     weights = [(1 - u) * (1 - v), u * (1 - v), (1 - u) * v, u * v]
 
     def blend(field: np.ndarray, rows: np.ndarray) -> np.ndarray:
-        parts = [w[rows] * field[j[rows], i[rows]].T for w, (j, i) in zip(weights, corners,
-                 strict=True)]  # fmt: skip
-        return np.asarray(sum(parts), dtype=np.float64).T
+        flat = field.reshape(old_h * old_w, -1)
+        parts = [w[rows, None] * flat[k[rows]] for w, k in zip(weights, corners, strict=True)]
+        blended = np.asarray(sum(parts), dtype=np.float64)
+        return blended if field.ndim == 3 else blended[:, 0]
 
-    ending = image.passes["ending"]
-    g = np.asarray(image.passes["redshift"], dtype=np.float64)
-    first, on_disk = ending[j0, i0], np.isfinite(g[j0, i0])
+    ending = image.passes["ending"].reshape(-1)
+    on_disk = np.isfinite(np.asarray(image.passes["redshift"]).reshape(-1))
+    end, disk_cell = ending[first], on_disk[first]
     alike = np.ones(x.shape, dtype=bool)
-    for j, i in corners[1:]:
-        alike &= (ending[j, i] == first) & (np.isfinite(g[j, i]) == on_disk)
-    alike &= (first != ENDING["hit"]) | on_disk  # a surface: only its colour is kept
-    sky = first == ENDING["escaped"]
-    d0 = image.passes["direction"][j0, i0]
+    for k in corners[1:]:
+        alike &= (ending[k] == end) & (on_disk[k] == disk_cell)
+    alike &= (end != ENDING["hit"]) | disk_cell  # a surface: only its colour is kept
+    sky = end == ENDING["escaped"]
+    directions = image.passes["direction"].reshape(-1, 3)
+    d0 = directions[first[sky]]
     least = np.cos(SKY_SPREAD * image.camera.pixel_angle())
-    for j, i in corners[1:]:  # a cell whose rays part by far more than a pixel: too bent
-        alike &= ~sky | (np.einsum("ij,ij->i", image.passes["direction"][j, i], d0) >= least)
-    every = np.arange(x.size)
-    colour = blend(image.rgba, every)
-    escaped = np.flatnonzero(alike & (first == ENDING["escaped"]))
+    for k in corners[1:]:  # a cell whose rays part by far more than a pixel: too bent
+        alike[sky] &= np.einsum("ij,ij->i", directions[k[sky]], d0) >= least
+    colour = np.zeros((x.size, 4))
+    captured = np.flatnonzero(alike & (end == ENDING["captured"]))
+    colour[captured] = blend(image.rgba, captured)
+    escaped = np.flatnonzero(alike & sky)
     if escaped.size:
         d = blend(image.passes["direction"], escaped)
-        sky = scene.background
-        sky = sky if isinstance(sky, Background) else Background(sky)
-        colour[escaped] = sky(d / np.linalg.norm(d, axis=1, keepdims=True))
-    disk = np.flatnonzero(alike & on_disk & (first == ENDING["hit"]))
+        background = scene.background
+        background = background if isinstance(background, Background) else Background(background)
+        colour[escaped] = background(d / np.linalg.norm(d, axis=1, keepdims=True))
+    disk = np.flatnonzero(alike & disk_cell & (end == ENDING["hit"]))
     if disk.size and scene.disk is not None and scene.disk.opacity >= 1.0:
         exposure = image.summary.get("disk_exposure", scene.disk.exposure)
         bound = dataclasses.replace(scene.disk, exposure=exposure)
-        on = np.isfinite(g)  # the radius is blended as the sampler blends it, not the points
-        radius = np.full(g.shape, np.nan)
-        radius[on] = disk_radius(scene, image.passes["position"][on])
-        colour[disk, :3] = bound.colour(blend(g, disk), blend(radius, disk))
+        g = np.asarray(image.passes["redshift"], dtype=np.float64)
+        colour[disk, :3] = bound.colour(blend(g, disk), blend(_radius_map(image, scene), disk))
+        colour[disk, 3] = blend(image.rgba[..., 3], disk)
     return colour.astype(np.float32), alike
+
+
+def _radius_map(image: ViewImage, scene: Scene) -> np.ndarray:
+    """The disk's radius at each pixel of ``image`` (NaN off it; kept with the image: the
+    radius is blended as the sampler blends it, not the points)."""
+    if "radius" not in image.derived:
+        on = np.isfinite(image.passes["redshift"])
+        radius = np.full(on.shape, np.nan)
+        radius[on] = disk_radius(scene, image.passes["position"][on])
+        image.derived["radius"] = radius
+    return image.derived["radius"]
