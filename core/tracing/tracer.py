@@ -648,6 +648,7 @@ class _StepEnds:
                 finite = good & np.isfinite(du) & np.isfinite(move).all(axis=0)
                 there = finite & (np.abs(Xt[2]) <= share * size)
                 close = finite & ~there & (np.linalg.norm(move, axis=0) <= reach * size)
+                close &= (u[todo] + du >= 0.0) & (u[todo] + du <= 1.0)  # inside the step
                 Xt[:, close] += move[:, close]
                 X[:, todo], ok[todo] = Xt, there | close
                 left = ~ok[todo]
