@@ -106,7 +106,9 @@ def main() -> None:
         tick = time.perf_counter()
         _, covered = core_viewport.resample(image, turned, session.job.scene)
         seconds = time.perf_counter() - tick
-        rows.append(("orbit redraw", seconds, f"turned {degrees:g} deg, {covered.mean():.1%} covered"))
+        rows.append(
+            ("orbit redraw", seconds, f"turned {degrees:g} deg, {covered.mean():.1%} covered")
+        )
 
     print(f"Kerr with Accretion Disk preset, {width}x{height} viewport, {os.cpu_count()} cores")
     print(f"{'step':14s} {'seconds':>8s} {'target':>7s}  notes")
