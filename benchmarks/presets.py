@@ -24,27 +24,16 @@ import sys
 
 import bpy
 import numpy as np
+from factory_scene import MODULE, preset_scene
 
-MODULE = "bl_ext.user_default.symray"
 PRESETS = ("SCHWARZSCHILD_LENS", "KERR", "KERR_DISK", "ADD_BLACK_HOLE")
 SECONDS_TARGET = 20.0
 
 
 def _scene(preset: str, width: int, height: int, quality: str) -> bpy.types.Scene:
-    """The factory scene without its cube, the preset applied, at the given size."""
-    bpy.ops.wm.read_homefile(use_factory_startup=True)
-    bpy.ops.preferences.addon_enable(module=MODULE)
-    bpy.data.objects.remove(bpy.data.objects["Cube"])
-    scene = bpy.context.scene
-    scene.render.engine = "SYMRAY"
-    scene.render.resolution_x, scene.render.resolution_y = width, height
-    scene.render.resolution_percentage = 100
-    if preset == "ADD_BLACK_HOLE":
-        bpy.ops.symray.add_black_hole()
-        presets = importlib.import_module(f"{MODULE}.symray_addon.presets")
-        presets.frame_hole(scene, scene.camera)
-    else:
-        bpy.ops.symray.apply_preset(preset=preset)
+    """The factory scene with the preset (factory_scene), at the given quality, with the
+    Redshift and Ending passes."""
+    scene = preset_scene(preset, width, height)
     scene.symray.quality = quality
     scene.symray.pass_redshift = scene.symray.pass_ending = True
     bpy.context.view_layer.update()

@@ -30,23 +30,9 @@ import time
 
 import bpy
 import numpy as np
+from factory_scene import MODULE, preset_scene
 
-MODULE = "bl_ext.user_default.symray"
 TARGETS = {"first image": 1.0, "full preview": 10.0, "reshade": 0.5, "orbit redraw": 0.3}
-
-
-def _scene(width: int, height: int) -> bpy.types.Scene:
-    """The factory scene without its cube, the Kerr-with-disk preset applied."""
-    bpy.ops.wm.read_homefile(use_factory_startup=True)
-    bpy.ops.preferences.addon_enable(module=MODULE)
-    bpy.data.objects.remove(bpy.data.objects["Cube"])
-    scene = bpy.context.scene
-    scene.render.engine = "SYMRAY"
-    scene.render.resolution_x, scene.render.resolution_y = width, height
-    scene.render.resolution_percentage = 100
-    bpy.ops.symray.apply_preset(preset="KERR_DISK")
-    bpy.context.view_layer.update()
-    return scene
 
 
 def _turned(core, camera, degrees: float):
@@ -72,7 +58,7 @@ def main() -> None:
     render_job = importlib.import_module(f"{MODULE}.symray_addon.render_job")
     viewport = importlib.import_module(f"{MODULE}.symray_addon.viewport")
 
-    scene = _scene(width, height)
+    scene = preset_scene("KERR_DISK", width, height)
     depsgraph = bpy.context.evaluated_depsgraph_get()
     camera = render_job.prepare(scene, depsgraph).camera
     session = viewport.ViewSession(job=render_job.prepare(scene, depsgraph, view_camera=camera))

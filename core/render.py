@@ -261,7 +261,7 @@ def exposure_probe(
         )  # fmt: skip
         found = _probe(seen, camera.resized(size[0] * finer, size[1] * finer, box), probe)
     on, g, position, luminance = found
-    return ExposureProbe(g[on], disk_radius(scene, position[on]), luminance[on])
+    return ExposureProbe(g[on], scene.disk_radius(position[on]), luminance[on])
 
 
 def probe_camera(camera):
@@ -282,15 +282,6 @@ def _probe(scene: Scene, camera, probe: dict) -> tuple[np.ndarray, ...]:
     g = np.asarray(out.passes["redshift"], dtype=np.float64)
     position = np.asarray(out.passes["position"], dtype=np.float64).reshape(g.shape + (3,))
     return np.isfinite(g), g, position, luminance
-
-
-def disk_radius(scene: Scene, world: np.ndarray) -> np.ndarray:
-    """Boyer–Lindquist radius of world points (..., 3) on the scene's disk (the tracer's
-    local frame)."""
-    world = np.asarray(world, dtype=np.float64)
-    local = (world.reshape(-1, 3) - scene.center) @ scene.frame()
-    radius = scene.model.for_backward_tracing().radius_at(local.T)
-    return np.asarray(radius).reshape(world.shape[:-1])
 
 
 def _span_work(tracer: Tracer, camera, with_error: bool, far_field: float):

@@ -337,7 +337,8 @@ class TileSampler:
         on_disk = np.flatnonzero(hit & (rays.object_id == DISK_ID))
         nodes.radius[jj, ii] = np.nan
         if on_disk.size:
-            nodes.radius[jj[on_disk], ii[on_disk]] = self._disk_radius(rays.position[on_disk])
+            radius = self.tracer.scene.disk_radius(rays.position[on_disk])
+            nodes.radius[jj[on_disk], ii[on_disk]] = radius
         err = np.zeros(jj.size) if error is None else error
         nodes.flipped[jj, ii] |= err >= FLIP  # once two runs ended apart, it stays a flip
         err = np.where(nodes.flipped[jj, ii], np.maximum(err, FLIP), err)
@@ -484,12 +485,6 @@ class TileSampler:
 
             worst = np.maximum(worst, _edge_deviations(apart))
         return worst
-
-    def _disk_radius(self, position: np.ndarray) -> np.ndarray:
-        """Boyer–Lindquist radius (M,) of world points (M, 3) on the disk."""
-        light = self.tracer.disk
-        assert light is not None  # only blocks on the disk come here
-        return light.model.radius_at(light.to_local(position).T)
 
     def _opaque_disk(self) -> bool:
         """Whether the scene's disk can be interpolated: opaque (a translucent one shows

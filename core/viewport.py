@@ -46,7 +46,6 @@ from .render import (
     TRACE_SHARE,
     ExposureProbe,
     RenderResult,
-    disk_radius,
     exposure_probe,
     probe_camera,
     render,
@@ -272,8 +271,7 @@ def _recolour(image: ViewImage, scene: Scene) -> np.ndarray:
     g = np.asarray(image.passes["redshift"], dtype=np.float64)
     on = np.isfinite(g) & (image.passes["ending"] == ENDING["hit"])
     if on.any():
-        radius = disk_radius(scene, image.passes["position"][on])
-        rgba[on, :3] = disk.colour(g[on], radius)
+        rgba[on, :3] = disk.colour(g[on], _radius_map(image, scene)[on])
     return rgba
 
 
@@ -371,6 +369,6 @@ def _radius_map(image: ViewImage, scene: Scene) -> np.ndarray:
     if "radius" not in image.derived:
         on = np.isfinite(image.passes["redshift"])
         radius = np.full(on.shape, np.nan)
-        radius[on] = disk_radius(scene, image.passes["position"][on])
+        radius[on] = scene.disk_radius(image.passes["position"][on])
         image.derived["radius"] = radius
     return image.derived["radius"]

@@ -86,6 +86,14 @@ class Scene:
         frame = self.frame()
         return Disk(self.center, frame[:, 2], r_in, r_out, u_axis=frame[:, 0], object_id=DISK_ID)
 
+    def disk_radius(self, world: Any) -> np.ndarray:
+        """Boyer–Lindquist radius of world points (..., 3) on the disk (the model's local
+        frame: ``frame``)."""
+        world = np.asarray(world, dtype=np.float64)
+        local = (world.reshape(-1, 3) - self.center) @ self.frame()
+        radius = self.model.for_backward_tracing().radius_at(local.T)
+        return np.asarray(radius).reshape(world.shape[:-1])
+
     def frame(self) -> np.ndarray:
         """3x3 matrix whose columns are the model's local x, y, z axes in the world."""
         if self.rotation is not None:
