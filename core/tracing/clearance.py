@@ -154,6 +154,14 @@ def _golden(f, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return 0.5 * (lo + hi)
 
 
+def clear_radius(bounds: Sequence[Bound], point: np.ndarray) -> float:
+    """How far ``point`` (3,) is from the nearest of ``bounds`` (each object's exact shape
+    where known, else its box); inf: no bounds."""
+    gaps = [(d if d is not None else _box_distance(lo, hi))(point[None, :])[0]
+            for lo, hi, d, _ in bounds]  # fmt: skip
+    return float(min(gaps, default=np.inf))
+
+
 def _box_distance(lo: np.ndarray, hi: np.ndarray) -> Distance:
     """The distance from the box [lo, hi] (infinite sides: none along them)."""
 

@@ -70,7 +70,10 @@ class DiskLight:
         else:
             omega = zamo_omega(block[1], block[2])
         emitted = killing_energy(block, p_t, p_phi, omega)
-        cam = killing_block(self.model, self.chart, self.chart.to_coords(camera))
+        one = camera.shape[1] > 1 and bool(np.all(camera == camera[:, :1]))  # a pinhole
+        cam = killing_block(
+            self.model, self.chart, self.chart.to_coords(camera[:, :1] if one else camera)
+        )
         seen = killing_energy(cam, p_t, p_phi, zamo_omega(cam[1], cam[2]))
         with np.errstate(all="ignore"):
             return seen / emitted
@@ -79,15 +82,25 @@ class DiskLight:
         """Record the hits of segments a -> b of the rays ``rows`` (``state`` = (Q, P,
         camera) of those rays: step end, local camera), the disk's with its light.
         -> (M,) bool: the rays that ended (an opaque surface, or a failed g)."""
-        if self.disk.opacity >= 1.0:
+        if self.opaque:
             got = self.geometry.record_hits(rows, a, b, hits, out)
             on = np.flatnonzero(got & (hits.object_id == DISK_ID))
             if on.size:
-                rgb, bad = self._light(rows[on], hits.position[on], state, on, out)
-                out.surface[rows[on], :3] = rgb
-                out.surface[rows[on], 3] = 1.0
+                self.shade(rows[on], hits.position[on], [x[:, on] for x in state], out)
             return got
         return self._through(rows, a, b, hits, state, out)
+
+    @property
+    def opaque(self) -> bool:
+        """Whether the disk ends the rays that hit it."""
+        return self.disk.opacity >= 1.0
+
+    def shade(self, rows, X_world, state, out: RayResults) -> None:
+        """The colour of an opaque disk where the rays ``rows`` ended on it, at world points
+        X_world (K, 3) (``state``: (Q, P, camera) of those rays, see record_hits)."""
+        rgb, _ = self._light(rows, X_world, state, slice(None), out)
+        out.surface[rows, :3] = rgb
+        out.surface[rows, 3] = 1.0
 
     def _through(self, rows, a, b, hits: Hits, state, out: RayResults) -> np.ndarray:
         """A translucent disk: a ray crossing it gains opacity x its light (behind the
