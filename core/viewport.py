@@ -24,8 +24,14 @@ own quality (``Quality``). Each level is a ``core.render`` of ``Camera.resized``
   the four colours agreed within 0.05). Pixels outside the old image, on a surface, or in
   a cell across an edge are marked uncovered: a fresh render of the view replaces them.
 
-Anything else (the observer moved, an object, a material, the model) renders again from
-the coarsest level.
+- ``reshade_surfaces``: a change of the surfaces' colours only (materials, textures; the
+  geometry the same): each pixel whose centre ended on a surface is coloured again where
+  that surface is met by a short segment through its hit point, nothing traced. Exact for
+  one ray per pixel; with anti-aliasing (or where a surface seen edge-on is not met
+  again) the add-on renders the last level again behind the re-shaded image.
+
+Anything else (the observer moved, an object, the model) renders again from the coarsest
+level.
 """
 
 from __future__ import annotations
@@ -66,6 +72,9 @@ one pixel apart leave radians apart, and a blend of them is no direction (sky pi
 rad off at the 99.5th percentile past a Schwarzschild hole without it)."""
 RESAMPLE_CHUNK = 1 << 16
 """Pixels a resample works on at once (its memory does not grow with the view's size)."""
+RECAST_REACH = 1e-4
+"""reshade_surfaces' segments reach this share of a hit point's distance from the camera
+either side of it (the position pass is float32: ~1e-7 of that distance off the surface)."""
 SAME_POSITION = 1e-9
 """Relative distance below which two observers stand at the same place (resample)."""
 
@@ -231,7 +240,17 @@ def look_only_change(old: Scene, new: Scene) -> bool:
     keep = {name: getattr(old.disk, name) for name in DISK_LOOK}
     if dataclasses.replace(new.disk, **keep) != old.disk:
         return False
-    fields = ("model", "center", "objects", "background", "volumes")
+    return _same_fields(old, new, ("model", "center", "objects", "background", "volumes"))
+
+
+def surfaces_only_change(old: Scene, new: Scene) -> bool:
+    """Whether ``new`` may differ from ``old`` only in its surfaces' colours: the same
+    model, centre, disk, background and volumes (that the objects' geometry is the same,
+    only the caller knows: the add-on from Blender's depsgraph and the meshes' arrays)."""
+    return _same_fields(old, new, ("model", "center", "disk", "background", "volumes"))
+
+
+def _same_fields(old: Scene, new: Scene, fields: tuple[str, ...]) -> bool:
     return all(getattr(old, name) is getattr(new, name) or _same(getattr(old, name),
                getattr(new, name)) for name in fields)  # fmt: skip
 
@@ -273,6 +292,34 @@ def _recolour(image: ViewImage, scene: Scene) -> np.ndarray:
     if on.any():
         rgba[on, :3] = disk.colour(g[on], _radius_map(image, scene)[on])
     return rgba
+
+
+def reshade_surfaces(image: ViewImage, scene: Scene) -> tuple[np.ndarray, np.ndarray] | None:
+    """(RGBA (h, w, 4), found (h, w)) of ``image`` with every pixel whose centre ended on a
+    surface coloured by ``scene``'s objects, nothing traced: ``scene`` is the image's with
+    only its surfaces' colours changed (the caller knows: the add-on from Blender's
+    depsgraph). A segment through each hit point along the pixel's direction from the
+    camera (RECAST_REACH either side) meets its surface there again; not ``found`` where
+    it does not (seen exactly edge-on: the old colour stays). Exact for one ray per pixel.
+    None where the pixels hold light besides their surface's (volumes, a translucent disk:
+    not kept per pixel)."""
+    if scene.volumes or (scene.disk is not None and scene.disk.opacity < 1.0):
+        return None
+    h, w = image.rgba.shape[:2]
+    rgba, found = image.rgba.reshape(h * w, 4).copy(), np.ones(h * w, dtype=bool)
+    surface = (image.passes["ending"] == ENDING["hit"]) & ~np.isfinite(image.passes["redshift"])
+    pixels = np.flatnonzero(surface)
+    objects = scene.intersector(disk=False)
+    eye = image.camera.frame.position
+    for start in range(0, pixels.size, RESAMPLE_CHUNK):
+        chunk = pixels[start : start + RESAMPLE_CHUNK]
+        point = image.passes["position"].reshape(-1, 3)[chunk].astype(np.float64)
+        direction = image.passes["direction"].reshape(-1, 3)[chunk].astype(np.float64)
+        reach = RECAST_REACH * np.linalg.norm(point - eye, axis=1, keepdims=True)
+        hits = objects.intersect(point - reach * direction, point + reach * direction)
+        rgba[chunk[hits.hit]] = hits.color[hits.hit]
+        found[chunk] = hits.hit
+    return rgba.reshape(h, w, 4), found.reshape(h, w)
 
 
 def _probe_options(options: dict) -> dict:

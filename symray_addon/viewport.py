@@ -69,18 +69,25 @@ class ViewSession:
         if self.view is not None:
             self.view.cancel()
 
-    def restart(self, camera: core.Camera) -> None:
-        """Render ``camera``'s view from the coarsest level (the work in flight cancelled)."""
+    def restart(self, camera: core.Camera, levels: tuple[int, ...] = core_viewport.LEVELS) -> None:
+        """Render ``camera``'s view from the coarsest of ``levels`` (the work in flight
+        cancelled)."""
         self.stop()
         self.camera = camera
         if self.job is None:
             return
         options = {k: v for k, v in self.job.options.items() if k in _VIEW_OPTIONS}
-        quality = core_viewport.Quality(
-            self.job.options.get("tolerance_px") or 1.0, int(self.job.options.get("samples", 1))
+        self.view = core_viewport.ProgressiveView(
+            self.job.scene, camera, self.quality(), levels=levels, **options
         )
-        self.view = core_viewport.ProgressiveView(self.job.scene, camera, quality, **options)
         self.view.start()
+
+    def quality(self) -> core_viewport.Quality:
+        """The scene's accuracy for the view's last level."""
+        options = self.job.options
+        return core_viewport.Quality(
+            options.get("tolerance_px") or 1.0, int(options.get("samples", 1))
+        )
 
     def latest(self) -> np.ndarray | None:
         """The image to show now: the view's latest level, else what is shown."""
@@ -120,8 +127,59 @@ def update(engine: Any, context: Any, depsgraph: Any) -> None:
         image.rgba = session.shown
         engine.tag_redraw()
         return
-    session.restart(camera)
+    surfaces = None
+    if image is not None and old is not None and _surfaces_only(old, job, depsgraph):
+        surfaces = core_viewport.reshade_surfaces(image, job.scene)
+    if surfaces is not None:  # re-shaded; rendered again only where that is not exact
+        session.stop()
+        rgba, found = surfaces
+        session.shown, session.shown_from, session.texture = rgba, image, None
+        image.rgba = rgba
+        engine.tag_redraw()
+        if session.quality().samples == 1 and found.all():
+            return
+        session.restart(camera, levels=(1,))
+    else:
+        session.restart(camera)
     _poll(engine)
+
+
+def _surfaces_only(old: Any, new: Any, depsgraph: Any) -> bool:
+    """Whether the change from job ``old`` to ``new`` is the surfaces' colours alone:
+    updates only of materials, shader trees, images or textures and of objects and meshes
+    with neither their geometry nor their transform updated, the same options and model,
+    core.viewport.surfaces_only_change, and the same triangles (a visibility setting
+    reads as a shading update but may hide an object)."""
+    for update in getattr(depsgraph, "updates", ()):
+        shaded = isinstance(update.id, (bpy.types.Object, bpy.types.Mesh))
+        shaded = shaded and not (update.is_updated_geometry or update.is_updated_transform)
+        colours = (bpy.types.Material, bpy.types.NodeTree, bpy.types.Image, bpy.types.Texture)
+        if not (shaded or isinstance(update.id, colours)):
+            return False
+    if old.options != new.options or repr(old.scene.model) != repr(new.scene.model):
+        return False
+    candidate = dataclasses.replace(new.scene, model=old.scene.model)
+    if not core_viewport.surfaces_only_change(old.scene, candidate):
+        return False
+    if not _same_triangles(old.scene.objects, new.scene.objects):
+        return False
+    new.scene = candidate
+    return True
+
+
+def _same_triangles(old: Any, new: Any) -> bool:
+    """Whether two scenes' objects (an intersector or a list of them) are the same
+    triangles (export_meshes.BVHIntersector: vertices, triangles, their objects)."""
+    old, new = (list(x) if isinstance(x, (list, tuple)) else [x] for x in (old, new))
+    names = ("vertices", "triangles", "tri_object")
+    if len(old) != len(new):
+        return False
+    for a, b in zip(old, new, strict=True):
+        if not all(isinstance(getattr(x, n, None), np.ndarray) for x in (a, b) for n in names):
+            return False
+        if not all(np.array_equal(getattr(a, n), getattr(b, n)) for n in names):
+            return False
+    return True
 
 
 def _look_only(old: Any, new: Any, depsgraph: Any) -> bool:

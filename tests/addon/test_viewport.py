@@ -154,3 +154,65 @@ def test_the_view_renders_as_f12_and_a_look_change_only_reshades(addon, factory_
         assert off.mean() <= 0.002
     finally:
         viewport.free(engine)
+
+
+def _update_in_handler(viewport, engine, context, change) -> None:
+    """Make ``change()`` and call view_update with the depsgraph Blender reports it in (its
+    ``updates`` are filled only inside a depsgraph handler)."""
+    handlers = bpy.app.handlers.depsgraph_update_post
+
+    def handler(_scene, depsgraph):
+        handlers.remove(handler)
+        viewport.update(engine, context, depsgraph)
+
+    handlers.append(handler)
+    change()
+    bpy.context.view_layer.update()
+    assert handler not in handlers  # it ran
+
+
+def test_a_material_change_only_reshades_and_a_move_renders_again(addon, factory_scene):
+    """From the factory scene with Add Black Hole at 96 x 54, its view rendered: a change
+    of the cube's material colour (Blender reports the material, its node tree, the cube's
+    object and mesh, none moved) starts no new render and shows the cube's pixels
+    recoloured, the same image as a fresh render of the new colour; moving the cube
+    renders the view again."""
+    viewport = addon.module("symray_addon.viewport")
+    render_job = addon.module("symray_addon.render_job")
+    core = addon.core
+    scene = factory_scene
+    scene.render.engine = "SYMRAY"
+    bpy.ops.symray.add_black_hole()
+    bpy.context.active_object.location = (0.0, 8.0, 0.0)
+    bpy.context.view_layer.update()
+    context, camera = _view_context(scene, 96, 54)
+    engine = _Engine()
+    try:
+        viewport.update(engine, context, bpy.context.evaluated_depsgraph_get())
+        session = viewport._session(engine)
+        assert session.view.join(300) and session.view.error is None
+        view, before = session.view, session.view.latest.rgba.copy()
+        passes = view.latest.passes
+        cube = (passes["ending"] == core.ENDING["hit"]) & ~np.isfinite(passes["redshift"])
+        assert cube.mean() > 0.05
+        bsdf = bpy.data.materials["Material"].node_tree.nodes["Principled BSDF"]
+
+        def recolour():
+            bsdf.inputs["Base Color"].default_value = (0.9, 0.1, 0.05, 1.0)
+
+        _update_in_handler(viewport, engine, context, recolour)
+        assert session.view is view  # nothing new traced
+        changed = np.abs(session.shown - before).max(axis=-1) > 1e-3
+        assert changed[cube].all() and not changed[~cube].any()
+        job = render_job.prepare(scene, bpy.context.evaluated_depsgraph_get(), view_camera=camera)
+        fresh = core.render(job.scene, camera, tolerance_px=job.options["tolerance_px"],
+                            samples=job.options["samples"])  # fmt: skip
+        np.testing.assert_allclose(session.shown, fresh.rgba.reshape(54, 96, 4), atol=1e-5)
+
+        def move():
+            bpy.data.objects["Cube"].location.x += 0.5
+
+        _update_in_handler(viewport, engine, context, move)
+        assert session.view is not view  # rendered again
+    finally:
+        viewport.free(engine)

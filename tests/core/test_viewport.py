@@ -222,6 +222,41 @@ def test_resampled_sky_past_a_lens_points_within_a_pixel_and_surfaces_wait():
     )
 
 
+def _surfaces_scene(board_colours, ball_colour, **extra) -> core.Scene:
+    """Schwarzschild with an opaque disk (fixed exposure), a checker board beside the hole
+    and a sphere, in the given colours."""
+    board = core.Plane((-6, 20, 0), (0, -1, 0), core.checker(12, 8, *board_colours),
+                       u_axis=(1, 0, 0), extent=(24, 16))  # fmt: skip
+    ball = core.Sphere((4, 3, 0), 1.0, ball_colour)
+    disk = core.AccretionDisk(r_out=10.0, temperature=8000.0, exposure=2.0)
+    return core.Scene(model=hm.schwarzschild(rg=1.0), objects=[board, ball], disk=disk, **extra)
+
+
+def test_a_surface_colour_change_is_reshaded_to_a_fresh_renders_pixels():
+    """Only the surfaces' colours changed (the board's checker, the sphere): re-shaded
+    from the view's last level, nothing traced, every surface pixel found again and the
+    image the same as a fresh render of the new colours (float32), the disk and the sky
+    untouched. With a volume (light in front of the surfaces, not kept per pixel): None."""
+    camera = core.Camera.perspective((8, -14, 5), (0, 0, 0), (0, 0, 1), 60.0, 96, 54)
+    old = _surfaces_scene(((0.9, 0.9, 0.9), (0.1, 0.1, 0.1)), (1, 0.4, 0.1, 1))
+    new = _surfaces_scene(((0.2, 0.6, 0.9), (0.8, 0.1, 0.3)), (0.1, 0.9, 0.2, 1))
+    image = viewport.render_level(old, camera, 1, viewport.PREVIEW)
+    shaded, found = viewport.reshade_surfaces(image, new)
+    fresh = viewport.render_level(new, camera, 1, viewport.PREVIEW)
+    surface = (image.passes["ending"] == core.ENDING["hit"]) & ~np.isfinite(
+        image.passes["redshift"]
+    )
+    assert surface.mean() > 0.1 and np.isfinite(image.passes["redshift"]).mean() > 0.05
+    assert found.all()
+    assert np.abs(shaded - image.rgba).max(axis=-1)[surface].min() > 0.1  # all recoloured
+    np.testing.assert_array_equal(shaded[~surface], image.rgba[~surface])
+    np.testing.assert_allclose(shaded, fresh.rgba, atol=1e-6)
+    fog = core.Volume((-2, 18, -2), (2, 22, 2), lambda p: np.ones(len(p)),
+                      lambda p: np.full((len(p), 3), 0.1))  # fmt: skip
+    assert viewport.reshade_surfaces(image, _surfaces_scene(
+        ((0, 0, 0), (1, 1, 1)), (1, 1, 1, 1), volumes=[fog])) is None  # fmt: skip
+
+
 def test_a_zoom_is_resampled_and_a_move_is_not(finished):
     """A narrower lens at the same place is a resample too; a camera moved is not."""
     scene = disk_exposure(_disk_scene(), _camera())
