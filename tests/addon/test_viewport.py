@@ -104,6 +104,26 @@ class _Engine:
         pass
 
 
+def _hole_in_view(scene):
+    """SymRay the engine, *Add › Black Hole* moved to (0, 8, 0) behind the cube; -> the
+    96 x 54 view context through the scene camera and its core camera."""
+    scene.render.engine = "SYMRAY"
+    bpy.ops.symray.add_black_hole()
+    bpy.context.active_object.location = (0.0, 8.0, 0.0)
+    bpy.context.view_layer.update()
+    return _view_context(scene, 96, 54)
+
+
+def _fresh_render(render_job, core, scene, camera):
+    """The scene read again and rendered through ``camera`` at its own quality, as F12
+    renders it (the reference a re-shade must give)."""
+    job = render_job.prepare(scene, bpy.context.evaluated_depsgraph_get(), view_camera=camera)
+    options = job.options
+    out = core.render(job.scene, camera, tolerance_px=options["tolerance_px"],
+                      samples=options["samples"])  # fmt: skip
+    return out.rgba.reshape(camera.height, camera.width, 4)
+
+
 def test_the_view_renders_as_f12_and_a_look_change_only_reshades(addon, factory_scene):
     """From the factory scene with Add Black Hole (its disk) at 96 x 54: view_update starts
     the view (cached bakes only: the cube unlit, with F12's hint); its last level is the
@@ -113,12 +133,7 @@ def test_the_view_renders_as_f12_and_a_look_change_only_reshades(addon, factory_
     render_job = addon.module("symray_addon.render_job")
     core = addon.core
     scene = factory_scene
-    scene.render.engine = "SYMRAY"
-    bpy.ops.symray.add_black_hole()
-    hole = bpy.context.active_object
-    hole.location = (0.0, 8.0, 0.0)
-    bpy.context.view_layer.update()
-    context, camera = _view_context(scene, 96, 54)
+    context, camera = _hole_in_view(scene)
     engine = _Engine()
     try:
         viewport.update(engine, context, bpy.context.evaluated_depsgraph_get())
@@ -128,12 +143,9 @@ def test_the_view_renders_as_f12_and_a_look_change_only_reshades(addon, factory_
         assert session.view.join(300) and session.view.error is None
         final = session.view.latest
         assert final.final
-        job = render_job.prepare(scene, bpy.context.evaluated_depsgraph_get(), view_camera=camera)
-        quality = core.viewport.Quality(job.options["tolerance_px"], job.options["samples"])
-        ref = core.render(job.scene, camera, tolerance_px=quality.tolerance_px,
-                          samples=quality.samples)  # fmt: skip
+        ref = _fresh_render(render_job, core, scene, camera)
         # rtol 1e-4: the automatic exposure's probe runs in another order of chunks (2e-5)
-        np.testing.assert_allclose(final.rgba, ref.rgba.reshape(54, 96, 4), rtol=1e-4, atol=1e-6)
+        np.testing.assert_allclose(final.rgba, ref, rtol=1e-4, atol=1e-6)
         before = final.rgba.copy()
         view = session.view
         objects = addon.module("symray_addon.objects")
@@ -146,11 +158,8 @@ def test_the_view_renders_as_f12_and_a_look_change_only_reshades(addon, factory_
         assert changed[disk].mean() > 0.9 and not changed[~disk].any()
         # against a fresh render of the new look (as F12 would give it): interpolated disk
         # pixels take r from their hit point (core.viewport.reshade), so a few may differ
-        depsgraph = bpy.context.evaluated_depsgraph_get()
-        eht = render_job.prepare(scene, depsgraph, view_camera=camera).scene
-        fresh = core.render(eht, camera, tolerance_px=quality.tolerance_px,
-                            samples=quality.samples)  # fmt: skip
-        off = np.abs(session.shown - fresh.rgba.reshape(54, 96, 4)).max(axis=-1) > 0.1
+        fresh = _fresh_render(render_job, core, scene, camera)
+        off = np.abs(session.shown - fresh).max(axis=-1) > 0.1
         assert off.mean() <= 0.002
     finally:
         viewport.free(engine)
@@ -181,11 +190,7 @@ def test_a_material_change_only_reshades_and_a_move_renders_again(addon, factory
     render_job = addon.module("symray_addon.render_job")
     core = addon.core
     scene = factory_scene
-    scene.render.engine = "SYMRAY"
-    bpy.ops.symray.add_black_hole()
-    bpy.context.active_object.location = (0.0, 8.0, 0.0)
-    bpy.context.view_layer.update()
-    context, camera = _view_context(scene, 96, 54)
+    context, camera = _hole_in_view(scene)
     engine = _Engine()
     try:
         viewport.update(engine, context, bpy.context.evaluated_depsgraph_get())
@@ -204,10 +209,8 @@ def test_a_material_change_only_reshades_and_a_move_renders_again(addon, factory
         assert session.view is view  # nothing new traced
         changed = np.abs(session.shown - before).max(axis=-1) > 1e-3
         assert changed[cube].all() and not changed[~cube].any()
-        job = render_job.prepare(scene, bpy.context.evaluated_depsgraph_get(), view_camera=camera)
-        fresh = core.render(job.scene, camera, tolerance_px=job.options["tolerance_px"],
-                            samples=job.options["samples"])  # fmt: skip
-        np.testing.assert_allclose(session.shown, fresh.rgba.reshape(54, 96, 4), atol=1e-5)
+        fresh = _fresh_render(render_job, core, scene, camera)
+        np.testing.assert_allclose(session.shown, fresh, atol=1e-5)
 
         def move():
             bpy.data.objects["Cube"].location.x += 0.5
