@@ -20,7 +20,7 @@ import numpy as np
 
 from .. import checks, integrators
 from ..charts import chart_for
-from ..geometry import segment_overlaps
+from ..geometry import Hits, segment_overlaps
 from ..integrators.batch import Batch, run_batch
 from ..observer import medium_momenta, spacetime_momenta
 from . import dense
@@ -345,7 +345,9 @@ class Tracer:
             out.position[idx[ended]] = self._to_world(X_prev[:, ended].T)
         paths, going = None, ok
         if self._near is not None:  # surfaces and volumes along this step's segment
-            step_ends = _StepEnds(self, batch.systems["K"], start, (Q, P), arrays["h"], camera)
+            # the step taken (a copy: _bent_steps sets the next one in place)
+            h_taken = arrays["h"].copy()
+            step_ends = _StepEnds(self, batch.systems["K"], start, (Q, P), h_taken, camera)
             chord, turn = _turn(X_prev, X, arrays["heading"])
             paths = self._near_paths(X_prev, X, ok, step_ends, camera, turn)
             redo = self._bent_steps(paths, chord, turn, ok, arrays)
@@ -501,7 +503,9 @@ class Tracer:
             hits = self.geometry.cast(a, b)
             guess = (j + np.where(hits.hit, hits.t, 0.0)) / n  # the hit's t on the cubic
             if hits.hit.any():
-                self._refine(path, live, hits, j / n, 1.0 / n, [x[live] for x in limits])
+                limit = [x[live] for x in limits]
+                guess = self._refine(path, live, hits, guess, j / n, 1.0 / n, limit)
+                self._surface_crossing(cols[live], guess, hits, step_ends)
             if self.disk is None or self.disk.opaque:
                 got = self.geometry.record_hits(rows[live], a, b, hits, out)
                 on = np.flatnonzero(got & (hits.object_id == DISK_ID))
@@ -532,19 +536,21 @@ class Tracer:
         out.position[rows[ok]] = self._to_world(X[:, ok].T)
         self.disk.shade(rows, out.position[rows], step_ends.state(cols), out)
 
-    def _refine(self, path: dense.CubicPath, live, hits, t0: float, width: float, limits):
+    def _refine(self, path: dense.CubicPath, live, hits, guess, t0: float, width: float, limits):
         """Where the chord [t0, t0 + width] of the rays ``live`` hit, find the hit again on
         REFINE_PIECES finer chords of the cubic, all cast at once (REFINE_LEVELS times at
         most, while they deviate more than allowed); ``hits`` takes the refined hits, in
-        place. A ray whose finer chords all miss (a grazing edge) keeps its chord's hit."""
+        place. A ray whose finer chords all miss (a grazing edge) keeps its chord's hit.
+        -> ``guess`` (the hits' fractions of the step on the cubic) refined."""
         deviation, allowed = limits
         allowed = allowed * dense.HIT_SHARE
         todo = np.flatnonzero(hits.hit & (deviation > allowed))
         lo = np.full(todo.size, t0)
+        guess = guess.copy()
         m = dense.REFINE_PIECES
         for _ in range(dense.REFINE_LEVELS):
             if todo.size == 0:
-                return
+                break
             width /= m
             rays = np.tile(live[todo], m)  # sub-chord i of every ray, i = 0..m-1
             ta = np.repeat(np.arange(m) * width, todo.size) + np.tile(lo, m)
@@ -554,9 +560,46 @@ class Tracer:
             ok = got.any(axis=0)
             first = got.argmax(axis=0)[ok] * todo.size + np.flatnonzero(ok)
             hits.assign(todo[ok], sub, first)
+            guess[todo[ok]] = ta[first] + sub.t[first] * width
             deviation = deviation / (m * m)
             keep = deviation[todo[ok]] > allowed[todo[ok]]
             todo, lo = todo[ok][keep], ta[first][keep]
+        return guess
+
+    def _surface_crossing(self, cols, u, hits, step_ends: _StepEnds) -> None:
+        """Surface hits (``hits`` of the batch rows ``cols``, not the disk's) moved to where
+        the method itself meets the surface, in place (_StepEnds.crossing from the cubic's
+        fraction ``u``; each straight move cast along the velocity both ways, the nearer
+        hit on the same object taken; where it does not converge the cubic's hit stands).
+        The cubic follows the path to O(h^4) with a constant far above the symplectic
+        methods' (1/384 against ~1e-5) and varying with where in a step the surface falls:
+        its hits converged erratically (observed order 1-7 on Schwarzschild and the mirage)
+        and step doubling misjudged their error (under 1/3 of it on 40-55 % of them)."""
+        on = np.flatnonzero(hits.hit & (hits.object_id != DISK_ID))
+        if on.size == 0:
+            return
+        found = Hits.miss(on.size)
+        h = step_ends.h if np.ndim(step_ends.h) == 0 else step_ends.h[cols[on]]
+
+        def to_surface(todo, X, V):
+            # both ways along V, as far as the step reaches: the nearer hit on the object
+            reach = np.abs(h if np.ndim(h) == 0 else h[todo]) * V
+            ahead = self.geometry.cast(self._to_world(X.T), self._to_world((X + reach).T))
+            back = self.geometry.cast(self._to_world(X.T), self._to_world((X - reach).T))
+            same = hits.object_id[on[todo]]
+            ahead.hit &= ahead.object_id == same
+            back.hit &= back.object_id == same
+            take_back = back.hit & (~ahead.hit | (back.t < ahead.t))
+            pick = np.where(take_back[:, None], back.position, ahead.position)
+            move = self._to_local(pick).T - X
+            move[:, ~(ahead.hit | back.hit)] = np.nan
+            found.assign(todo[take_back], back, np.flatnonzero(take_back))
+            rest = ahead.hit & ~take_back
+            found.assign(todo[rest], ahead, np.flatnonzero(rest))
+            return move
+
+        _, ok = step_ends.crossing(cols[on], u[on], to_surface)
+        hits.assign(on[ok], found, np.flatnonzero(ok))
 
     def _watch_segments(self, rows, a, b, out: RayResults, eye=None) -> None:
         """Lower the clearance of the rays ``rows`` to that of their world chords a -> b
@@ -660,45 +703,58 @@ class _StepEnds:
         return ends[0], ends[1], h
 
     def plane_crossing(self, rows: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Where the rays ``rows`` cross the local plane z = 0 within this step, by the
-        method's own partial steps from the step's start (Newton's method on the fraction u
-        of the step, from the cubic's estimate u): -> (X (3, M), ok (M,)); not ok where it
-        did not converge inside the step (the cubic's point stands). The disk's g depends on
-        where the ray crosses it, which the cubic only finds to O(h^4) (long split steps)."""
-        tracer, method = self.tracer, self.tracer.method
+        """Where the rays ``rows`` cross the local plane z = 0 within this step (``crossing``
+        from the cubic's estimate u): -> (X (3, M), ok (M,)); not ok where it did not
+        converge inside the step (the cubic's point stands). The disk's g depends on where
+        the ray crosses it, which the cubic only finds to O(h^4) (long split steps)."""
+
+        def to_plane(todo, X, V):
+            with np.errstate(all="ignore"):
+                return -(X[2] / V[2]) * V
+
+        return self.crossing(rows, u, to_plane)
+
+    def crossing(self, rows: np.ndarray, u: np.ndarray, offset) -> tuple[np.ndarray, np.ndarray]:
+        """Newton's method on the fraction u of this step where the rays ``rows`` meet a
+        surface: X(u) by the method's own partial step from the step's start, then
+        ``offset(todo, X, V)`` -> the straight move (3, M) along the velocity V from X to the
+        surface (NaN: none), u moved by its length. -> (X + move (3, M), ok (M,)): ok once
+        the move is at most CROSSING_REACH sqrt(share) |X| (or |X| share) with u inside the
+        step, within CROSSING_ITERATIONS; a straight move that short is off the path by
+        at most CROSSING_REACH^2 share |X| (share = CROSSING_SHARE x tolerance)."""
         K = self.K.subset(rows)
         Q0, P0 = (x[:, rows] for x in self.start)
         h = self.h if np.ndim(self.h) == 0 else self.h[rows]
         u = np.asarray(u, dtype=np.float64).copy()
         X = np.full((3, rows.size), np.nan)
         ok = np.zeros(rows.size, dtype=bool)
-        share = CROSSING_SHARE * tracer.options.tolerance
+        share = CROSSING_SHARE * self.tracer.options.tolerance
         reach = CROSSING_REACH * math.sqrt(share)
         todo = np.arange(rows.size)  # the rays not yet there
         with np.errstate(all="ignore"):
             for _ in range(CROSSING_ITERATIONS):
                 Kt = K.subset(todo) if todo.size < rows.size else K
                 ht = h if np.ndim(h) == 0 else h[todo]
-                start = method.init(Kt, Q0[:, todo].copy(), P0[:, todo].copy())
-                state, good = method.step(Kt, start, u[todo] * ht)
-                Q, P = method.qp(state)
-                Xt = tracer.chart.to_cartesian(Q[tracer.chart.offset :])
-                V = self._velocity(Kt, Q, P)
-                du = -Xt[2] / (ht * V[2])
-                move = du * ht * V
-                size = np.linalg.norm(Xt, axis=0)
-                finite = good & np.isfinite(du) & np.isfinite(move).all(axis=0)
-                there = finite & (np.abs(Xt[2]) <= share * size)
-                close = finite & ~there & (np.linalg.norm(move, axis=0) <= reach * size)
-                close &= (u[todo] + du >= 0.0) & (u[todo] + du <= 1.0)  # inside the step
-                Xt[:, close] += move[:, close]
-                X[:, todo], ok[todo] = Xt, there | close
-                left = ~ok[todo]
+                Xt, V, good = self._partial(Kt, Q0[:, todo], P0[:, todo], u[todo] * ht)
+                move = offset(todo, Xt, V)
+                finite = good & np.isfinite(move).all(axis=0)
+                du = np.einsum("im,im->m", move, V) / (ht * np.einsum("im,im->m", V, V))
+                size, length = np.linalg.norm(Xt, axis=0), np.linalg.norm(move, axis=0)
+                inside = (u[todo] + du >= 0.0) & (u[todo] + du <= 1.0)
+                there = finite & ((length <= share * size) | (inside & (length <= reach * size)))
+                X[:, todo], ok[todo] = Xt + move, there
+                left = ~there
                 u[todo[left]] = np.clip(u[todo[left]] + np.where(finite, du, 0.0)[left], 0, 1)
                 todo = todo[left]
                 if todo.size == 0:
                     break
         return X, ok
+
+    def _partial(self, K: Any, Q0: np.ndarray, P0: np.ndarray, step) -> tuple:
+        method, chart = self.tracer.method, self.tracer.chart
+        state, good = method.step(K, method.init(K, Q0.copy(), P0.copy()), step)
+        Q, P = method.qp(state)
+        return chart.to_cartesian(Q[chart.offset :]), self._velocity(K, Q, P), good
 
     def _velocity(self, K: Any, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
         chart = self.tracer.chart

@@ -322,6 +322,29 @@ def test_anti_aliasing_memory_does_not_grow_with_samples(monkeypatch):
     assert peaks[1024] < 1.5 * peaks[64], peaks
 
 
+def test_grazing_ground_hits_are_where_the_method_meets_the_ground():
+    """The seed's Fig. 10 mirage, its ground seen from 0.4 m at a grazing 3.4 deg down
+    (96x54, 16 deg wide), at 0.25 px against dopri5 at 1e-10 rad: surface hits are moved
+    from the step's cubic to where the method's own partial step meets the ground
+    (Tracer._surface_crossing). On the cubic (constant 1/384, far above the method's) 1460
+    of 2673 traced ground pixels were 1e-3 px or more off and 246 of them estimated below
+    a third of that; now every traced hit is within 1e-3 px, none under-reported, and no
+    pixel exceeds the tolerance."""
+    scene, _ = core.presets.mirage_view("fig10", 96, 54)
+    cam = core.Camera.perspective((0, 0, 0.4), (1, 0, 0.34), (0, 0, 1), 16.0, 96, 54)
+    passes = ("ending", "direction", "position")
+    ref = core.render(scene, cam, method="dopri5", tolerance=1e-10, max_steps=10**6,
+                      passes=passes)  # fmt: skip
+    run = core.render(scene, cam, tolerance_px=0.25, passes=(*passes, "error_px", "steps"))
+    truth = true_error_px(ref, run, cam.frame.position)
+    est = run.passes["error_px"].astype(float)
+    traced = (run.passes["steps"] > 0) & (run.passes["ending"] == core.ENDING["hit"])
+    assert traced.sum() > 2000 and np.all(np.isfinite(truth[traced]))
+    assert np.count_nonzero(traced & (truth > 1e-3)) <= 0.01 * traced.sum()
+    assert np.count_nonzero(traced & (truth > 1e-3) & (est < truth / 3)) == 0
+    assert np.nanmax(truth[np.isfinite(truth)]) <= 0.25
+
+
 def test_the_companion_run_keeps_its_own_steps_near_geometry():
     """Kerr a/M 0.99 with its disk seen from 25 rg at 0.05 px: near the disk both runs of
     the error pass halve their steps (Tracer._bent_steps); with one absolute limit the
