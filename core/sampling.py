@@ -843,7 +843,10 @@ def seen_direction(rays: RayResults, origins: np.ndarray) -> np.ndarray:
 
 
 HIT_ORDER = 4
-"""Order of a hit point's error in the step: the cubic Hermite path's (tracing/dense.py)."""
+"""Highest order assumed of a hit point's error in the step: a hit is where the method's
+own partial step meets the surface (Tracer._surface_crossing), at the method's order, but
+one whose crossing did not converge keeps the cubic Hermite path's point (tracing/dense.py,
+fourth order). Conservative for a sixth-order method's hits (over-reported <= 63/15)."""
 
 
 def richardson_error(fine: RayResults, coarse: RayResults, origins, order: int) -> np.ndarray:
@@ -873,9 +876,8 @@ def seen_apart(seen_a, position_a, seen_b, position_b, ending, origins) -> np.nd
 
 def _richardson(apart, ending_fine, alike, order: int) -> np.ndarray:
     """richardson_error from how far apart the two runs' ends are (radians, ``seen_apart``)
-    and whether they end ``alike``. A hit point lies on the cubic through its step's ends
-    (core/tracing/dense.py): its error falls at most at that cubic's order (HIT_ORDER),
-    whatever the method's."""
+    and whether they end ``alike``. A hit point's error is taken to fall at most at
+    HIT_ORDER, whatever the method's order."""
     orders = np.where(ending_fine == ENDING["hit"], min(order, HIT_ORDER), order)
     with np.errstate(all="ignore"):
         err = apart / (COMPANION_RATIO**orders - 1.0)

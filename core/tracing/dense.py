@@ -9,6 +9,9 @@ follows the ray to O(h⁴) (the order of the 4th-order methods), where the strai
 X0 → X1 is off by up to |h (V0 − V1)| / 8 (second order). Surfaces are found on k chords
 through points of the cubic, k chosen per ray so that each chord's own deviation, about
 that over k², stays below what the tolerance allows at the ray's distance from the camera.
+The hit found there is then moved to where the method's own partial step meets the surface
+(core/tracing/tracer.py, Tracer._surface_crossing): the cubic's error constant (1/384) is far
+above a symplectic method's, and varies with where in the step the surface falls.
 """
 
 from __future__ import annotations
@@ -25,9 +28,9 @@ only."""
 HIT_SHARE = 1e-3
 """A hit point is refined until its chord deviates from the cubic by less than HIT_SHARE x
 the chords' allowance: the chord's part of a hit point's error is then negligible next to
-the integration's (and the cubic's), which the error pass estimates (step doubling cannot
-see a chord error bounded by the tolerance: both runs share it; measured on the Kerr board
-scene at 0.25 px: hit errors under-reported ~10x before)."""
+the cubic's, and the refined point is a close start for the method's own crossing (step
+doubling cannot see a chord error bounded by the tolerance: both runs share it; measured on
+the Kerr board scene at 0.25 px: hit errors under-reported ~10x before)."""
 
 
 def hermite(X0: np.ndarray, V0: np.ndarray, X1: np.ndarray, V1: np.ndarray, h, t) -> np.ndarray:
