@@ -4,6 +4,7 @@ in background mode: skipped there), and the view session from Blender's factory 
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from types import SimpleNamespace
 
 import numpy as np
@@ -124,20 +125,31 @@ def _fresh_render(render_job, core, scene, camera):
     return out.rgba.reshape(camera.height, camera.width, 4)
 
 
-def test_the_view_renders_as_f12_and_a_look_change_only_reshades(addon, factory_scene):
-    """From the factory scene with Add Black Hole (its disk) at 96 x 54: view_update starts
-    the view (cached bakes only: the cube unlit, with F12's hint); its last level is the
-    image core.render gives the same scene and view camera; a change of the disk's look
-    starts no new render and shows the re-shaded image, the disk recoloured."""
+@contextmanager
+def _viewing(addon, scene):
+    """The view of ``_hole_in_view`` started by view_update on a stand-in engine: yields
+    (viewport module, render_job module, core, context, camera, engine, session); the
+    engine's session is freed after."""
     viewport = addon.module("symray_addon.viewport")
     render_job = addon.module("symray_addon.render_job")
-    core = addon.core
-    scene = factory_scene
     context, camera = _hole_in_view(scene)
     engine = _Engine()
     try:
         viewport.update(engine, context, bpy.context.evaluated_depsgraph_get())
         session = viewport._session(engine)
+        yield viewport, render_job, addon.core, context, camera, engine, session
+    finally:
+        viewport.free(engine)
+
+
+def test_the_view_renders_as_f12_and_a_look_change_only_reshades(addon, factory_scene):
+    """From the factory scene with Add Black Hole (its disk) at 96 x 54: view_update starts
+    the view (cached bakes only: the cube unlit, with F12's hint); its last level is the
+    image core.render gives the same scene and view camera; a change of the disk's look
+    starts no new render and shows the re-shaded image, the disk recoloured."""
+    scene = factory_scene
+    with _viewing(addon, scene) as (viewport, render_job, core, context, camera, engine,
+                                    session):  # fmt: skip
         assert session.error == "" and session.view is not None
         assert any("unlit" in line for line in engine.stats)  # the cube: no bake cached
         assert session.view.join(300) and session.view.error is None
@@ -161,8 +173,6 @@ def test_the_view_renders_as_f12_and_a_look_change_only_reshades(addon, factory_
         fresh = _fresh_render(render_job, core, scene, camera)
         off = np.abs(session.shown - fresh).max(axis=-1) > 0.1
         assert off.mean() <= 0.002
-    finally:
-        viewport.free(engine)
 
 
 def _update_in_handler(viewport, engine, context, change) -> None:
@@ -186,15 +196,9 @@ def test_a_material_change_only_reshades_and_a_move_renders_again(addon, factory
     object and mesh, none moved) starts no new render and shows the cube's pixels
     recoloured, the same image as a fresh render of the new colour; moving the cube
     renders the view again."""
-    viewport = addon.module("symray_addon.viewport")
-    render_job = addon.module("symray_addon.render_job")
-    core = addon.core
     scene = factory_scene
-    context, camera = _hole_in_view(scene)
-    engine = _Engine()
-    try:
-        viewport.update(engine, context, bpy.context.evaluated_depsgraph_get())
-        session = viewport._session(engine)
+    with _viewing(addon, scene) as (viewport, render_job, core, context, camera, engine,
+                                    session):  # fmt: skip
         assert session.view.join(300) and session.view.error is None
         view, before = session.view, session.view.latest.rgba.copy()
         passes = view.latest.passes
@@ -217,5 +221,3 @@ def test_a_material_change_only_reshades_and_a_move_renders_again(addon, factory
 
         _update_in_handler(viewport, engine, context, move)
         assert session.view is not view  # rendered again
-    finally:
-        viewport.free(engine)

@@ -211,6 +211,18 @@ def test_a_lens_maps_interpolation_error_is_not_hidden_by_its_harmonic_part():
     assert sampling._worst(deviation)[0] == 0.5
 
 
+def _against_dopri5(scene, cam, tolerance_px: float):
+    """(run at ``tolerance_px`` with error_px and steps passes, its true error in pixels
+    against dopri5 at 1e-10 rad, its error_px estimate as float)."""
+    passes = ("ending", "direction", "position")
+    ref = core.render(scene, cam, method="dopri5", tolerance=1e-10, max_steps=10**6,
+                      passes=passes)  # fmt: skip
+    run = core.render(scene, cam, tolerance_px=tolerance_px,
+                      passes=(*passes, "error_px", "steps"))  # fmt: skip
+    truth = true_error_px(ref, run, cam.frame.position)
+    return run, truth, run.passes["error_px"].astype(float)
+
+
 def test_interpolated_sky_around_a_lens_is_not_under_reported():
     """Schwarzschild from 30 rg, the procedural sky only, 1 px (Preview), against dopri5 at
     1e-10 rad: of the interpolated pixels whose true error exceeds a tenth of the tolerance,
@@ -218,12 +230,7 @@ def test_interpolated_sky_around_a_lens_is_not_under_reported():
     and no pixel exceeds the tolerance."""
     cam = _hole_camera(96, 54)
     scene = core.Scene(model=hm.schwarzschild(rg=1.0), background="procedural")
-    ref = core.render(scene, cam, method="dopri5", tolerance=1e-10, max_steps=10**6,
-                      passes=("ending", "direction", "position"))  # fmt: skip
-    passes = ("ending", "direction", "position", "error_px", "steps")
-    run = core.render(scene, cam, tolerance_px=1.0, passes=passes)
-    truth = true_error_px(ref, run, cam.frame.position)
-    est = run.passes["error_px"].astype(float)
+    run, truth, est = _against_dopri5(scene, cam, 1.0)
     seen = np.isfinite(truth)
     interpolated = seen & (run.passes["steps"] == 0) & (truth > 0.1)
     assert interpolated.sum() > 100
@@ -332,12 +339,7 @@ def test_grazing_ground_hits_are_where_the_method_meets_the_ground():
     pixel exceeds the tolerance."""
     scene, _ = core.presets.mirage_view("fig10", 96, 54)
     cam = core.Camera.perspective((0, 0, 0.4), (1, 0, 0.34), (0, 0, 1), 16.0, 96, 54)
-    passes = ("ending", "direction", "position")
-    ref = core.render(scene, cam, method="dopri5", tolerance=1e-10, max_steps=10**6,
-                      passes=passes)  # fmt: skip
-    run = core.render(scene, cam, tolerance_px=0.25, passes=(*passes, "error_px", "steps"))
-    truth = true_error_px(ref, run, cam.frame.position)
-    est = run.passes["error_px"].astype(float)
+    run, truth, est = _against_dopri5(scene, cam, 0.25)
     traced = (run.passes["steps"] > 0) & (run.passes["ending"] == core.ENDING["hit"])
     assert traced.sum() > 2000 and np.all(np.isfinite(truth[traced]))
     assert np.count_nonzero(traced & (truth > 1e-3)) <= 0.01 * traced.sum()
@@ -358,12 +360,7 @@ def test_the_companion_run_keeps_its_own_steps_near_geometry():
                                   (0, 0, 1), 40.0, 80, 45)  # fmt: skip
     disk = core.AccretionDisk(r_out=8.0, temperature=8000.0, brightness=0.7)
     scene = core.Scene(model=hm.kerr(rg=1.0, a=0.495, chart="kerr_schild"), disk=disk)
-    passes = ("ending", "direction", "position")
-    ref = core.render(scene, cam, method="dopri5", tolerance=1e-10, max_steps=10**6,
-                      passes=passes)  # fmt: skip
-    run = core.render(scene, cam, tolerance_px=0.05, passes=(*passes, "error_px", "steps"))
-    truth = true_error_px(ref, run, cam.frame.position)
-    est = run.passes["error_px"].astype(float)
+    run, truth, est = _against_dopri5(scene, cam, 0.05)
     on_disk = (run.passes["ending"] == core.ENDING["hit"]) & (run.passes["steps"] > 0)
     measured = on_disk & np.isfinite(truth) & (truth > 1e-4)
     assert measured.sum() > 500  # the runs are really off the reference there
