@@ -108,3 +108,43 @@ def xyz_to_rgb(xyz) -> np.ndarray:
     """Linear Rec.709 / sRGB (..., 3) of XYZ (..., 3); colours outside the gamut (a deep
     red black body) keep their negative components (the caller decides)."""
     return np.asarray(xyz, dtype=np.float64) @ RGB_FROM_XYZ.T
+
+
+COLOUR_KELVIN = (1000.0, 40_000.0)
+"""The colour temperatures a colour may be given (shifted_colour): colours redder or bluer
+than the black bodies of these count as these."""
+
+
+def colour_temperature(rgb) -> np.ndarray:
+    """The temperature (...,) of the black body whose CIE Z/X ratio is that of linear RGB
+    (..., 3), clipped to COLOUR_KELVIN (Z/X grows with T along the Planckian locus)."""
+    xyz = np.asarray(rgb, dtype=np.float64) @ XYZ_FROM_RGB.T
+    with np.errstate(all="ignore"):
+        key = np.log(np.maximum(xyz[..., 2], 1e-300) / np.maximum(xyz[..., 0], 1e-300))
+    return np.exp(np.interp(key, _LOCUS_KEY, _LOCUS_LOG_T))
+
+
+def shifted_colour(rgb, g, power: float = 3.0) -> np.ndarray:
+    """Linear RGB (N, 3) of colours (N, 3) seen with frequency ratio g (N,) (observed /
+    emitted): each treated as a black body of its colour_temperature T, its XYZ scaled
+    channel by channel as the black body's from T to g T and its luminance by g^power (3:
+    the specific intensity of an image, I_ν / ν³ invariant). A documented approximation:
+    exact for black-body colours, a hue off the Planckian locus keeps its offset. Out of
+    gamut components are clipped to 0."""
+    rgb = np.asarray(rgb, dtype=np.float64)
+    g = np.asarray(g, dtype=np.float64)
+    T = colour_temperature(rgb)
+    before, after = planck_xyz(T), planck_xyz(np.clip(g * T, TABLE_KELVIN[0], TABLE_KELVIN[-1]))
+    ratio = (after / after[:, 1:2]) / (before / before[:, 1:2])
+    xyz = (rgb @ XYZ_FROM_RGB.T) * ratio * (g**power)[:, None]
+    return np.maximum(xyz_to_rgb(xyz), 0.0)
+
+
+def _locus() -> tuple[np.ndarray, np.ndarray]:
+    """log(Z/X) and log T along the Planckian locus over COLOUR_KELVIN (increasing)."""
+    T = np.geomspace(*COLOUR_KELVIN, 4096)
+    xyz = planck_xyz(T)
+    return np.log(xyz[:, 2] / xyz[:, 0]), np.log(T)
+
+
+_LOCUS_KEY, _LOCUS_LOG_T = _locus()

@@ -64,6 +64,13 @@ def spacetime_momenta(model, chart, S: np.ndarray, D: np.ndarray):
     return np.vstack([np.zeros((1, n_rays)), S]), P
 
 
+def observer_frame(model, chart, S: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """At one point S (3, 1) of chart coords: the metric g (4, 4), the static / ZAMO
+    observer's u (4,) and its spatial triad E (4, 3) (the local Cartesian axes)."""
+    g, u, E = _observer_frames(model, chart, S)
+    return g[0], u[0], E[0]
+
+
 def _observer_frames(model, chart, S: np.ndarray):
     """At spatial coords S (3, N): the metric g (N, 4, 4), the observer's u (N, 4) and its
     spatial triad E (N, 4, 3) (the module); an ObserverError where none exists."""

@@ -37,6 +37,9 @@ class Pass:
     derived_from: str | None = None
     """The stored pass it is computed from at the end (error_px: error in pixels); None:
     stored itself, chunk by chunk."""
+    from_camera: bool = False
+    """Computed at the end from each pixel centre's camera ray alone (doppler: the camera's
+    motion), not stored."""
     label: str | None = None
     """The add-on's name for it ("SymRay <label>" render pass and passes-EXR layer, toggle
     ``pass_<label>``); None: a core-only pass."""
@@ -80,13 +83,18 @@ PASSES: tuple[Pass, ...] = (
     Pass("redshift", np.float32, math.nan,
          "g = observed / emitted frequency where a ray ends on the accretion disk (or first "
          "crosses a translucent one; interpolated on an opaque one's smooth blocks), NaN "
-         "elsewhere", label="Redshift"),
+         "elsewhere; it includes the doppler pass's g of a moving camera unless colours are "
+         "not shifted (core.render's shift_colours)", label="Redshift"),
+    Pass("doppler", np.float32, math.nan,
+         "g of the camera's motion along each pixel centre's ray (core.motion): the frequency "
+         "it sees over the static (Kerr: zero-angular-momentum) observer's; 1 when static",
+         interpolated=False, from_camera=True),
 )  # fmt: skip
 """Every pass, in its one order."""
 
 BY_NAME = {p.name: p for p in PASSES}
 ALL_PASSES = tuple(p.name for p in PASSES)
-STORED = tuple(p for p in PASSES if p.derived_from is None)
+STORED = tuple(p for p in PASSES if p.derived_from is None and not p.from_camera)
 """The passes held per pixel while a frame renders (the others are computed from them)."""
 
 

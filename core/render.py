@@ -32,6 +32,8 @@ from .geometry import Intersector
 from .geometry.hits import box_corners
 from .imageio import FAILED_COLOR
 from .integrators import Splitting
+from .motion import check_observer, observer_motion
+from .motion import shift as doppler_shift
 from .observer import ObserverError, check_camera
 from .passes import ALL_PASSES, BY_NAME, STORED, traced_passes
 from .sampling import (
@@ -48,13 +50,18 @@ from .sampling import (
 )
 from .sky import Background
 from .tracing import ENDING, FAR_FIELD_CONSTANT, RayResults, Scene, TraceOptions, Tracer
+from .tracing.scene import DISK_ID
 from .tracing.steps import DEFAULT_METHOD
 
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
-DEFAULT_PASSES = tuple(name for name in ALL_PASSES if name not in ("direction", "position"))
+DEFAULT_PASSES = tuple(
+    name for name in ALL_PASSES if name not in ("direction", "position", "doppler")
+)
 """The passes core.render computes unless asked otherwise."""
 _MIN_CHUNK = 2048
+_CAMERA_CHUNK = 1 << 16
+"""Pixels per chunk of a pass computed from camera rays alone (doppler): memory bounded."""
 TRACE_SHARE = 0.5
 """With ``tolerance_px``, the integration and far field get this share of it (the tracer's
 ``tolerance``); the image interpolation gets the rest."""
@@ -101,6 +108,8 @@ def render(
     progress: Callable[[int, int], None] | None = None,
     should_cancel: Callable[[], bool] | None = None,
     on_tile: Callable[[tuple[int, int, int, int], RenderResult], None] | None = None,
+    observer: Any = "static",
+    shift_colours: bool = True,
 ) -> RenderResult:
     """Render ``scene`` seen by ``camera`` (docs/design.md, "Rendering in the core").
 
@@ -115,24 +124,36 @@ def render(
     ``progress(done, total)`` (pixels), ``should_cancel()`` and ``on_tile((x0, y0, x1,
     y1), part)`` (a finished tile's pixels, row 0 at the top) are called from the
     caller's thread, or from the worker threads when there are threads.
+    ``observer``: who looks through the camera (core.motion): "static" (Kerr: the
+    zero-angular-momentum observer), "orbit" (the prograde circular geodesic through the
+    camera), "infall" (falling from rest at infinity) or a 3-velocity (vx, vy, vz) (units of
+    c, world axes) relative to the static one; ``shift_colours`` False keeps the colours
+    (and the disk's g) of the static observer, with the moving one's aberration.
     """
     passes = _check_render_call(passes, chunk_size, workers, cores)
     _check_sampling(tolerance_px, samples, pixel_filter, filter_size)
+    check_observer(observer)
     pixel_angle = camera.pixel_angle(_camera_distance(scene, camera))
-    interpolation = 0.0
-    if tolerance_px is not None:
-        tolerance = TRACE_SHARE * tolerance_px * pixel_angle
-        interpolation = (1.0 - TRACE_SHARE) * tolerance_px * pixel_angle
-    options = TraceOptions(method=method, tolerance=tolerance, step=step, max_steps=max_steps)
+    options = _trace_options(method, tolerance, tolerance_px, pixel_angle, step, max_steps)
     start_time = time.perf_counter()
     probe = {"method": method, "step": step, "max_steps": max_steps, "workers": workers,
-             "parallel": parallel, "cores": cores, "should_cancel": should_cancel}  # fmt: skip
+             "parallel": parallel, "cores": cores, "should_cancel": should_cancel,
+             "observer": observer, "shift_colours": shift_colours}  # fmt: skip
     scene = disk_exposure(scene, camera, **probe)
     extent = _scene_extent(scene, camera)
     tracer = tracer_for_camera(scene, options, extent, camera.frame.position)
     if tracer.curved:
         checks.check_render_method(tracer.method, time_scaled(tracer.model))
     check_camera(tracer, camera.frame.position)
+    moving = observer_motion(observer, tracer, camera.frame.position, shift_colours)
+    if moving is not None:  # the tolerances hold in the static frame (core.motion)
+        pixel_angle *= min(1.0, moving.smallest_doppler(camera))
+        options = _trace_options(method, tolerance, tolerance_px, pixel_angle, step, max_steps)
+        tracer = tracer_for_camera(scene, options, extent, camera.frame.position)
+        tracer.set_motion(moving)
+    interpolation = 0.0
+    if tolerance_px is not None:
+        interpolation = (1.0 - TRACE_SHARE) * tolerance_px * pixel_angle
     background = (
         scene.background
         if isinstance(scene.background, Background)
@@ -143,6 +164,7 @@ def render(
     with_error = "error" in passes or "error_px" in passes or tolerance_px is not None
     with_error = with_error and tracer.curved
     image = _Buffers(n, with_error, camera.width, "direction" in passes, pixel_angle)
+    image.camera, image.motion = camera, moving
     kind, count = workers_module.choose(parallel, workers, n, cores)
     sampled = samples > 1 or (tolerance_px is not None and tracer.curved)
     if sampled:
@@ -182,6 +204,14 @@ def render(
         result.summary["disk_exposure"] = scene.disk.exposure
     _summarise_px(result.summary, pixel_angle)
     return result
+
+
+def _trace_options(method, tolerance, tolerance_px, pixel_angle, step, max_steps) -> TraceOptions:
+    """core.render's TraceOptions: with ``tolerance_px``, TRACE_SHARE of it (in radians of
+    ``pixel_angle`` a pixel) replaces ``tolerance``."""
+    if tolerance_px is not None:
+        tolerance = TRACE_SHARE * tolerance_px * pixel_angle
+    return TraceOptions(method=method, tolerance=tolerance, step=step, max_steps=max_steps)
 
 
 def disk_exposure(scene: Scene, camera, **probe: Any) -> Scene:
@@ -456,6 +486,8 @@ class _Buffers:
     ):
         self.n = n
         self.pixel_angle = pixel_angle
+        self.camera: Any = None
+        self.motion: Any = None  # the camera's (core.motion), for the doppler pass
         self.with_error = with_error
         self.with_direction = with_direction
         self.width = width
@@ -548,6 +580,9 @@ class _Buffers:
         out = RenderResult(self.rgba[idx].reshape(*shape, 4), cancelled=cancelled)
         for name in passes:
             kind = BY_NAME[name]
+            if kind.from_camera:
+                out.passes[name] = self._doppler(idx).reshape(shape)
+                continue
             data = self.passes[kind.derived_from or name][idx]
             if kind.derived_from and isinstance(idx, slice):  # a view: its own copy
                 data = data.copy()
@@ -560,6 +595,24 @@ class _Buffers:
                 shape if kind.channels == 1 else (*shape, kind.channels)
             )
         return out
+
+    def _doppler(self, idx) -> np.ndarray:
+        """The doppler pass (float32, flat) of the pixels ``idx`` (a slice or indices): the
+        camera's motion's g along each pixel centre's ray, in chunks (1 without a motion)."""
+        size = len(range(self.n)[idx]) if isinstance(idx, slice) else np.size(idx)
+        g = np.ones(size, dtype=np.float32)
+        if self.motion is None:
+            return g
+        for start in range(0, size, _CAMERA_CHUNK):
+            stop = min(start + _CAMERA_CHUNK, size)
+            if isinstance(idx, slice):
+                first = range(self.n)[idx][start]  # whole-frame slices have step 1
+                _, seen = self.camera.rays(first, first + stop - start)
+            else:
+                row, col = np.divmod(np.asarray(idx).reshape(-1)[start:stop], self.width)
+                _, seen = self.camera.rays_at(np.stack([col + 0.5, row + 0.5], axis=1))
+            g[start:stop] = self.motion.doppler(seen)
+        return g
 
     def result(self, camera, passes, seconds, cancelled, tracer) -> RenderResult:
         self.allocate()
@@ -626,6 +679,8 @@ def summary_text(summary: dict) -> str:
 
 def shade(rays: RayResults, background: Background) -> np.ndarray:
     """RGBA (N, 4) of traced rays: surfaces, sky, black horizon, volumes; debug colours.
+    Sky and surfaces take the Doppler shift of a moving camera (core.motion.shift; volumes'
+    light does not: a documented approximation).
 
     What lies in front of a ray's ending (volumes, a translucent disk: radiance, and
     transmittance T) covers 1 - T of it: alpha = 1 - T (1 - the ending's alpha). A
@@ -639,6 +694,9 @@ def shade(rays: RayResults, background: Background) -> np.ndarray:
     escaped = rays.ending == ENDING["escaped"]
     if escaped.any():
         color[escaped] = background(rays.direction[escaped])
+    moving = np.flatnonzero((escaped | hit & (rays.object_id != DISK_ID)) & (rays.doppler != 1.0))
+    if moving.size:  # static emitters seen by a moving camera (the disk's g has it already)
+        color[moving, :3] = doppler_shift(color[moving, :3], rays.doppler[moving])
     color[:, :3] = rays.radiance + rays.transmittance[:, None] * color[:, :3]
     color[:, 3] = 1.0 - rays.transmittance * (1.0 - color[:, 3])
     color[rays.ending == ENDING["failed"]] = FAILED_COLOR

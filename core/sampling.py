@@ -60,6 +60,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import Hits
+from .motion import shift as doppler_shift
 from .passes import BY_NAME
 from .sky import Background
 from .tracing import ENDING, RayResults, Tracer
@@ -641,6 +642,12 @@ class TileSampler:
             out.position[rows[hit[ok]]] = found.position[ok]
             seen = found.position[ok] - origins[ok]
             out.direction[rows[hit[ok]]] = seen / np.linalg.norm(seen, axis=1, keepdims=True)
+        moving = self.tracer.motion
+        if moving is not None:  # static emitters seen by a moving camera (render.shade)
+            surface = (ending == ENDING["hit"]) & (nodes.object_id[bj, bi] != DISK_ID)
+            shifted = np.flatnonzero(sky | surface)
+            _, seen = self.camera.rays_at(self._image_xy(y[shifted], x[shifted]))
+            colour[shifted, :3] = doppler_shift(colour[shifted, :3], moving.colour_shift(seen))
         out.rgba[rows] = colour
         out.ending[rows] = ending
         interpolation = np.einsum("mk,mk->m", blocks.deviation[b], _error_shape(u, v))

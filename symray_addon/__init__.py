@@ -5,9 +5,19 @@ Everything here may import bpy/mathutils; the numpy core (``..core``) never does
 
 from __future__ import annotations
 
-from . import engine, migration, objects, operator, overlay, panel, presets, properties
+from . import (
+    engine,
+    migration,
+    objects,
+    observer,
+    operator,
+    overlay,
+    panel,
+    presets,
+    properties,
+)
 
-_MODULES = (objects, properties, presets, operator, engine, panel, overlay, migration)
+_MODULES = (objects, properties, observer, presets, operator, engine, panel, overlay, migration)
 
 
 def register() -> None:

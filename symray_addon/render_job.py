@@ -19,7 +19,17 @@ import numpy as np
 
 from .. import core
 from ..core.render import summary_text as render_summary_text
-from . import bake, export_camera, export_meshes, models, objects, properties, validation, world
+from . import (
+    bake,
+    export_camera,
+    export_meshes,
+    models,
+    objects,
+    observer,
+    properties,
+    validation,
+    world,
+)
 
 Progress = Callable[[int, int], None]
 Cancel = Callable[[], bool]
@@ -123,6 +133,8 @@ def prepare(
         # Blender's own thread count (-t N on the command line, or Performance › Threads)
         # bounds the automatic one worker per core
         "cores": int(scene.render.threads),
+        # the camera's Observer (a viewport's own view: the static observer)
+        **observer.observer_options(scene, camera_object),
     }
     job = RenderJob(core_scene, camera, options, camera.width, camera.height, transparent)
     job.warnings = warnings

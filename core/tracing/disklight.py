@@ -11,7 +11,8 @@ ray ends on it, g = ν_obs / ν_emit = (p·u)_cam / (p·u)_disk from the ray's m
   the tracing chart's own metric at the hit (observer.killing_block).
 - The camera is the zero-angular-momentum observer (static where a = 0) at each ray's
   origin, the observer of core/observer.py, evaluated there with the same constants (the
-  ray starts its integration at the region's boundary when the camera is outside it).
+  ray starts its integration at the region's boundary when the camera is outside it). A
+  moving camera (core.motion) sees g times its Doppler factor (RayResults.doppler).
 
 An opaque disk ends the ray with its colour; a translucent one (opacity a < 1) adds a x its
 light to the ray's radiance and keeps (1 - a) of what lies behind, like a volume, and the ray
@@ -133,7 +134,7 @@ class DiskLight:
         Q, P, camera = (x[:, on] for x in state)
         X = self.to_local(X_world).T
         p_t, p_phi = self.momenta(Q, P)
-        g = self.redshift(X, p_t, p_phi, camera)
+        g = self.redshift(X, p_t, p_phi, camera) * out.doppler[r]  # the camera's motion
         bad = ~(np.isfinite(g) & (g > 0))
         g = np.where(bad, np.nan, g)
         first = np.isnan(out.redshift[r])

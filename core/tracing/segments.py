@@ -35,6 +35,7 @@ class RayResults:
     clearance_other: np.ndarray  # (N,) radians from the other bounds
     object_id: np.ndarray  # (N,) int32: the object hit (Hits.object_id); -1 where none
     tangent: np.ndarray  # (N, 3) where hit: the unit direction of the chord that hit
+    doppler: np.ndarray  # (N,) g of the camera's motion its colours take (core.motion; 1: none)
 
     @classmethod
     def empty(cls, n: int, origins: np.ndarray, directions: np.ndarray) -> RayResults:
@@ -54,6 +55,7 @@ class RayResults:
             clearance_other=np.full(n, np.inf),
             object_id=np.full(n, -1, dtype=np.int32),
             tangent=np.zeros((n, 3)),
+            doppler=np.ones(n),
         )
 
     def take(self, rows: slice | np.ndarray) -> RayResults:

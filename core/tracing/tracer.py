@@ -22,6 +22,7 @@ from .. import checks, integrators
 from ..charts import chart_for
 from ..geometry import Hits, segment_overlaps
 from ..integrators.batch import Batch, run_batch
+from ..motion import Motion
 from ..observer import medium_momenta, spacetime_momenta
 from . import dense
 from .clearance import ClearanceBoxes, clear_radius
@@ -152,6 +153,8 @@ class Tracer:
     ``plan_trace``)."""
 
     disk: DiskLight | None = None
+    motion: Motion | None = None
+    """The camera's motion (set_motion): rays start along the static observer's directions."""
     _watch: ClearanceBoxes | None = None  # Tracer.watch_geometry
     _clear = 0.0
     """Inside an accretion disk's inner edge (or a nearer object's) no step is near geometry
@@ -210,6 +213,12 @@ class Tracer:
             if local is not None:
                 self._watch_near = (local[0] - margin, local[1] + margin)
 
+    def set_motion(self, motion: Motion | None) -> None:
+        """Trace for a camera moving with ``motion`` (core.motion; None: the static / ZAMO
+        observer): each ray starts along the direction the static observer sees its photon
+        from, and carries the Doppler factor its colours (and the disk's g) take."""
+        self.motion = motion
+
     @property
     def objects(self) -> Any:
         """The scene's objects as one intersector."""
@@ -229,7 +238,12 @@ class Tracer:
         n = origins.shape[0]
         if np.ndim(step) and np.shape(step) != (n,):
             raise ValueError(f"step: one for all rays or one per ray ({n}), got {np.shape(step)}")
+        if self.motion is not None:
+            shift = self.motion.colour_shift(directions)
+            directions, _ = self.motion.aberrate(directions)
         out = RayResults.empty(n, origins, directions)
+        if self.motion is not None:
+            out.doppler = shift
         if not self.curved:
             self._straight(np.arange(n), origins, directions, out)
             return self._besides_hit(out)
