@@ -181,3 +181,42 @@ def test_sky_colours_take_each_pixels_doppler_shift(shift_colours):
     colours = np.broadcast_to(sky, (g.size, 3))
     expected = blackbody.shifted_colour(colours, g) if shift_colours else colours
     assert np.abs(image.rgba[on_sky][:, :3] - expected).max() < 1e-5
+
+
+@pytest.mark.parametrize(
+    "chart, method",
+    [("boyer_lindquist", None), ("kerr_schild", None), ("kerr_schild", "gauss4")],
+)
+def test_an_orbiting_camera_sees_the_disk_shifted_by_the_circular_orbit_formula(chart, method):
+    """Kerr a/M = 0.9, a camera on the prograde circular orbit at r_o = 10 M over a disk out
+    to 8 M. Photons of zero angular momentum (L = 0: the pixels looking at
+    n'·v̂ = β, where the static frame sees no azimuthal momentum) have
+    g = E_o / E_e = u^t(r_o) / u^t(r_e) for both on circular orbits (E − Ω L = E), with
+    u^t = (r^{3/2} + a √M) / (r^{3/4} √(r^{3/2} − 3M √r + 2a √M)) (Bardeen et al. 1972)."""
+    mass, a = 0.5, 0.45
+    scene = core.Scene(model=hm.kerr(rg=1.0, a=a, chart=chart), disk=core.AccretionDisk(r_out=4.0))
+    tracer = Tracer(scene, TraceOptions(method=method, tolerance=1e-10), extent=20)
+    r_o = 5.0
+    position = np.array([math.hypot(r_o, a), 0.0, 0.0])
+    motion = observer_motion("orbit", tracer, position)
+    tracer.set_motion(motion)
+    beta = float(np.linalg.norm(motion.velocity))
+    along = motion.velocity / beta
+    angle = np.linspace(0.05, 1.5, 60)  # inwards and down, off the velocity
+    across = np.stack([-np.cos(angle), np.zeros_like(angle), -np.sin(angle)], axis=1)
+    across -= (across @ along)[:, None] * along
+    across /= np.linalg.norm(across, axis=1, keepdims=True)
+    seen = beta * along + math.sqrt(1 - beta**2) * across
+    out = tracer.trace(np.tile(position, (angle.size, 1)), seen)
+    on_disk = np.isfinite(out.redshift)
+    assert on_disk.sum() >= 5
+    r_e = tracer.model.radius_at(((out.position[on_disk] - scene.center) @ tracer.rotation).T)
+    assert r_e.max() - r_e.min() > 1.0  # hits across the disk
+
+    def u_t(r):
+        root_m = math.sqrt(mass)
+        return (r**1.5 + a * root_m) / (
+            r**0.75 * np.sqrt(r**1.5 - 3 * mass * np.sqrt(r) + 2 * a * root_m)
+        )
+
+    assert np.abs(out.redshift[on_disk] / (u_t(r_o) / u_t(r_e)) - 1).max() < 1e-9
