@@ -20,6 +20,9 @@ that data at tiny sizes) and a plotting step (matplotlib, Agg backend, imported 
 - fig12   Kerr (Eq. 12, not shown by the seed): a rotating hole's asymmetric shadow
 - fig13   a relativistic thin accretion disk around Schwarzschild and Kerr (a/M = 0.9)
           holes at inclination 80 deg: its colour and its redshift pass g
+- fig14   moving observers (core.render's ``observer``): at 6 M from an a/M = 0.9 hole
+          with its disk, a static camera, one on the circular orbit and one falling in;
+          flat space seen at rest and at 0.9 c (aberration, Doppler shift, beaming)
 """
 
 from __future__ import annotations
@@ -305,6 +308,32 @@ def disk_view(
         f"disk a={a / M:g}", scene, cam, method, tolerance=tolerance,
         passes=("ending", "steps", "redshift"),
     )  # fmt: skip
+
+
+OBSERVER_RADIUS = 6.0 * M
+"""fig14's camera: 6 M from the hole, in its equatorial plane."""
+
+
+def observer_views(width: int, height: int, method: str = "gauss4", tolerance: float = 1e-6):
+    """fig14's renders by name: an a/M = 0.9 hole (Kerr–Schild) with a disk from the ISCO to
+    5 M, seen from OBSERVER_RADIUS on its equator ("static", "orbit", "infall", looking at
+    the hole); flat space with textured spheres seen at rest and moving at 0.9 c towards
+    where the camera looks ("flat", "flat 0.9c")."""
+    model = hm.kerr(rg=RG, a=0.45, chart="kerr_schild")
+    disk = core.AccretionDisk(r_out=5.0 * M, temperature=6000.0, exposure=1.0)
+    scene = core.Scene(model=model, disk=disk, background=sky())
+    cam = camera((0.0, -OBSERVER_RADIUS, 0.0), (0.0, 0.0, 0.0), 120.0, width, height)
+    passes = ("ending", "redshift", "doppler")
+    views = {}
+    for observer in ("static", "orbit", "infall"):
+        views[observer] = render(f"fig14 {observer}", scene, cam, method, tolerance=tolerance,
+                                 observer=observer, passes=passes)  # fmt: skip
+    flat = core.Scene(model=None, objects=textured_spheres(), background=sky())
+    ahead = camera((0.0, -12.0, 0.0), (0.0, 0.0, 0.0), 70.0, width, height)
+    views["flat"] = render("fig14 flat", flat, ahead, method, passes=("ending", "doppler"))
+    views["flat 0.9c"] = render("fig14 flat 0.9c", flat, ahead, method, observer=(0.0, 0.9, 0.0),
+                                passes=("ending", "doppler"))  # fmt: skip
+    return views
 
 
 def mirage_view(
@@ -643,6 +672,34 @@ def fig13(args) -> str:
     return _save(fig, "fig13_accretion_disk", args.out)
 
 
+def fig14(args) -> str:
+    """Moving observers at 6 M from an a/M = 0.9 hole, and in flat space at 0.9 c."""
+    plt = _plt()
+    w, h = size_hw(args.size)
+    views = observer_views(w, h, args.method, args.tolerance)
+    fig, axes = plt.subplots(2, 3, figsize=(12, 6.6))
+    captions = {
+        "static": "static (ZAMO) at 6 M",
+        "orbit": "on the circular orbit at 6 M (moving right)",
+        "infall": "falling in from rest at infinity",
+        "flat": "flat space, at rest",
+        "flat 0.9c": "flat space, 0.9 c towards the view",
+    }
+    for ax, (name, out) in zip(axes.ravel(), views.items(), strict=False):
+        _show(ax, np.clip(out.rgba, 0.0, 1.0), captions[name])
+    g = views["orbit"].passes["doppler"]
+    image = axes[1, 2].imshow(g, cmap="coolwarm_r", vmin=0.3, vmax=1.7)
+    axes[1, 2].set_title("orbit: the camera's Doppler factor g", fontsize=9)
+    axes[1, 2].set_axis_off()
+    fig.colorbar(image, ax=axes[1, 2], fraction=0.035)
+    fig.suptitle(
+        "Moving observers: aberration shrinks what lies ahead (the falling camera's shadow, "
+        "the spheres at 0.9 c)\nand Doppler shift and beaming brighten and blue it; the "
+        "orbiting camera sees the sky it moves towards bluer"
+    )
+    return _save(fig, "fig14_observers", args.out)
+
+
 FIGURES = {
     "fig02b": fig02b,
     "fig03": fig03,
@@ -654,6 +711,7 @@ FIGURES = {
     "fig11": fig11,
     "fig12": fig12,
     "fig13": fig13,
+    "fig14": fig14,
 }
 
 
