@@ -395,23 +395,16 @@ class RENDER_PT_symray_film(SymRayPanelMixin, bpy.types.Panel):
         col.prop(context.scene.render, "film_transparent", text="Transparent")
 
 
-class DATA_PT_symray_observer(bpy.types.Panel):
+class DATA_PT_symray_observer(SymRayPanelMixin, bpy.types.Panel):
     """Who looks through the camera (SymRay), in the camera's Object Data Properties"""
 
-    bl_space_type = "PROPERTIES"
-    bl_region_type = "WINDOW"
     bl_context = "data"
     bl_label = "SymRay Observer"
-    COMPAT_ENGINES = {ENGINE}
 
     @classmethod
     def poll(cls, context: bpy.types.Context) -> bool:
         """Shown for a camera when the scene renders with SymRay."""
-        return (
-            _has_settings(context)
-            and context.scene.render.engine in cls.COMPAT_ENGINES
-            and getattr(context, "camera", None) is not None
-        )
+        return super().poll(context) and getattr(context, "camera", None) is not None
 
     def draw(self, context: bpy.types.Context) -> None:
         """Static, Orbit, Infall, a velocity or From Animation; Shift Colours."""
