@@ -381,6 +381,35 @@ class Camera:
         yb = (s[:, 1] - ymin) / (ymax - ymin) * winy
         return np.stack([xb - x0, y1 - yb], axis=1)
 
+    def direction_tangents(self, xy: np.ndarray) -> np.ndarray:
+        """The derivatives (M, 2, 3) of the unit directions of ``rays_at(xy)`` with respect
+        to the image coordinates x (columns) and y (rows, downwards), in world axes; a
+        perspective or panoramic camera's (an orthographic one's directions do not vary:
+        ValueError)."""
+        if self.kind == "ortho":
+            raise ValueError(
+                "ray differentials (the magnification pass, point stars) need a camera whose "
+                "pixels span solid angles (perspective or panoramic), not an orthographic one"
+            )
+        s = self.image_window_coords(xy)
+        xmin, xmax, ymin, ymax = self.window
+        winx, winy = self.full_size
+        rate = np.array([(xmax - xmin) / winx, -(ymax - ymin) / winy])  # d(window) / d(image)
+        right, up, back = self._basis.T
+        if self.kind == "persp":
+            v = s[:, :1] * right + s[:, 1:] * up - back
+            size = np.linalg.norm(v, axis=1, keepdims=True)
+            d = v / size
+            per_window = [(e - (d @ e)[:, None] * d) / size for e in (right, up)]
+        else:
+            lon, lat = s[:, :1], s[:, 1:]
+            ahead = np.cos(lon) * -back + np.sin(lon) * right
+            per_window = [
+                np.cos(lat) * (-np.sin(lon) * -back + np.cos(lon) * right),
+                -np.sin(lat) * ahead + np.cos(lat) * up,
+            ]
+        return np.stack([per_window[0] * rate[0], per_window[1] * rate[1]], axis=1)
+
     def rays_at_window(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Origins (M, 3) and unit directions (M, 3) for window coordinates s (M, 2)."""
         m = s.shape[0]

@@ -141,6 +141,8 @@ class KerrBLChart:
     """What to add to the polar-axis refusal's advice to use the Kerr–Schild chart."""
     offset = 1
     time_index = 0
+    periodic = (2,)
+    """The angles among the spatial coordinates (phi): their differences wrap modulo 2 pi."""
 
     def __init__(self, mass: float, a: float):
         self.mass, self.a = float(mass), float(a)

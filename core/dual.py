@@ -123,6 +123,42 @@ def value_of(x):
     return x.v if isinstance(x, Dual) else x
 
 
+def where(condition, x, y):
+    """np.where on values, each branch's partials kept where it is chosen (a branch that
+    is a plain number or array contributes none)."""
+    value = np.where(condition, value_of(x), value_of(y))
+    if not isinstance(x, Dual) and not isinstance(y, Dual):
+        return value
+    dx = x.d if isinstance(x, Dual) else {}
+    dy = y.d if isinstance(y, Dual) else {}
+    partials = {k: np.where(condition, dx.get(k, 0.0), dy.get(k, 0.0)) for k in {*dx, *dy}}
+    return Dual(value, partials)
+
+
+class DualRows:
+    """A block of rows (n, N) with the derivatives of every entry along k directions
+    (k, n, N): row i reads as the Dual of ``value[i]`` with the one partial {0: tangent[:,
+    i]} ((k, N): the k directions together, broadcast against the value's (N,) in every
+    operation), and assigning a Dual (or an array) to row i writes both back. Code written
+    row by row with this module's functions (a split's flows) then carries its tangent map
+    along (forward mode), while the same code on a plain array does the plain flow."""
+
+    __slots__ = ("value", "tangent")
+
+    def __init__(self, value: np.ndarray, tangent: np.ndarray) -> None:
+        self.value, self.tangent = value, tangent
+
+    def __len__(self) -> int:
+        return self.value.shape[0]
+
+    def __getitem__(self, i: int) -> Dual:
+        return Dual(self.value[i], {0: self.tangent[:, i]})
+
+    def __setitem__(self, i: int, x) -> None:
+        self.value[i] = value_of(x)
+        self.tangent[:, i] = x.d.get(0, 0.0) if isinstance(x, Dual) else 0.0
+
+
 def _unary(x, f, df):
     """Apply f with derivative df(value, f(value)) to a Dual or a plain number/array."""
     if not isinstance(x, Dual):

@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from ..dual import DualRows
 from ._common import (
     Method,
     State,
@@ -63,6 +64,9 @@ class SplitSystem(System):
     nystrom: bool = False
     """Whether the split is of Runge–Kutta–Nyström type (T quadratic in p, V free of p:
     [V, [V, [V, T]]] = 0), where the SRKN splittings reach their nominal order."""
+    tangents: bool = False
+    """Whether ``kick`` and ``drift`` also take core.dual.DualRows (rows with derivatives):
+    then a step carries the tangent map along (``Splitting.step`` on a state with tangents)."""
 
     def kick(self, Q: np.ndarray, P: np.ndarray, t: Any) -> None:
         """Exact flow of the position part V over t (q fixed)."""
@@ -176,14 +180,32 @@ class Splitting(Method):
 
     @quiet
     def step(self, H: Any, state: State, h: Any) -> tuple[State, np.ndarray]:
-        """One step of the composition of H's exact kick and drift flows."""
+        """One step of the composition of H's exact kick and drift flows. A state (Q, P,
+        dQ, dP) with tangents (k, n, N) (``with_tangents``) gets them carried through the
+        step's own tangent map (forward mode, core.dual.DualRows)."""
         kick, drift = split_flows(H, self.name)
         Q, P = (a.copy() for a in state[:2])
+        if len(state) == 4:
+            Q, P = DualRows(Q, state[2].copy()), DualRows(P, state[3].copy())
         for b, a in zip(self.kicks, self.drifts, strict=False):
             kick(Q, P, b * h)
             drift(Q, P, a * h)
         kick(Q, P, self.kicks[-1] * h)
+        if isinstance(Q, DualRows):
+            ok = finite_rays(Q.value, P.value, *Q.tangent, *P.tangent)
+            return (Q.value, P.value, Q.tangent, P.tangent), ok
         return (Q, P), finite_rays(Q, P)
+
+    def with_tangents(self, H: Any, state: State, dQ: np.ndarray, dP: np.ndarray) -> State:
+        """``state`` with tangents dQ, dP (k, n, N) to carry along; ValueError where H's
+        flows cannot carry them (``SplitSystem.tangents``)."""
+        if not (isinstance(H, SplitSystem) and H.tangents):
+            raise ValueError(
+                f"ray differentials (the magnification pass, point stars) need a split whose "
+                f"flows carry derivatives; {type(H).__name__} has none: they are available "
+                "for Schwarzschild, Kerr with |a| < M and flat space"
+            )
+        return (*state[:2], as_soa(dQ), as_soa(dP))
 
     def with_options(self, **options: Any) -> Splitting:
         """No options: the method itself."""

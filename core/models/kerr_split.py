@@ -47,6 +47,7 @@ import math
 
 import numpy as np
 
+from .. import dual
 from ..charts import KerrBLChart
 from ..integrators.splitting import SplitSystem
 from .base import Hamiltonian
@@ -102,10 +103,10 @@ class KerrBoyerLindquist(Hamiltonian):
         - a^2 E^2 sin^2(theta) / 2 + H0 Sigma (the module's U plus L^2 / (2 sin^2 theta))."""
         s, theta = Q[1], Q[2]
         E, L, a, b = -P[0], P[3], self.a, self.b
-        sh = np.sinh(s)
-        r = self.mass + b * np.cosh(s)
+        sh, ch = dual.sinh(s), dual.cosh(s)
+        r = self.mass + b * ch
         delta = (b * sh) ** 2
-        st, ct = np.sin(theta), np.cos(theta)
+        st, ct = dual.sin(theta), dual.cos(theta)
         ra2 = r * r + a * a
         pr = ra2 * E - a * L
         sigma = r * r + a * a * ct * ct
@@ -115,7 +116,7 @@ class KerrBoyerLindquist(Hamiltonian):
                 return V, sigma
             dsig = (2.0 * r * b * sh, -2.0 * a * a * ct * st)
             # d/ds of P^2/(2 Delta) = (P 2 r E / Delta - P^2 (r - M) / Delta^2) dr/ds, dr/ds = b sh
-            dV_s = (pr * 2.0 * r * E - pr * pr * b * np.cosh(s) / delta) / (b * sh) + H0 * dsig[0]
+            dV_s = (pr * 2.0 * r * E - pr * pr * b * ch / delta) / (b * sh) + H0 * dsig[0]
             dV_t = -a * a * E * E * st * ct + H0 * dsig[1]
             dV_E = pr * ra2 / delta + a * L - a * a * E * st * st
             dV_L = -a * pr / delta + a * E
@@ -124,7 +125,7 @@ class KerrBoyerLindquist(Hamiltonian):
     @staticmethod
     def kinetic(Q: np.ndarray, P: np.ndarray):
         """T = (p_s^2 + p_theta^2 + p_phi^2 / sin^2 theta) / 2 and dT/dtheta, (N,)."""
-        st, ct = np.sin(Q[2]), np.cos(Q[2])
+        st, ct = dual.sin(Q[2]), dual.cos(Q[2])
         with np.errstate(divide="ignore", invalid="ignore"):
             l2 = P[3] * P[3] / (st * st)
             T = 0.5 * (P[1] * P[1] + P[2] * P[2] + l2)
@@ -194,6 +195,7 @@ class SqrtSplit(SplitSystem):
     """Λ = 2 sqrt(T + c) - 2 sqrt(V + c) of a KerrBoyerLindquist (see the module)."""
 
     separable = False  # T depends on theta (the sphere), both parts on E and L
+    tangents = True
 
     def __init__(self, model: KerrBoyerLindquist, H0) -> None:
         self.model = model
@@ -209,14 +211,14 @@ class SqrtSplit(SplitSystem):
         """sqrt(T + c), dT/dtheta and E."""
         T, dT_t = self.model.kinetic(Q, P)
         E = -P[0]
-        return np.sqrt(T + self.c0 * E * E), dT_t, E
+        return dual.sqrt(T + self.c0 * E * E), dT_t, E
 
     def _root_V(self, Q: np.ndarray, P: np.ndarray):
         """1 / sqrt(V + c) and dV."""
         V, _, dV, _ = self.model.parts(Q, P, self.H0)
         E = -P[0]
         with np.errstate(invalid="ignore", divide="ignore"):
-            return 1.0 / np.sqrt(V + self.c0 * E * E), dV
+            return 1.0 / dual.sqrt(V + self.c0 * E * E), dV
 
     def drift(self, Q: np.ndarray, P: np.ndarray, t) -> None:
         """Exact flow of 2 sqrt(T + c) over t: s moves at p_s / sqrt(T + c), the direction
@@ -267,18 +269,19 @@ def sphere_geodesic(Q: np.ndarray, P: np.ndarray, c) -> None:
     J = p_theta e_phi - (p_phi / sin theta) e_theta by c |J| (a great circle, through the
     poles as well: no coordinate singularity in the flow; J_z = p_phi is kept). Written in
     the frame (e_rho, e_phi, z) at the old phi: n' = cos w n + sin w (J x n) / |J|."""
-    st, ct = np.sin(Q[2]), np.cos(Q[2])
+    st, ct = dual.sin(Q[2]), dual.cos(Q[2])
     p_theta = P[2]
     with np.errstate(divide="ignore", invalid="ignore"):
         spin = P[3] / st  # (J x n) . e_phi
-        size = np.sqrt(p_theta * p_theta + spin * spin)
+        size = dual.sqrt(p_theta * p_theta + spin * spin)
         omega = c * size
-        cw, sw = np.cos(omega), np.sin(omega) / np.where(size > 0, size, np.inf)
+        cw = dual.cos(omega)
+        sw = dual.sin(omega) / dual.where(dual.value_of(size) > 0, size, np.inf)
     along_rho = cw * st + sw * p_theta * ct  # n' . e_rho(phi)
     along_phi = sw * spin  # n' . e_phi(phi)
-    rho = np.hypot(along_rho, along_phi)
-    Q[2] = np.arctan2(rho, cw * ct - sw * p_theta * st)
-    Q[3] += np.arctan2(along_phi, along_rho)
+    rho = dual.sqrt(along_rho * along_rho + along_phi * along_phi)
+    Q[2] = dual.arctan2(rho, cw * ct - sw * p_theta * st)
+    Q[3] += dual.arctan2(along_phi, along_rho)
     with np.errstate(divide="ignore", invalid="ignore"):
         # J . e_phi(phi'), with e_phi(phi') = cos d e_phi(phi) - sin d e_rho(phi)
         P[2] = (p_theta * along_rho + spin * ct * along_phi) / rho

@@ -26,6 +26,7 @@ import math
 
 import numpy as np
 
+from .. import dual
 from ..charts import IsotropicChart
 from ..integrators.splitting import SplitSystem
 from .medium import Medium
@@ -111,6 +112,7 @@ class LogarithmicSplit(SplitSystem):
     """Λ = ln(|p|²/2 − H0) − ln(H0 (n² − 1)) with its exact drift and kick flows."""
 
     separable = True
+    tangents = True
 
     def __init__(self, model: SchwarzschildOptical, H0) -> None:
         self.model = model
@@ -121,19 +123,42 @@ class LogarithmicSplit(SplitSystem):
         """The split for the rays keep (per-ray H0)."""
         return LogarithmicSplit(self.model, self.H0 if self.H0.ndim == 0 else self.H0[keep])
 
+    def _force_factor(self, Q):
+        """f with ∇ln(n² − 1) = f q (n radial: 2 n n'(ρ) / ((n² − 1) ρ)), (N,); NaN inside
+        ρ = M/2. Written row by row with core.dual's functions: on rows carrying
+        derivatives (core.dual.DualRows) it gives f's as well, f being a function of ρ²
+        alone (its derivative is taken with one scalar seed, then chained)."""
+        rho2 = Q[0] * Q[0] + Q[1] * Q[1] + Q[2] * Q[2]
+        if isinstance(rho2, dual.Dual):
+            f = self._radial_factor(dual.Dual.variable(rho2.v, 0))
+            return dual.Dual(f.v, {0: f.d[0] * rho2.d[0]})
+        return self._radial_factor(rho2)
+
+    def _radial_factor(self, rho2):
+        """f of ``_force_factor`` at ρ² (an array, or a Dual)."""
+        with np.errstate(all="ignore"):
+            u = 0.5 * self.model.mass / dual.sqrt(rho2)
+            n = (1.0 + u) ** 3 / (1.0 - u)
+            dn_du = (1.0 + u) ** 2 * (4.0 - 2.0 * u) / (1.0 - u) ** 2
+            factor = (2.0 * n / (n * n - 1.0)) * dn_du * (-u / rho2)
+        return dual.where(dual.value_of(u) < 1.0, factor, np.nan)
+
     def _force(self, Q: np.ndarray) -> np.ndarray:
         """∇ln(n² − 1) = 2 n ∇n / (n² − 1), (3, N)."""
-        n, dn = self.model.index_gradient_soa(Q)
-        return (2.0 * n / (n * n - 1.0)) * dn
+        return self._force_factor(Q) * Q
 
-    def kick(self, Q: np.ndarray, P: np.ndarray, t) -> None:
-        """Exact flow of −ln B over t (q fixed): p += t ∇ln(n² − 1)."""
-        P += t * self._force(Q)
+    def kick(self, Q, P, t) -> None:
+        """Exact flow of −ln B over t (q fixed): p += t ∇ln(n² − 1). In place, row by row
+        (arrays, or core.dual.DualRows: with its tangent map)."""
+        c = t * self._force_factor(Q)
+        for i in range(3):
+            P[i] += c * Q[i]
 
-    def drift(self, Q: np.ndarray, P: np.ndarray, t) -> None:
-        """Exact flow of ln A over t (p fixed): q += t p / A(p)."""
-        A = 0.5 * np.einsum("ij,ij->j", P, P) - self.H0
-        Q += (t / A) * P
+    def drift(self, Q, P, t) -> None:
+        """Exact flow of ln A over t (p fixed): q += t p / A(p). In place, row by row."""
+        c = t / (0.5 * (P[0] * P[0] + P[1] * P[1] + P[2] * P[2]) - self.H0)
+        for i in range(3):
+            Q[i] += c * P[i]
 
     def value_soa(self, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
         """Λ(q, p), (N,)."""

@@ -36,6 +36,13 @@ class RayResults:
     object_id: np.ndarray  # (N,) int32: the object hit (Hits.object_id); -1 where none
     tangent: np.ndarray  # (N, 3) where hit: the unit direction of the chord that hit
     doppler: np.ndarray  # (N,) g of the camera's motion its colours take (core.motion; 1: none)
+    sky_jacobian: np.ndarray
+    """(N, k, 3) where escaped, traced with tangents: the final direction's derivatives with
+    respect to the k image coordinates (core/tracing/differentials.py); NaN elsewhere; k = 0
+    without tangents."""
+    magnification: np.ndarray
+    """(N,) where escaped, traced with tangents: |μ| of its image, the camera's solid angle
+    over the sky's (core/tracing/differentials.py); NaN elsewhere."""
 
     @classmethod
     def empty(cls, n: int, origins: np.ndarray, directions: np.ndarray) -> RayResults:
@@ -56,6 +63,8 @@ class RayResults:
             object_id=np.full(n, -1, dtype=np.int32),
             tangent=np.zeros((n, 3)),
             doppler=np.ones(n),
+            sky_jacobian=np.zeros((n, 0, 3)),
+            magnification=np.full(n, np.nan),
         )
 
     def take(self, rows: slice | np.ndarray) -> RayResults:

@@ -26,6 +26,7 @@ from ..motion import Motion
 from ..observer import medium_momenta, spacetime_momenta
 from . import dense
 from .clearance import ClearanceBoxes, clear_radius
+from .differentials import directional, magnification, unit_directional
 from .disklight import DiskLight
 from .regions import Region, region_for
 from .scene import DISK_ID, ENDING, Scene
@@ -231,29 +232,60 @@ class Tracer:
         directions: np.ndarray,
         step: float | np.ndarray | None = None,
         cancel: Callable[[], bool] | None = None,
+        tangents: np.ndarray | None = None,
     ) -> RayResults:
         """Trace rays (N, 3) from world origins along unit world directions, at ``step``
         (the tracer's by default; one for all, or (N,) per ray: runs at several steps share
-        one batch, and its per-step overhead)."""
+        one batch, and its per-step overhead). With ``tangents`` (N, k, 3), the directions'
+        derivatives with respect to k image coordinates, each escaped ray's final
+        direction gets its derivatives too (``RayResults.sky_jacobian``) and its image's
+        magnification (``RayResults.magnification``, per the camera's solid angle: a moving
+        camera's own) (core/tracing/differentials.py; ValueError where the method cannot
+        carry them: ``supports_tangents``)."""
         n = origins.shape[0]
         if np.ndim(step) and np.shape(step) != (n,):
             raise ValueError(f"step: one for all rays or one per ray ({n}), got {np.shape(step)}")
-        if self.motion is not None:
-            shift = self.motion.colour_shift(directions)
-            directions, _ = self.motion.aberrate(directions)
-        out = RayResults.empty(n, origins, directions)
-        if self.motion is not None:
-            out.doppler = shift
+        if tangents is not None:
+            self.check_tangents()
+        out, static_tangents = self._start_results(origins, directions, tangents)
+        directions = out.direction.copy()  # the static observer's
         if not self.curved:
             self._straight(np.arange(n), origins, directions, out)
-            return self._besides_hit(out)
+            if tangents is not None:
+                out.sky_jacobian[:] = static_tangents
+        else:
+            self._trace_curved(origins, directions, step, cancel, static_tangents, out)
+        if tangents is not None:  # per the camera's own solid angle (a moving one's)
+            out.sky_jacobian[out.ending != ENDING["escaped"]] = np.nan
+            out.magnification = magnification(tangents, out.sky_jacobian)
+        return self._besides_hit(out)
+
+    def _start_results(self, origins, directions, tangents) -> tuple[RayResults, Any]:
+        """The results of rays not traced yet, along the static observer's directions (a
+        moving camera's aberrated, with their Doppler factor), and those directions'
+        tangents (None without ``tangents``)."""
+        shift = None
+        if self.motion is not None:
+            shift = self.motion.colour_shift(directions)
+            if tangents is not None:
+                tangents = unit_directional(self._aberrated, directions, tangents)
+            directions, _ = self.motion.aberrate(directions)
+        out = RayResults.empty(origins.shape[0], origins, directions)
+        if shift is not None:
+            out.doppler = shift
+        if tangents is not None:
+            out.sky_jacobian = np.full(tangents.shape, np.nan)
+        return out, tangents
+
+    def _trace_curved(self, origins, directions, step, cancel, tangents, out) -> None:
+        """Rays straight to the model's region, then integrated through it (``trace``)."""
         assert self.region is not None
         X = self._to_local(origins)
         D = directions @ self.rotation  # (N, 3) local components
         start, inside = self.region.entry(X, D)
         outside = np.flatnonzero(~inside)
         if outside.size:
-            self._straight_to_region(outside, origins, directions, start, out)
+            self._straight_to_region(outside, origins, directions, start, out, tangents)
         todo = np.flatnonzero(np.isfinite(start[:, 0]) & (out.ending < 0))
         h = self.step if step is None else step
         assert h is not None  # a curved scene's tracer has a step
@@ -261,8 +293,36 @@ class Tracer:
             camera = self._to_local(origins[todo]).T  # (3, M): where each ray is seen from
             if np.ndim(h):
                 h = np.asarray(h, dtype=np.float64)[todo]
-            self._integrate(todo, start[todo].T.copy(), D[todo].T.copy(), out, h, cancel, camera)
-        return self._besides_hit(out)
+            local_tangents = None if tangents is None else tangents[todo] @ self.rotation
+            self._integrate(
+                todo, start[todo].T.copy(), D[todo].T.copy(), out, h, cancel, camera,
+                local_tangents,
+            )  # fmt: skip
+
+    @property
+    def supports_tangents(self) -> bool:
+        """Whether ``trace`` can carry ray differentials here: flat space, or a splitting on
+        a split whose flows take derivatives (``SplitSystem.tangents``)."""
+        if not self.curved:
+            return True
+        if not isinstance(self.method, integrators.Splitting):
+            return False
+        return bool(getattr(self.model.split_parts(0.0), "tangents", False))
+
+    def check_tangents(self) -> None:
+        """ValueError naming why this trace cannot carry ray differentials, if it cannot."""
+        if not self.supports_tangents:
+            raise ValueError(
+                "ray differentials (the magnification pass, point stars) need the rays "
+                "carried by an explicit splitting on a split whose flows take derivatives: "
+                "Schwarzschild, Kerr with |a| < M (their default methods) and flat space; "
+                f"this scene's rays are integrated by {self.method!r} on "
+                f"{type(self.model).__name__}"
+            )
+
+    def _aberrated(self, directions: np.ndarray) -> np.ndarray:
+        assert self.motion is not None
+        return self.motion.aberrate(directions)[0]
 
     def _besides_hit(self, out: RayResults) -> RayResults:
         """``out`` with each hit ray's clearance from everything but what it hit."""
@@ -279,8 +339,10 @@ class Tracer:
         out.ending[rows[~h]] = ENDING["escaped"]
         out.direction[rows] = d
 
-    def _straight_to_region(self, rows, origins, directions, start, out):
-        """Rays starting outside the region: straight to its boundary (or forever)."""
+    def _straight_to_region(self, rows, origins, directions, start, out, tangents=None):
+        """Rays starting outside the region: straight to its boundary (or forever); those
+        that miss it get their far-field direction (and its derivatives along the
+        ``tangents`` of ``directions``, if given)."""
         X_entry = start[rows]
         enters = np.isfinite(X_entry[:, 0])
         a = origins[rows]
@@ -290,29 +352,38 @@ class Tracer:
         miss = ~h & ~enters
         if miss.any():
             X0 = self._to_local(a[miss])
-            D0 = directions[rows[miss]] @ self.rotation
-            out.direction[rows[miss]] = self._far_field(X0, D0) @ self.rotation.T
+
+            def far(d_world: np.ndarray) -> np.ndarray:
+                return self._far_field(X0, d_world @ self.rotation) @ self.rotation.T
+
+            out.direction[rows[miss]] = far(directions[rows[miss]])
             out.ending[rows[miss]] = ENDING["escaped"]
+            if tangents is not None:
+                seen = tangents[rows[miss]]
+                out.sky_jacobian[rows[miss]] = unit_directional(far, directions[rows[miss]], seen)
 
     # --- the integration ---------------------------------------------------------------
-    def _integrate(self, rows, X, D, out: RayResults, h: float | np.ndarray, cancel, camera):
-        """Follow rays from local positions X (3, M) along local directions D (3, M).
+    def _integrate(
+        self, rows, X, D, out: RayResults, h: float | np.ndarray, cancel, camera, tangents=None
+    ):
+        """Follow rays from local positions X (3, M) along local directions D (3, M) (with
+        ``tangents`` (M, k, 3): the directions' derivatives, carried along).
 
         Per step, everything is done in the model's local frame on (3, M) arrays; world
         coordinates are computed only for the rays that need them: segments near geometry
         (a local box around the objects and volumes), and rays that end.
         """
-        model, chart = self.model, self.chart
-        S = chart.to_coords(X)
-        if self.spacetime:
-            Q, P = spacetime_momenta(model, chart, S, D)
-        else:
-            Q, P = medium_momenta(model, S, D)
+        model = self.model
+        Q, P = self._start_state(X, D)
         H0 = model.value_soa(Q, P)
         K = model.split_parts(H0) or integrators.PoincareTransformed(model, H0)
+        state = self.method.init(K, Q, P)
+        if tangents is not None:
+            dQ, dP = self._start_tangents(camera, D, tangents, Q.shape[0])
+            state = self.method.with_tangents(K, state, dQ, dP)
         batch = Batch(
             self.method,
-            self.method.init(K, Q, P),
+            state,
             {"K": K},
             {"idx": rows.copy(), "X": X, "camera": camera, "H0": H0,
              "h": np.broadcast_to(np.asarray(h, dtype=np.float64), rows.shape).copy(),
@@ -337,6 +408,30 @@ class Tracer:
         Q, P = self.method.qp(batch.state)
         out.position[idx] = self._to_world(X_last.T)
         self._finish_energy(out, idx, Q, P, batch.arrays["H0"])
+
+    def _start_state(self, X: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(Q, P) of rays starting at local positions X (3, M) along local directions D
+        (3, M): the chart's coordinates and the observer frame's momenta."""
+        S = self.chart.to_coords(X)
+        if self.spacetime:
+            return spacetime_momenta(self.model, self.chart, S, D)
+        return medium_momenta(self.model, S, D)
+
+    def _start_tangents(self, camera, D, tangents, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """(dQ, dP) (k, n, M): the start state's derivatives along the directions' tangents
+        (M, k, 3), through the region's entry point, the chart and the observer's frame
+        (central differences, core/tracing/differentials.py)."""
+        assert self.region is not None
+
+        def state(d: np.ndarray) -> np.ndarray:
+            X, _ = self.region.entry(camera.T, d)
+            Q, P = self._start_state(X.T.copy(), d.T.copy())
+            return np.concatenate([Q, P]).T
+
+        periodic = [i + self.chart.offset for i in getattr(self.chart, "periodic", ())]
+        dZ = directional(state, D.T, tangents, periodic)  # unit directions: |d| = 1 each side
+        dZ = np.moveaxis(dZ, 0, -1)  # (k, 2n, M)
+        return dZ[:, :n].copy(), dZ[:, n:].copy()
 
     def _step_events(self, batch: Batch, taken: int, start, ok, shell, out: RayResults):
         """After a step: which rays failed, hit something, were captured or left the
@@ -391,13 +486,12 @@ class Tracer:
             local = X[:, leaving].T
             self._escape(
                 idx[leaving],
-                S[:, leaving],
                 Q[:, leaving],
                 P[:, leaving],
-                local,
                 self._to_world(local),
                 out,
                 self._to_world(camera[:, leaving].T),
+                [d[..., leaving] for d in batch.state[2:4]],
             )
             ended |= leaving
         if ended.any():
@@ -625,16 +719,33 @@ class Tracer:
         with np.errstate(all="ignore"):
             out.energy_error[rows] = np.abs(self.model.value_soa(Q, P) - H0)
 
-    def _escape(self, rows, S, Q, P, local, world, out: RayResults, eye):
-        """Rays leaving the region: direction from dq/ds, far-field correction, straight on."""
-        _, dHdp = self.model.gradient_soa(Q, P, wrt="p")
-        V = self.chart.cartesian_velocity(S, dHdp[self.chart.offset :])
-        D = (V / np.linalg.norm(V, axis=0)).T
-        D = self._far_field(local, D)
-        d_world = D @ self.rotation.T
+    def _escape(self, rows, Q, P, world, out: RayResults, eye, tangents=()):
+        """Rays leaving the region: direction from dq/ds, far-field correction, straight on
+        (with ``tangents`` (dQ, dP) (k, n, M): the escape direction's derivatives too)."""
+        d_world = self._escape_direction(Q, P)
         self._straight(rows, world, d_world, out, eye)
         failed = ~np.isfinite(d_world).all(axis=1)
         out.ending[rows[failed]] = ENDING["failed"]
+        if len(tangents) == 2:
+            n = Q.shape[0]
+
+            def escape(z: np.ndarray) -> np.ndarray:
+                return self._escape_direction(z[:, :n].T.copy(), z[:, n:].T.copy())
+
+            Z = np.concatenate([Q, P]).T
+            dZ = np.moveaxis(np.concatenate(tangents, axis=1), -1, 0)  # (M, k, 2n)
+            jacobian = directional(escape, Z, dZ)
+            sky = out.ending[rows] == ENDING["escaped"]
+            out.sky_jacobian[rows[sky]] = jacobian[sky]
+
+    def _escape_direction(self, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
+        """Unit world directions (M, 3) rays leave the region along from (Q, P) (n, M): the
+        velocity dX/dσ, bent by the rest of the far field (``_far_field``)."""
+        S = Q[self.chart.offset :]
+        _, dHdp = self.model.gradient_soa(Q, P, wrt="p")
+        V = self.chart.cartesian_velocity(S, dHdp[self.chart.offset :])
+        D = (V / np.linalg.norm(V, axis=0)).T
+        return self._far_field(self.chart.to_cartesian(S).T, D) @ self.rotation.T
 
     def _far_field(self, X, D):
         """Bend directions D (M, 3) at X by the rest of the first-order deflection of a mass.
