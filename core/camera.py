@@ -316,13 +316,18 @@ class Camera:
         return Frame(self._position.copy(), -b[:, 2].copy(), b[:, 0].copy(), b[:, 1].copy())
 
     # -- rays ---------------------------------------------------------------------------
-    def window_coords(self, start: int = 0, stop: int | None = None) -> np.ndarray:
-        """Window coordinates (M, 2) of the pixel centres with flat indices [start, stop)."""
+    def pixel_centres(self, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """Image points (M, 2) (as ``rays_at`` takes them) of the pixel centres with flat
+        indices [start, stop)."""
         stop = self.n_pixels if stop is None else stop
         if not 0 <= start <= stop <= self.n_pixels:
             raise IndexError(f"pixel range [{start}, {stop}) outside [0, {self.n_pixels})")
         row, col = np.divmod(np.arange(start, stop, dtype=np.int64), self.width)
-        return self.image_window_coords(np.stack([col + 0.5, row + 0.5], axis=1))
+        return np.stack([col + 0.5, row + 0.5], axis=1)
+
+    def window_coords(self, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """Window coordinates (M, 2) of the pixel centres with flat indices [start, stop)."""
+        return self.image_window_coords(self.pixel_centres(start, stop))
 
     def image_window_coords(self, xy: np.ndarray) -> np.ndarray:
         """Window coordinates (M, 2) of image points xy (M, 2): x = column, y = row from

@@ -102,6 +102,9 @@ def _scale(d: Partials, factor) -> Partials:
 
 def _combine(da: Partials, fa, db: Partials, fb) -> Partials:
     """fa * da + fb * db, touching only the partials that exist."""
+    if len(da) == 1 and da.keys() == db.keys():  # one shared key (core.dual.DualRows)
+        (k, ga), (gb,) = next(iter(da.items())), db.values()
+        return {k: _times(ga, fa) + _times(gb, fb)}
     out = {k: _times(g, fa) for k, g in da.items()}
     for k, g in db.items():
         if k in out:

@@ -89,6 +89,11 @@ PASSES: tuple[Pass, ...] = (
          "g of the camera's motion along each pixel centre's ray (core.motion): the frequency "
          "it sees over the static (Kerr: zero-angular-momentum) observer's; 1 when static",
          interpolated=False, from_camera=True),
+    Pass("magnification", np.float32, math.nan,
+         "|μ| where a pixel centre sees the sky: how much brighter a point source (a star) "
+         "looks in that image than without the hole, the pixel's solid angle over the sky's "
+         "it covers (ray differentials carried through the integration; a moving camera's "
+         "own solid angle); NaN where it sees no sky", label="Magnification"),
 )  # fmt: skip
 """Every pass, in its one order."""
 
@@ -98,13 +103,17 @@ STORED = tuple(p for p in PASSES if p.derived_from is None and not p.from_camera
 """The passes held per pixel while a frame renders (the others are computed from them)."""
 
 
+OPTIONAL = ("direction", "magnification")
+"""Stored passes held (and, magnification, computed) only where asked for."""
+
+
 def traced_passes(rays: Any, seen: np.ndarray | None, error: np.ndarray | None) -> dict:
     """The stored passes of rays traced through pixel centres (a RayResults), by name:
     ``seen`` the directions they see (or None), ``error`` their estimate (or None)."""
     hit = rays.ending == ENDING["hit"]
     position = np.where(hit[:, None], rays.position, np.nan)
     values = {"steps": rays.steps, "ending": rays.ending, "redshift": rays.redshift,
-              "position": position}  # fmt: skip
+              "position": position, "magnification": rays.magnification}  # fmt: skip
     if seen is not None:
         values["direction"] = seen
     if error is not None:

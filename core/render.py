@@ -35,7 +35,7 @@ from .integrators import Splitting
 from .motion import check_observer, observer_motion
 from .motion import shift as doppler_shift
 from .observer import ObserverError, check_camera
-from .passes import ALL_PASSES, BY_NAME, STORED, traced_passes
+from .passes import ALL_PASSES, BY_NAME, OPTIONAL, STORED, traced_passes
 from .sampling import (
     CLEARANCE,
     COMPANION_RATIO,
@@ -56,7 +56,7 @@ from .tracing.steps import DEFAULT_METHOD
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
 DEFAULT_PASSES = tuple(
-    name for name in ALL_PASSES if name not in ("direction", "position", "doppler")
+    name for name in ALL_PASSES if name not in ("direction", "position", "doppler", "magnification")
 )
 """The passes core.render computes unless asked otherwise."""
 _MIN_CHUNK = 2048
@@ -163,7 +163,11 @@ def render(
     # with tolerance_px the companion run always goes: its estimate picks the rays to redo
     with_error = "error" in passes or "error_px" in passes or tolerance_px is not None
     with_error = with_error and tracer.curved
-    image = _Buffers(n, with_error, camera.width, "direction" in passes, pixel_angle)
+    with_tangents = "magnification" in passes
+    if with_tangents:  # refused by name before anything is traced
+        tracer.check_tangents()
+        camera.direction_tangents(np.zeros((1, 2)))
+    image = _Buffers(n, with_error, camera.width, passes, pixel_angle)
     image.camera, image.motion = camera, moving
     kind, count = workers_module.choose(parallel, workers, n, cores)
     sampled = samples > 1 or (tolerance_px is not None and tracer.curved)
@@ -176,6 +180,7 @@ def render(
             pixel_filter=pixel_filter, filter_size=filter_size, with_error=with_error,
             far_field=_far_field_error(tracer), pixel_angle=pixel_angle,
             budget=_integration_budget(tolerance_px, pixel_angle, tracer),
+            tangents=with_tangents,
         )  # fmt: skip
         tile_list = _tiles_for(camera, count)
         chunks = [(k, k + 1) for k in range(len(tile_list))]
@@ -185,7 +190,7 @@ def render(
         # not below _MIN_CHUNK rays: per-step work is Python overhead on small batches
         size = max(_MIN_CHUNK, min(chunk_size, -(-n // (2 * count))))
         chunks = [(s, min(s + size, n)) for s in range(0, n, size)]
-        work = _span_work(tracer, camera, with_error, _far_field_error(tracer))
+        work = _span_work(tracer, camera, with_error, _far_field_error(tracer), with_tangents)
     cancelled = workers_module.CancelLatch(should_cancel)
     done = 0
     for span, chunk in workers_module.run_chunks(work, chunks, kind, count, cancelled):
@@ -314,14 +319,16 @@ def _probe(scene: Scene, camera, probe: dict) -> tuple[np.ndarray, ...]:
     return np.isfinite(g), g, position, luminance
 
 
-def _span_work(tracer: Tracer, camera, with_error: bool, far_field: float):
-    """A chunk of flat pixel indices: one ray through each pixel centre."""
+def _span_work(tracer: Tracer, camera, with_error: bool, far_field: float, tangents: bool):
+    """A chunk of flat pixel indices: one ray through each pixel centre (with its ray
+    differentials where ``tangents``)."""
 
     def work(span, cancel):
         if cancel():
             return None
         origins, directions = camera.rays(*span)
-        chunk = _trace_chunk(tracer, origins, directions, with_error, cancel, far_field)
+        seen = camera.direction_tangents(camera.pixel_centres(*span)) if tangents else None
+        chunk = _trace_chunk(tracer, origins, directions, with_error, cancel, far_field, seen)
         return None if cancel() else chunk
 
     return work
@@ -458,9 +465,13 @@ def tracer_for_camera(scene: Scene, options: TraceOptions, extent: float, positi
     return tracer
 
 
-def _trace_chunk(tracer: Tracer, origins, directions, with_error: bool, cancel, far_field=0.0):
-    """Trace one chunk; with the error pass, a companion run at COMPANION_RATIO x the step."""
-    rays = tracer.trace(origins, directions, cancel=cancel)
+def _trace_chunk(
+    tracer: Tracer, origins, directions, with_error: bool, cancel, far_field=0.0, tangents=None
+):
+    """Trace one chunk (with ``tangents``: the directions' derivatives along the image, for
+    the magnification pass); with the error pass, a companion run at COMPANION_RATIO x the
+    step."""
+    rays = tracer.trace(origins, directions, cancel=cancel, tangents=tangents)
     seen = seen_direction(rays, origins)
     if not with_error:
         return rays, seen, None
@@ -481,15 +492,14 @@ class _Buffers:
     the caller, that grew with the image).
     """
 
-    def __init__(
-        self, n: int, with_error: bool, width: int, with_direction: bool, pixel_angle: float
-    ):
+    def __init__(self, n: int, with_error: bool, width: int, passes, pixel_angle: float):
         self.n = n
         self.pixel_angle = pixel_angle
         self.camera: Any = None
         self.motion: Any = None  # the camera's (core.motion), for the doppler pass
         self.with_error = with_error
-        self.with_direction = with_direction
+        self.optional = {name for name in OPTIONAL if name in passes}
+        """The passes of core.passes.OPTIONAL asked for: only those are held."""
         self.width = width
         self.rays = 0
         self.error_rays = 0
@@ -503,7 +513,7 @@ class _Buffers:
             return
         self.rgba = np.zeros((self.n, 4), dtype=np.float32)
         for kind in STORED:
-            wanted = kind.name != "direction" or self.with_direction
+            wanted = kind.name not in OPTIONAL or kind.name in self.optional
             self.passes[kind.name] = kind.empty(self.n if wanted else 0)
 
     @property
@@ -527,7 +537,7 @@ class _Buffers:
     def _put(self, idx, values: dict) -> None:
         """Store the passes ``values`` (by name) of the pixels ``idx``."""
         for name, data in values.items():
-            if name != "direction" or self.with_direction:
+            if name not in OPTIONAL or name in self.optional:
                 self.passes[name][idx] = data
 
     def store(self, span, chunk, background: Background) -> int:

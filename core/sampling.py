@@ -64,6 +64,7 @@ from .motion import shift as doppler_shift
 from .passes import BY_NAME
 from .sky import Background
 from .tracing import ENDING, RayResults, Tracer
+from .tracing.differentials import magnification
 from .tracing.scene import DISK_ID
 
 TILE = 512
@@ -73,6 +74,9 @@ STRIDE = 32
 MAX_TILE_PIXELS = 1 << 19
 """core.render's tiles are bands of rows of at most this many pixels (memory: ~0.8 kB a
 tile pixel at the peak, lattice and temporaries; ~400 MiB a worker, measured)."""
+MAGNIFICATION_SHARE = 0.01
+"""With the magnification pass, a sky block is interpolated only where ln |μ| is within
+this of bilinear over it (_smooth_magnification): |μ| to ~1 %."""
 FINEST = 4
 """Pixels per side of the finest block tried: every pixel of a block refused at this size
 is traced (one round instead of two more: each round costs a batch's per-step overhead)."""
@@ -222,7 +226,7 @@ class TileResult:
 class _Nodes:
     """The lattice of a tile: what is known at each node (traced or not)."""
 
-    def __init__(self, ny: int, nx: int) -> None:
+    def __init__(self, ny: int, nx: int, tangents: bool = False) -> None:
         shape = (ny, nx)
         self.traced = np.zeros(shape, dtype=bool)
         self.direction = np.zeros(shape + (3,))
@@ -240,6 +244,9 @@ class _Nodes:
         self.redshift = np.full(shape, np.nan)  # g on the accretion disk
         self.radius = np.full(shape, np.nan)  # Boyer–Lindquist r of a hit on the disk
         self.flipped = np.zeros(shape, dtype=bool)  # two of its runs ended on different things
+        self.magnification = np.full(shape, np.nan)  # |μ| where it sees the sky (with tangents)
+        # d(direction) / d(image x, y) where it sees the sky (RayResults.sky_jacobian)
+        self.jacobian = np.full(shape + ((2, 3) if tangents else (0, 3)), np.nan)
 
 
 class TileSampler:
@@ -260,6 +267,7 @@ class TileSampler:
         far_field: float = 0.0,
         pixel_angle: float = 1.0,
         budget: float = np.inf,
+        tangents: bool = False,
     ) -> None:
         self.tracer, self.camera, self.background, self.shade = tracer, camera, background, shade
         self.interpolation = float(interpolation)  # radians; 0: trace every pixel
@@ -272,23 +280,31 @@ class TileSampler:
         self.far_field = far_field  # error of escaped rays beyond the region, radians
         self.pixel_angle = pixel_angle  # radians (core.Camera.pixel_angle)
         self.budget = budget  # radians: a traced ray's integration error above it is redone
+        self.with_tangents = tangents  # ray differentials: the magnification pass
         self._origin = (0, 0)  # image (row, column) of the current tile's node (0, 0)
         self.rays = 0
         self.error_rays = 0
 
     # --- tracing nodes -----------------------------------------------------------------
     def _trace_points(
-        self, xy: np.ndarray, cancel, companion: bool = True, step: float | None = None
+        self,
+        xy: np.ndarray,
+        cancel,
+        companion: bool = True,
+        step: float | None = None,
+        node: bool = True,
     ) -> tuple[RayResults, np.ndarray, np.ndarray | None]:
         """Trace camera rays through image points xy (M, 2) at ``step`` (default: the
         tracer's) -> (rays, seen directions, and with the error pass (and ``companion``)
         their Richardson error in radians from a companion run at COMPANION_RATIO x the
-        step; sub-pixel samples need none: the pass reports pixel centres)."""
+        step; sub-pixel samples need none: the pass reports pixel centres). Nodes (``node``)
+        carry ray differentials where the sampler takes them."""
         origins, directions = self.camera.rays_at(xy)
         n = xy.shape[0]
         self.rays += n if step is None else 0
+        seen = self.camera.direction_tangents(xy) if self.with_tangents and node else None
         if not (self.with_error and companion):
-            rays = self.tracer.trace(origins, directions, step=step, cancel=cancel)
+            rays = self.tracer.trace(origins, directions, step=step, cancel=cancel, tangents=seen)
             return rays, seen_direction(rays, origins), None
         step = step or self.tracer.step
         assert step is not None
@@ -297,6 +313,7 @@ class TileSampler:
             np.concatenate([directions, directions]),
             step=np.repeat([step, COMPANION_RATIO * step], n),
             cancel=cancel,
+            tangents=None if seen is None else np.concatenate([seen, seen]),
         )  # one batch: the companion shares the main run's per-step overhead
         rays, coarse = both.take(slice(0, n)), both.take(slice(n, None))
         self.error_rays += n
@@ -337,6 +354,9 @@ class TileSampler:
         nodes.redshift[jj, ii] = rays.redshift
         on_disk = np.flatnonzero(hit & (rays.object_id == DISK_ID))
         nodes.radius[jj, ii] = np.nan
+        nodes.magnification[jj, ii] = rays.magnification
+        if nodes.jacobian.shape[2] == rays.sky_jacobian.shape[1]:
+            nodes.jacobian[jj, ii] = rays.sky_jacobian
         if on_disk.size:
             radius = self.tracer.scene.disk_radius(rays.position[on_disk])
             nodes.radius[jj[on_disk], ii[on_disk]] = radius
@@ -389,7 +409,7 @@ class TileSampler:
         ny, nx = 1 + s * math.ceil((h + 1) / s), 1 + s * math.ceil((w + 1) / s)
         origin = (tile.y0 - 1, tile.x0 - 1)  # image (row, column) of node (0, 0)
         self._origin = origin
-        nodes = _Nodes(ny, nx)
+        nodes = _Nodes(ny, nx, self.with_tangents)
         blocks = _Blocks(ny - 1, nx - 1)
         if s == 1:
             jj, ii = np.mgrid[0:ny, 0:nx]
@@ -449,6 +469,8 @@ class TileSampler:
             deviation[disk] = self._radius_deviations(nodes, on_disk, width)
         worst = _worst(deviation)
         accepted = alike & (INTERPOLATION_SAFETY * worst <= self.interpolation)
+        if self.with_tangents:
+            accepted &= _smooth_magnification(nodes, nine, ending)
         return accepted, deviation
 
     def _deviations(self, nodes: _Nodes, nine, ending) -> np.ndarray:
@@ -538,7 +560,9 @@ class TileSampler:
         if missed.size:
             self._trace_nodes(nodes, jj[missed], ii[missed], origin, cancel)
             again = self._evaluate(nodes, blocks, jj[missed] * 1.0, ii[missed] * 1.0)
-            for name in ("rgba", "ending", "error", "direction", "redshift", "position"):
+            for name in (
+                "rgba", "ending", "error", "direction", "redshift", "position", "magnification"
+            ):  # fmt: skip
                 getattr(centre, name)[missed] = getattr(again, name)
         rgba = centre.rgba.reshape(h + 2, w + 2, 4)
         error = centre.error.reshape(h + 2, w + 2)
@@ -559,7 +583,8 @@ class TileSampler:
             colour[busy] = self._supersample(nodes, blocks, busy, differs, near, cancel)
         passes = {"error": error[inner], "steps": steps, "ending": ending[inner],
                   "direction": direction[inner], "redshift": redshift[inner],
-                  "position": position[inner]}  # fmt: skip
+                  "position": position[inner],
+                  "magnification": centre.magnification.reshape(h + 2, w + 2)[inner]}  # fmt: skip
         return TileResult(
             colour.astype(np.float32),
             {name: data.astype(BY_NAME[name].dtype, copy=False) for name, data in passes.items()},
@@ -573,7 +598,7 @@ class TileSampler:
         m = y.shape[0]
         out = _Points(
             np.zeros((m, 4)), np.full(m, -1, dtype=np.int8), np.zeros(m), np.full((m, 3), np.nan),
-            np.full(m, np.nan), np.full((m, 3), np.nan),
+            np.full(m, np.nan), np.full((m, 3), np.nan), np.full(m, np.nan),
         )  # fmt: skip
         cell_j = np.clip(np.floor(y).astype(np.int64), 0, blocks.block.shape[0] - 1)
         cell_i = np.clip(np.floor(x).astype(np.int64), 0, blocks.block.shape[1] - 1)
@@ -590,6 +615,7 @@ class TileSampler:
         out.error[t] = nodes.error[nj[t], ni[t]]
         out.direction[t] = nodes.direction[nj[t], ni[t]]
         out.redshift[t] = nodes.redshift[nj[t], ni[t]]
+        out.magnification[t] = nodes.magnification[nj[t], ni[t]]
         hit = out.ending[t] == ENDING["hit"]
         out.position[t[hit]] = nodes.position[nj[t[hit]], ni[t[hit]]]
         return out
@@ -604,8 +630,9 @@ class TileSampler:
         corners = [(bj, bi), (bj, bi + s), (bj + s, bi), (bj + s, bi + s)]
 
         def blend(field):
+            spread = (-1,) + (1,) * (field.ndim - 2)  # a weight per point, over its values
             return sum(
-                (wk if field.ndim == 2 else wk[:, None]) * field[j, i]
+                (wk if field.ndim == 2 else wk.reshape(spread)) * field[j, i]
                 for wk, (j, i) in zip(weights, corners, strict=True)
             )
 
@@ -618,6 +645,9 @@ class TileSampler:
         if sky.any():
             colour[sky] = self.background(d[sky])
         out.direction[rows] = np.where(sky[:, None], d, np.nan)
+        if self.with_tangents and sky.any():  # the nodes' ray differentials, blended
+            seen = self.camera.direction_tangents(self._image_xy(y[sky], x[sky]))
+            out.magnification[rows[sky]] = magnification(seen, blend(nodes.jacobian)[sky])
         disk = np.flatnonzero((ending == ENDING["hit"]) & (nodes.object_id[bj, bi] == DISK_ID))
         if disk.size:  # the disk's light at the interpolated radius and g
             sub = [(j[disk], i[disk]) for j, i in corners]
@@ -713,7 +743,8 @@ class TileSampler:
         points = self._evaluate(nodes, blocks, y, x)
         todo = np.flatnonzero(points.ending < 0)
         if todo.size:
-            rays, _, _ = self._trace_points(self._image_xy(y[todo], x[todo]), cancel, False)
+            xy = self._image_xy(y[todo], x[todo])
+            rays, _, _ = self._trace_points(xy, cancel, False, node=False)
             points.rgba[todo] = self.shade(rays, self.background)
         return points.rgba.reshape(pj.size, -1, 4), weight
 
@@ -758,6 +789,20 @@ def _worst(deviation: np.ndarray) -> np.ndarray:
     return np.maximum(top, bottom) + np.maximum(left, right) + beyond
 
 
+def _smooth_magnification(nodes: _Nodes, nine, ending) -> np.ndarray:
+    """(B,) blocks whose magnification pass may be interpolated (the nodes' ray differentials
+    blended): not on the sky, or ln |μ| within MAGNIFICATION_SHARE of bilinear (the
+    deviations of _edge_deviations, bounded as by _worst)."""
+    with np.errstate(all="ignore"):
+        values = [np.log(nodes.magnification[j, i]) for j, i in nine]
+
+    def apart(k, ends):
+        return np.abs(values[k] - sum(values[e] for e in ends) / len(ends))
+
+    worst = _worst(_edge_deviations(apart))
+    return (ending != ENDING["escaped"]) | (worst <= MAGNIFICATION_SHARE)
+
+
 def _magnification(nodes: _Nodes, corners, width: float) -> np.ndarray:
     """(B,) how much wider than at the camera a block's rays spread at their ends (at
     least 1): the largest angle between its corners' final directions over their angle
@@ -785,6 +830,7 @@ class _Points:
     direction: np.ndarray
     redshift: np.ndarray
     position: np.ndarray
+    magnification: np.ndarray
 
 
 class _Blocks:

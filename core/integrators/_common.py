@@ -167,6 +167,10 @@ class Method:
         """Positions and momenta (each (n, N)) of a state."""
         return state[0], state[1]
 
+    def tangents_of(self, state: State) -> tuple[np.ndarray, ...]:
+        """(dQ, dP) (k, n, N) a state carries (``Splitting.with_tangents``), or ()."""
+        return ()
+
     def pattern(self, H: Any) -> Pattern | None:
         """A splitting's sub-flows for H (compositions merge neighbours); None: not one."""
         return None

@@ -196,6 +196,10 @@ class Splitting(Method):
             return (Q.value, P.value, Q.tangent, P.tangent), ok
         return (Q, P), finite_rays(Q, P)
 
+    def tangents_of(self, state: State) -> tuple[np.ndarray, ...]:
+        """(dQ, dP) of a state with tangents, else ()."""
+        return tuple(state[2:4])
+
     def with_tangents(self, H: Any, state: State, dQ: np.ndarray, dP: np.ndarray) -> State:
         """``state`` with tangents dQ, dP (k, n, N) to carry along; ValueError where H's
         flows cannot carry them (``SplitSystem.tangents``)."""

@@ -491,7 +491,7 @@ class Tracer:
                 self._to_world(local),
                 out,
                 self._to_world(camera[:, leaving].T),
-                [d[..., leaving] for d in batch.state[2:4]],
+                [d[..., leaving] for d in self.method.tangents_of(batch.state)],
             )
             ended |= leaving
         if ended.any():

@@ -70,3 +70,27 @@ def test_a_moving_cameras_sky_takes_each_pixels_doppler_shift(
     expected = blackbody.shifted_colour(colours, g) if shift_colours else colours
     np.testing.assert_allclose(image[rows, cols, :3], expected, rtol=1e-5, atol=1e-6)
     assert g.max() - g.min() > 0.2  # the shift differs across the frame
+
+
+def test_the_magnification_pass_of_a_moving_camera_is_its_aberration(addon, factory_scene, helpers):
+    """Flat space, the camera moving at 0.5 c to its right, the SymRay Magnification pass
+    on: the aberration maps the camera's solid angle onto the sky's scaled by g², so each
+    pixel seeing the world has |μ| = 1 / g² (core/tracing/differentials.py against special
+    relativity; at 0.5 c the aberration moves the factory cube out of this frame: every
+    pixel sees the world)."""
+    scene = factory_scene
+    scene.symray.model = "FLAT"
+    scene.symray.pass_magnification = scene.symray.pass_ending = True
+    camera = scene.camera
+    right = np.array(camera.matrix_world)[:3, 0]
+    camera.data.symray.kind = "VELOCITY"
+    camera.data.symray.velocity = (0.5 * right).tolist()
+    job = _job(addon)
+    result = job.run(job.prepare(scene, bpy.context.evaluated_depsgraph_get()))
+    mu = result.passes["magnification"]
+    assert (result.passes["ending"] == addon.module("core").ENDING["escaped"]).all()
+    rows, cols = (a.ravel() for a in np.mgrid[0:48, 0:64])  # every pixel sees the world
+    n = helpers.frame_directions(scene, camera, rows, cols)
+    g = 1.0 / ((1.0 / math.sqrt(1 - 0.25)) * (1.0 - n @ (0.5 * right)))
+    np.testing.assert_allclose(mu[rows, cols], 1.0 / g**2, rtol=1e-5)
+    assert g.max() / g.min() > 1.3  # μ differs across the frame
