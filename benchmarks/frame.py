@@ -1,7 +1,7 @@
 """One timed frame of the Kerr board scene, written so that an old checkout runs it too.
 
     PYTHONPATH=<checkout> python benchmarks/frame.py OUT.npz --width W --height H
-        [--method gauss4 --tolerance RAD | --tolerance-px PX [--samples N]]
+        [--method gauss4 --tolerance RAD | --tolerance-px PX [--samples N] [--magnification]]
 
 Renders with core.render (error pass on), then saves the time, the rays, and what each
 pixel's centre sees (escape direction, or the unit vector to the hit point; NaN where
@@ -79,12 +79,19 @@ def main() -> None:
     parser.add_argument("--tolerance", type=float, default=None)
     parser.add_argument("--tolerance-px", type=float, default=None)
     parser.add_argument("--samples", type=int, default=1)
+    parser.add_argument(
+        "--magnification",
+        action="store_true",
+        help="also the magnification pass (ray differentials)",
+    )
     args = parser.parse_args()
     scene, cam = kerr_board_scene(), camera(args.width, args.height)
     kwargs = {"method": args.method} if args.method else {}
     if args.tolerance_px is not None:
         kwargs.update(tolerance_px=args.tolerance_px, samples=args.samples)
         kwargs["passes"] = ("error", "error_px", "steps", "ending", "direction")
+        if args.magnification:
+            kwargs["passes"] += ("magnification",)
     else:
         kwargs["tolerance"] = args.tolerance
     start = time.perf_counter()

@@ -205,7 +205,7 @@ def test_the_passes_follow_the_core_table(addon, scene):
     its scene.symray toggle (named, default and description from the table), its render pass
     and its passes-EXR layer, in the table's order."""
     table = [p for p in addon.module("core.passes").PASSES if p.label]
-    assert [p.name for p in table] == ["error_px", "steps", "ending", "redshift"]
+    assert [p.name for p in table] == ["error_px", "steps", "ending", "redshift", "magnification"]
     rna = scene.symray.bl_rna.properties
     for kind in table:
         assert rna[kind.toggle].name == kind.label
