@@ -134,7 +134,9 @@ def where(condition, x, y):
         return value
     dx = x.d if isinstance(x, Dual) else {}
     dy = y.d if isinstance(y, Dual) else {}
-    partials = {k: np.where(condition, dx.get(k, 0.0), dy.get(k, 0.0)) for k in {*dx, *dy}}
+    partials: Partials = {
+        k: np.where(condition, dx.get(k, 0.0), dy.get(k, 0.0)) for k in {*dx, *dy}
+    }
     return Dual(value, partials)
 
 

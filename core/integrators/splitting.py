@@ -184,17 +184,21 @@ class Splitting(Method):
         dQ, dP) with tangents (k, n, N) (``with_tangents``) gets them carried through the
         step's own tangent map (forward mode, core.dual.DualRows)."""
         kick, drift = split_flows(H, self.name)
-        Q, P = (a.copy() for a in state[:2])
         if len(state) == 4:
-            Q, P = DualRows(Q, state[2].copy()), DualRows(P, state[3].copy())
+            Q, P = (DualRows(state[i].copy(), state[i + 2].copy()) for i in (0, 1))
+            self._compose(kick, drift, Q, P, h)
+            ok = finite_rays(Q.value, P.value, *Q.tangent, *P.tangent)
+            return (Q.value, P.value, Q.tangent, P.tangent), ok
+        Q, P = (a.copy() for a in state[:2])
+        self._compose(kick, drift, Q, P, h)
+        return (Q, P), finite_rays(Q, P)
+
+    def _compose(self, kick: Any, drift: Any, Q: Any, P: Any, h: Any) -> None:
+        """The step's kicks and drifts in place on Q, P (arrays, or DualRows)."""
         for b, a in zip(self.kicks, self.drifts, strict=False):
             kick(Q, P, b * h)
             drift(Q, P, a * h)
         kick(Q, P, self.kicks[-1] * h)
-        if isinstance(Q, DualRows):
-            ok = finite_rays(Q.value, P.value, *Q.tangent, *P.tangent)
-            return (Q.value, P.value, Q.tangent, P.tangent), ok
-        return (Q, P), finite_rays(Q, P)
 
     def tangents_of(self, state: State) -> tuple[np.ndarray, ...]:
         """(dQ, dP) of a state with tangents, else ()."""

@@ -421,10 +421,11 @@ class Tracer:
         """(dQ, dP) (k, n, M): the start state's derivatives along the directions' tangents
         (M, k, 3), through the region's entry point, the chart and the observer's frame
         (central differences, core/tracing/differentials.py)."""
-        assert self.region is not None
+        region = self.region
+        assert region is not None
 
         def state(d: np.ndarray) -> np.ndarray:
-            X, _ = self.region.entry(camera.T, d)
+            X, _ = region.entry(camera.T, d)
             Q, P = self._start_state(X.T.copy(), d.T.copy())
             return np.concatenate([Q, P]).T
 
