@@ -185,10 +185,10 @@ class Splitting(Method):
         step's own tangent map (forward mode, core.dual.DualRows)."""
         kick, drift = split_flows(H, self.name)
         if len(state) == 4:
-            Q, P = (DualRows(state[i].copy(), state[i + 2].copy()) for i in (0, 1))
-            self._compose(kick, drift, Q, P, h)
-            ok = finite_rays(Q.value, P.value, *Q.tangent, *P.tangent)
-            return (Q.value, P.value, Q.tangent, P.tangent), ok
+            rows = [DualRows(state[i].copy(), state[i + 2].copy()) for i in (0, 1)]
+            self._compose(kick, drift, *rows, h)
+            new = (rows[0].value, rows[1].value, rows[0].tangent, rows[1].tangent)
+            return new, finite_rays(*new[:2], *new[2], *new[3])
         Q, P = (a.copy() for a in state[:2])
         self._compose(kick, drift, Q, P, h)
         return (Q, P), finite_rays(Q, P)
