@@ -186,7 +186,7 @@ class Splitting(Method):
         kick, drift = split_flows(H, self.name)
         if len(state) == 4:
             rows = [DualRows(state[i].copy(), state[i + 2].copy()) for i in (0, 1)]
-            self._compose(kick, drift, *rows, h)
+            self._compose(kick, drift, rows[0], rows[1], h)
             new = (rows[0].value, rows[1].value, rows[0].tangent, rows[1].tangent)
             return new, finite_rays(*new[:2], *new[2], *new[3])
         Q, P = (a.copy() for a in state[:2])
