@@ -32,6 +32,11 @@ from ..integrators.splitting import SplitSystem
 from .medium import Medium
 
 
+def index_and_slope(u):
+    """n = (1 + u)³ / (1 − u) and dn/du at u = M/2ρ (arrays, or core.dual Duals)."""
+    return (1.0 + u) ** 3 / (1.0 - u), (1.0 + u) ** 2 * (4.0 - 2.0 * u) / (1.0 - u) ** 2
+
+
 class SchwarzschildOptical(Medium):
     """Schwarzschild light rays as the isotropic optical medium n(ρ) (see the module)."""
 
@@ -59,11 +64,9 @@ class SchwarzschildOptical(Medium):
         rho = np.sqrt(np.einsum("ij,ij->j", Q, Q))
         with np.errstate(all="ignore"):
             u = 0.5 * self.mass / rho
-            n = (1.0 + u) ** 3 / (1.0 - u)
-            dn_du = (1.0 + u) ** 2 * (4.0 - 2.0 * u) / (1.0 - u) ** 2
+            n, dn_du = index_and_slope(u)
             grad = (dn_du * (-u / (rho * rho))) * Q
-            bad = ~(u < 1.0)
-            n = np.where(bad, np.nan, n)
+            n = np.where(~(u < 1.0), np.nan, n)
         return n, grad
 
     def killing_block_soa(self, S: np.ndarray):
@@ -138,8 +141,7 @@ class LogarithmicSplit(SplitSystem):
         """f of ``_force_factor`` at ρ² (an array, or a Dual)."""
         with np.errstate(all="ignore"):
             u = 0.5 * self.model.mass / dual.sqrt(rho2)
-            n = (1.0 + u) ** 3 / (1.0 - u)
-            dn_du = (1.0 + u) ** 2 * (4.0 - 2.0 * u) / (1.0 - u) ** 2
+            n, dn_du = index_and_slope(u)
             factor = (2.0 * n / (n * n - 1.0)) * dn_du * (-u / rho2)
         return dual.where(dual.value_of(u) < 1.0, factor, np.nan)
 
