@@ -43,6 +43,7 @@ from .observer import (
 )
 from .render import MAX_STEPS_COLOR, RenderResult, render
 from .sky import Background, equirect_lookup, procedural_sky
+from .stars import StarField
 from .trace import ENDING, Scene
 
 __all__ = [
@@ -90,6 +91,7 @@ __all__ = [
     "RenderResult",
     "render",
     "Background",
+    "StarField",
     "equirect_lookup",
     "procedural_sky",
     "ENDING",

@@ -94,6 +94,10 @@ PASSES: tuple[Pass, ...] = (
          "looks in that image than without the hole, the pixel's solid angle over the sky's "
          "it covers (ray differentials carried through the integration; a moving camera's "
          "own solid angle); NaN where it sees no sky", label="Magnification"),
+    Pass("transmittance", np.float32, 1.0,
+         "the share of the light behind (the sky, or what the ray ends on) that reaches the "
+         "camera through what lies in front: volumes, a translucent disk; 1 where nothing "
+         "(point stars are dimmed by it)"),
 )  # fmt: skip
 """Every pass, in its one order."""
 
@@ -103,7 +107,7 @@ STORED = tuple(p for p in PASSES if p.derived_from is None and not p.from_camera
 """The passes held per pixel while a frame renders (the others are computed from them)."""
 
 
-OPTIONAL = ("direction", "magnification")
+OPTIONAL = ("direction", "magnification", "transmittance")
 """Stored passes held (and, magnification, computed) only where asked for."""
 
 
@@ -113,7 +117,8 @@ def traced_passes(rays: Any, seen: np.ndarray | None, error: np.ndarray | None) 
     hit = rays.ending == ENDING["hit"]
     position = np.where(hit[:, None], rays.position, np.nan)
     values = {"steps": rays.steps, "ending": rays.ending, "redshift": rays.redshift,
-              "position": position, "magnification": rays.magnification}  # fmt: skip
+              "position": position, "magnification": rays.magnification,
+              "transmittance": rays.transmittance}  # fmt: skip
     if seen is not None:
         values["direction"] = seen
     if error is not None:

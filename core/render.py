@@ -49,15 +49,17 @@ from .sampling import (
     tiles,
 )
 from .sky import Background
+from .star_images import draw_stars
+from .stars import StarField
 from .tracing import ENDING, FAR_FIELD_CONSTANT, RayResults, Scene, TraceOptions, Tracer
 from .tracing.scene import DISK_ID
 from .tracing.steps import DEFAULT_METHOD
 
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
-DEFAULT_PASSES = tuple(
-    name for name in ALL_PASSES if name not in ("direction", "position", "doppler", "magnification")
-)
+ON_REQUEST = ("direction", "position", "doppler", "magnification", "transmittance")
+"""Passes computed only when asked for."""
+DEFAULT_PASSES = tuple(name for name in ALL_PASSES if name not in ON_REQUEST)
 """The passes core.render computes unless asked otherwise."""
 _MIN_CHUNK = 2048
 _CAMERA_CHUNK = 1 << 16
@@ -167,7 +169,12 @@ def render(
     if with_tangents:  # refused by name before anything is traced
         tracer.check_tangents()
         camera.direction_tangents(np.zeros((1, 2)))
+    stars = background if isinstance(background, StarField) else None
+    if stars is not None:  # their images need each pixel's solid angle: refused by name
+        camera.direction_tangents(np.zeros((1, 2)))
     image = _Buffers(n, with_error, camera.width, passes, pixel_angle)
+    if stars is not None:  # what the stars' images are found and dimmed from
+        image.optional |= {"direction", "transmittance"}
     image.camera, image.motion = camera, moving
     kind, count = workers_module.choose(parallel, workers, n, cores)
     sampled = samples > 1 or (tolerance_px is not None and tracer.curved)
@@ -202,9 +209,14 @@ def render(
         if progress is not None:
             progress(done, n)
     was_cancelled = done < n or cancelled()
+    star_images = None
+    if stars is not None and not was_cancelled:
+        star_images = image.draw_stars(stars, pixel_filter, filter_size)
     result = image.result(camera, passes, time.perf_counter() - start_time, was_cancelled, tracer)
     result.summary["parallel"] = f"{count} {kind}" if kind != "inline" else "inline"
     result.summary["pixel_angle"] = pixel_angle
+    if star_images is not None:
+        result.summary["star_images"] = star_images
     if scene.disk is not None:
         result.summary["disk_exposure"] = scene.disk.exposure
     _summarise_px(result.summary, pixel_angle)
@@ -605,6 +617,18 @@ class _Buffers:
                 shape if kind.channels == 1 else (*shape, kind.channels)
             )
         return out
+
+    def draw_stars(self, stars: StarField, pixel_filter: str, filter_size: float) -> int:
+        """Add the point stars' lensed images to the finished frame (core.star_images);
+        -> how many were drawn."""
+        h, w = self.n // self.width, self.width
+        return draw_stars(
+            self.rgba.reshape(h, w, 4),
+            self.passes["direction"].reshape(h, w, 3),
+            (self.ending == ENDING["escaped"]).reshape(h, w),
+            self.passes["transmittance"].reshape(h, w),
+            self.camera, stars, self.motion, pixel_filter, filter_size,
+        )  # fmt: skip
 
     def _doppler(self, idx) -> np.ndarray:
         """The doppler pass (float32, flat) of the pixels ``idx`` (a slice or indices): the

@@ -245,6 +245,7 @@ class _Nodes:
         self.radius = np.full(shape, np.nan)  # Boyer–Lindquist r of a hit on the disk
         self.flipped = np.zeros(shape, dtype=bool)  # two of its runs ended on different things
         self.magnification = np.full(shape, np.nan)  # |μ| where it sees the sky (with tangents)
+        self.transmittance = np.ones(shape)  # through volumes and a translucent disk
         # d(direction) / d(image x, y) where it sees the sky (RayResults.sky_jacobian)
         self.jacobian = np.full(shape + ((2, 3) if tangents else (0, 3)), np.nan)
 
@@ -355,6 +356,7 @@ class TileSampler:
         on_disk = np.flatnonzero(hit & (rays.object_id == DISK_ID))
         nodes.radius[jj, ii] = np.nan
         nodes.magnification[jj, ii] = rays.magnification
+        nodes.transmittance[jj, ii] = rays.transmittance
         if nodes.jacobian.shape[2] == rays.sky_jacobian.shape[1]:
             nodes.jacobian[jj, ii] = rays.sky_jacobian
         if on_disk.size:
@@ -561,7 +563,8 @@ class TileSampler:
             self._trace_nodes(nodes, jj[missed], ii[missed], origin, cancel)
             again = self._evaluate(nodes, blocks, jj[missed] * 1.0, ii[missed] * 1.0)
             for name in (
-                "rgba", "ending", "error", "direction", "redshift", "position", "magnification"
+                "rgba", "ending", "error", "direction", "redshift", "position", "magnification",
+                "transmittance",
             ):  # fmt: skip
                 getattr(centre, name)[missed] = getattr(again, name)
         rgba = centre.rgba.reshape(h + 2, w + 2, 4)
@@ -584,7 +587,8 @@ class TileSampler:
         passes = {"error": error[inner], "steps": steps, "ending": ending[inner],
                   "direction": direction[inner], "redshift": redshift[inner],
                   "position": position[inner],
-                  "magnification": centre.magnification.reshape(h + 2, w + 2)[inner]}  # fmt: skip
+                  "magnification": centre.magnification.reshape(h + 2, w + 2)[inner],
+                  "transmittance": centre.transmittance.reshape(h + 2, w + 2)[inner]}  # fmt: skip
         return TileResult(
             colour.astype(np.float32),
             {name: data.astype(BY_NAME[name].dtype, copy=False) for name, data in passes.items()},
@@ -598,7 +602,7 @@ class TileSampler:
         m = y.shape[0]
         out = _Points(
             np.zeros((m, 4)), np.full(m, -1, dtype=np.int8), np.zeros(m), np.full((m, 3), np.nan),
-            np.full(m, np.nan), np.full((m, 3), np.nan), np.full(m, np.nan),
+            np.full(m, np.nan), np.full((m, 3), np.nan), np.full(m, np.nan), np.ones(m),
         )  # fmt: skip
         cell_j = np.clip(np.floor(y).astype(np.int64), 0, blocks.block.shape[0] - 1)
         cell_i = np.clip(np.floor(x).astype(np.int64), 0, blocks.block.shape[1] - 1)
@@ -616,6 +620,7 @@ class TileSampler:
         out.direction[t] = nodes.direction[nj[t], ni[t]]
         out.redshift[t] = nodes.redshift[nj[t], ni[t]]
         out.magnification[t] = nodes.magnification[nj[t], ni[t]]
+        out.transmittance[t] = nodes.transmittance[nj[t], ni[t]]
         hit = out.ending[t] == ENDING["hit"]
         out.position[t[hit]] = nodes.position[nj[t[hit]], ni[t[hit]]]
         return out
@@ -831,6 +836,8 @@ class _Points:
     redshift: np.ndarray
     position: np.ndarray
     magnification: np.ndarray
+    transmittance: np.ndarray
+    """1 where interpolated: blocks are only where nothing lies in front (_Nodes.plain)."""
 
 
 class _Blocks:

@@ -280,7 +280,8 @@ def procedural_sky(
 
 
 class Background:
-    """What rays that escape see: "procedural", a constant rgb(a), an equirect array or callable.
+    """What rays that escape see: "procedural" ("milky_way": without its stars), a constant
+    rgb(a), an equirect array or callable.
 
     ``matrix`` (3x3, optional) rotates the environment: a world direction d is looked up
     at ``matrix.T @ d``. ``strength`` scales the colour (not the alpha).
@@ -306,9 +307,12 @@ class Background:
         if isinstance(spec, Background):
             return spec
         if isinstance(spec, str):
-            if spec != "procedural":
-                raise ValueError(f"background string must be 'procedural', got {spec!r}")
-            return lambda d: procedural_sky(d, grid=grid, star_size=star_size)
+            if spec not in ("procedural", "milky_way"):
+                raise ValueError(
+                    f"background string must be 'procedural' or 'milky_way', got {spec!r}"
+                )
+            stars = spec == "procedural"  # milky_way: the galaxy band and gradient only
+            return lambda d: procedural_sky(d, grid=grid, stars=stars, star_size=star_size)
         if callable(spec):
             return spec
         arr = np.asarray(spec, dtype=np.float64)

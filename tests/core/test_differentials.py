@@ -8,13 +8,12 @@ import math
 
 import numpy as np
 import pytest
-from scipy.integrate import quad
-from scipy.optimize import brentq
 
 import core
 from core import hamiltonians as hm
 from core.motion import Motion
 from core.trace import TraceOptions, Tracer
+from tests.exact_lens import exact_magnification
 
 CAMERA = np.array([0.0, -30.0, 3.0])
 
@@ -66,44 +65,6 @@ def test_sky_jacobian_is_the_derivative_of_the_traced_flow(model):
         assert error[same].max() < 1e-6
 
 
-def _swept_to_infinity(b: float, mass: float, r_from: float | None = None) -> float:
-    """The angle φ a Schwarzschild light ray of impact parameter b sweeps from r_from (or
-    from its periapsis) out to infinity: ∫ du / √(1/b² − u² + 2 M u³), u = 1/r."""
-
-    def f(u):
-        return 1.0 / b**2 - u * u + 2.0 * mass * u**3
-
-    if r_from is not None:
-        return quad(lambda u: 1.0 / math.sqrt(f(u)), 0.0, 1.0 / r_from, epsabs=1e-14,
-                    epsrel=1e-13, limit=200)[0]  # fmt: skip
-    top = brentq(f, 0.0, 1.0 / (3.0 * mass), xtol=1e-16)  # the periapsis' u
-    slope = top * (2.0 - 6.0 * mass * top)  # -f'(top) top: f(top (1 - s²)) ~ slope s²
-
-    def smooth(s):  # u = top (1 - s²): the 1/√ end point is gone
-        if s == 0.0:
-            return 2.0 * top / math.sqrt(slope * top)
-        return 2.0 * s * top / math.sqrt(f(top * (1.0 - s * s)))
-
-    return quad(smooth, 0.0, 1.0, epsabs=1e-14, epsrel=1e-13, limit=200)[0]
-
-
-def _exact_magnification(alpha: float, mass: float, r_obs: float) -> float:
-    """|μ| of the image a static observer at r_obs sees at angle alpha from the hole:
-    sin α = (b / r) √(1 − 2M/r) (the static frame), the sky angle Θ = π − Δφ(b) from the
-    axis behind the hole, μ = sin α / |sin Θ dΘ/dα| (dΔφ/dα by central differences of
-    the quadrature)."""
-
-    def swept(a):
-        b = r_obs * math.sin(a) / math.sqrt(1.0 - 2.0 * mass / r_obs)
-        if a > math.pi / 2:  # moving out from the start
-            return _swept_to_infinity(b, mass, r_obs)
-        return 2.0 * _swept_to_infinity(b, mass) - _swept_to_infinity(b, mass, r_obs)
-
-    h = 1e-5
-    rate = (swept(alpha + h) - swept(alpha - h)) / (2.0 * h)
-    return math.sin(alpha) / abs(math.sin(swept(alpha)) * rate)
-
-
 def _in_plane_rays(alpha: np.ndarray, r_obs: float):
     """Rays from (0, -r_obs, 0) at angles alpha from the hole's direction (+y), in the
     z = 0 plane, with two orthonormal tangents each (the camera's solid angle rate 1)."""
@@ -125,7 +86,7 @@ def test_magnification_is_the_exact_schwarzschild_lens():
     origins, d, t = _in_plane_rays(alpha, r_obs)
     out = tracer.trace(origins, d, tangents=t)
     assert np.all(out.ending == core.ENDING["escaped"])
-    exact = np.array([_exact_magnification(a, mass, r_obs) for a in alpha])
+    exact = np.array([exact_magnification(a, mass, r_obs) for a in alpha])
     assert np.abs(out.magnification / exact - 1).max() < 0.01
 
 
@@ -204,6 +165,6 @@ def test_the_magnification_pass_is_the_exact_lens(sampling):
     alpha = np.arccos(seen @ np.array([0.0, 1.0, 0.0]))
     pick = np.flatnonzero(np.isfinite(mu) & (mu < 30))[::7]
     assert pick.size > 150
-    exact = np.array([_exact_magnification(a, mass, r_obs) for a in alpha[pick]])
+    exact = np.array([exact_magnification(a, mass, r_obs) for a in alpha[pick]])
     far = exact < 30
     assert np.abs(mu[pick][far] / exact[far] - 1).max() < 0.01
