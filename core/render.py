@@ -211,7 +211,7 @@ def render(
     was_cancelled = done < n or cancelled()
     star_images = None
     if stars is not None and not was_cancelled:
-        star_images = image.draw_stars(stars, pixel_filter, filter_size)
+        star_images = image.draw_stars(stars, pixel_filter, filter_size, tracer)
     result = image.result(camera, passes, time.perf_counter() - start_time, was_cancelled, tracer)
     result.summary["parallel"] = f"{count} {kind}" if kind != "inline" else "inline"
     result.summary["pixel_angle"] = pixel_angle
@@ -618,7 +618,7 @@ class _Buffers:
             )
         return out
 
-    def draw_stars(self, stars: StarField, pixel_filter: str, filter_size: float) -> int:
+    def draw_stars(self, stars: StarField, pixel_filter: str, filter_size: float, tracer) -> int:
         """Add the point stars' lensed images to the finished frame (core.star_images);
         -> how many were drawn."""
         h, w = self.n // self.width, self.width
@@ -627,7 +627,7 @@ class _Buffers:
             self.passes["direction"].reshape(h, w, 3),
             (self.ending == ENDING["escaped"]).reshape(h, w),
             self.passes["transmittance"].reshape(h, w),
-            self.camera, stars, self.motion, pixel_filter, filter_size,
+            self.camera, stars, self.motion, pixel_filter, filter_size, tracer,
         )  # fmt: skip
 
     def _doppler(self, idx) -> np.ndarray:

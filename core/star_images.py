@@ -28,6 +28,7 @@ import numpy as np
 
 from .sampling import sample_offsets
 from .stars import StarField, star_rgb
+from .tracing.scene import ENDING
 
 CELL_LIMIT = 0.1
 """Cells whose corners' directions lie more than this (radians) from their mean are skipped:
@@ -36,6 +37,12 @@ images pile up) make the bilinear map meaningless, and an image there is demagni
 (pixel angle / CELL_LIMIT)² ~ 1e-5 at 1080p."""
 BAND_ROWS = 32
 """Rows of cells handled at once (memory stays bounded for any resolution)."""
+TRACE_CHUNK = 16_384
+"""Images whose magnification is traced at once."""
+FD_PIXELS = 0.25
+"""Where the tracer carries no ray differentials: half the spacing (pixels) of the central
+differences of traced rays that give an image's magnification (second order: ~1e-3 of μ
+where it varies over tens of pixels)."""
 STARS_PER_BIN = 2.0
 """The star index's cells (equal-area in z and longitude) hold about this many stars."""
 
@@ -104,10 +111,13 @@ def draw_stars(
     motion: Any = None,
     pixel_filter: str = "blackman_harris",
     filter_size: float = 1.5,
+    tracer: Any = None,
 ) -> int:
     """Add the lensed images of ``stars`` to ``rgba`` (h, w, 4), in place (module docstring):
     ``seen`` (h, w, 3) the pixel centres' directions, ``sky`` (h, w) where they escaped,
-    ``transmittance`` (h, w) of what lies in front. -> the number of images drawn."""
+    ``transmittance`` (h, w) of what lies in front; ``tracer`` (the render's, with the
+    camera's motion): each image's magnification is traced at its point (image_magnification),
+    else taken from the centres' differences. -> the number of images drawn."""
     h, w = sky.shape
     if h < 2 or w < 2 or stars.magnitudes.size == 0:
         return 0
@@ -124,7 +134,11 @@ def draw_stars(
         if found is None:
             continue
         xy, sky_area, dimming, star = found
-        _splat(rgba, xy, sky_area, dimming, stars, star, camera, motion, pixel_filter, filter_size)
+        mu = _camera_area(camera, xy) / sky_area
+        if tracer is not None and star.size:
+            traced = image_magnification(tracer, camera, xy, stars.directions[star])
+            mu = np.where(np.isfinite(traced), traced, mu)
+        _splat(rgba, xy, mu, dimming, stars, star, camera, motion, pixel_filter, filter_size)
         drawn += star.size
     return drawn
 
@@ -263,8 +277,8 @@ def inverse_bilinear(corners: list, s: np.ndarray) -> tuple[np.ndarray, ...]:
     for k, v in enumerate(candidates):
         if k == 1:  # a double root (q = k0 / q = q / k2) is one image
             v = np.where(np.isclose(candidates[0], candidates[1], rtol=0, atol=1e-12), np.nan, v)
-        along = e + g * v[:, None]
         with np.errstate(all="ignore"):
+            along = e + g * v[:, None]
             u = np.sum((hh - f * v[:, None]) * along, 1) / np.sum(along * along, 1)
             miss = a + e * u[:, None] + f * v[:, None] + g * (u * v)[:, None]
             inside = real & (u >= 0) & (u < 1) & (v >= 0) & (v < 1)
@@ -276,14 +290,47 @@ def inverse_bilinear(corners: list, s: np.ndarray) -> tuple[np.ndarray, ...]:
     return np.concatenate(us), np.concatenate(vs), np.concatenate(owners)
 
 
-def _splat(rgba, xy, sky_area, dimming, stars, star, camera, motion, pixel_filter, filter_size):
-    """Add each image (points xy (M, 2)) of star numbers ``star`` to ``rgba`` (h, w, 4)."""
+def image_magnification(tracer: Any, camera: Any, xy: np.ndarray, star: np.ndarray) -> np.ndarray:
+    """|μ| (M,) of the images at points xy (M, 2) of stars in directions ``star`` (M, 3): a
+    ray traced through each point carrying its ray differentials (Tracer.trace's tangents),
+    or where the tracer cannot, central differences of rays traced FD_PIXELS either side;
+    NaN where a ray does not escape. The positions come from the (possibly interpolated)
+    direction map, whose differences are not accurate enough for μ (an interpolated block's
+    bilinear map is within the tolerance in direction, not in its derivative)."""
+    mu = np.full(xy.shape[0], np.nan)
+    for a in range(0, xy.shape[0], TRACE_CHUNK):
+        b = min(a + TRACE_CHUNK, xy.shape[0])
+        mu[a:b] = _traced_magnification(tracer, camera, xy[a:b], star[a:b])
+    return mu
+
+
+def _traced_magnification(tracer, camera, xy, star) -> np.ndarray:
+    escaped = ENDING["escaped"]
+    if tracer.supports_tangents:
+        origins, directions = camera.rays_at(xy)
+        rays = tracer.trace(origins, directions, tangents=camera.direction_tangents(xy))
+        return np.where(rays.ending == escaped, rays.magnification, np.nan)
+    m = xy.shape[0]
+    shifts = FD_PIXELS * np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
+    points = (xy[None, :, :] + shifts[:, None, :]).reshape(-1, 2)
+    origins, directions = camera.rays_at(points)
+    rays = tracer.trace(origins, directions)
+    ends = rays.direction.reshape(4, m, 3)
+    ok = np.all((rays.ending == escaped).reshape(4, m), axis=0)
+    along_x, along_y = (ends[0] - ends[1]) / (2 * FD_PIXELS), (ends[2] - ends[3]) / (2 * FD_PIXELS)
+    area = np.abs(np.sum(np.cross(along_x, along_y) * star, axis=1))
+    with np.errstate(all="ignore"):
+        return np.where(ok, _camera_area(camera, xy) / area, np.nan)
+
+
+def _splat(rgba, xy, mu, dimming, stars, star, camera, motion, pixel_filter, filter_size):
+    """Add each image (points xy (M, 2), magnifications mu (M,)) of star numbers ``star`` to
+    ``rgba`` (h, w, 4)."""
     if star.size == 0:
         return
     h, w = rgba.shape[:2]
     _, look = camera.rays_at(xy)
     g = np.ones(star.size) if motion is None else motion.colour_shift(look)
-    mu = _camera_area(camera, xy) / sky_area
     flux = stars.flux[star] * mu * g**4 * dimming
     colour = star_rgb(g * stars.temperatures[star]) * flux[:, None]  # (M, 3) luminance × sr
     half = 0 if pixel_filter == "box" else int(math.ceil(filter_size / 2)) + 1
