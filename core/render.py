@@ -169,12 +169,8 @@ def render(
     if with_tangents:  # refused by name before anything is traced
         tracer.check_tangents()
         camera.direction_tangents(np.zeros((1, 2)))
-    stars = background if isinstance(background, StarField) else None
-    if stars is not None:  # their images need each pixel's solid angle: refused by name
-        camera.direction_tangents(np.zeros((1, 2)))
     image = _Buffers(n, with_error, camera.width, passes, pixel_angle)
-    if stars is not None:  # what the stars' images are found and dimmed from
-        image.optional |= {"direction", "transmittance"}
+    image.hold_stars(background, camera)
     image.camera, image.motion = camera, moving
     kind, count = workers_module.choose(parallel, workers, n, cores)
     sampled = samples > 1 or (tolerance_px is not None and tracer.curved)
@@ -209,14 +205,10 @@ def render(
         if progress is not None:
             progress(done, n)
     was_cancelled = done < n or cancelled()
-    star_images = None
-    if stars is not None and not was_cancelled:
-        star_images = image.draw_stars(stars, pixel_filter, filter_size, tracer)
+    image.draw_stars(pixel_filter, filter_size, tracer, was_cancelled)
     result = image.result(camera, passes, time.perf_counter() - start_time, was_cancelled, tracer)
     result.summary["parallel"] = f"{count} {kind}" if kind != "inline" else "inline"
     result.summary["pixel_angle"] = pixel_angle
-    if star_images is not None:
-        result.summary["star_images"] = star_images
     if scene.disk is not None:
         result.summary["disk_exposure"] = scene.disk.exposure
     _summarise_px(result.summary, pixel_angle)
@@ -509,6 +501,8 @@ class _Buffers:
         self.pixel_angle = pixel_angle
         self.camera: Any = None
         self.motion: Any = None  # the camera's (core.motion), for the doppler pass
+        self.stars: StarField | None = None  # point stars, drawn on the finished frame
+        self.star_images: int | None = None  # how many of their images were drawn
         self.with_error = with_error
         self.optional = {name for name in OPTIONAL if name in passes}
         """The passes of core.passes.OPTIONAL asked for: only those are held."""
@@ -618,16 +612,27 @@ class _Buffers:
             )
         return out
 
-    def draw_stars(self, stars: StarField, pixel_filter: str, filter_size: float, tracer) -> int:
-        """Add the point stars' lensed images to the finished frame (core.star_images);
-        -> how many were drawn."""
+    def hold_stars(self, background: Background, camera) -> None:
+        """With point stars (a StarField background), hold what their images are found and
+        dimmed from (the direction and transmittance passes); a camera whose pixels span no
+        solid angle is refused by name."""
+        if isinstance(background, StarField):
+            camera.direction_tangents(np.zeros((1, 2)))
+            self.stars = background
+            self.optional |= {"direction", "transmittance"}
+
+    def draw_stars(self, pixel_filter: str, filter_size: float, tracer, cancelled: bool) -> None:
+        """Add the point stars' lensed images to the finished frame (core.star_images),
+        counted in ``star_images``; nothing on a cancelled one."""
+        if self.stars is None or cancelled:
+            return
         h, w = self.n // self.width, self.width
-        return draw_stars(
+        self.star_images = draw_stars(
             self.rgba.reshape(h, w, 4),
             self.passes["direction"].reshape(h, w, 3),
             (self.ending == ENDING["escaped"]).reshape(h, w),
             self.passes["transmittance"].reshape(h, w),
-            self.camera, stars, self.motion, pixel_filter, filter_size, tracer,
+            self.camera, self.stars, self.motion, pixel_filter, filter_size, tracer,
         )  # fmt: skip
 
     def _doppler(self, idx) -> np.ndarray:
@@ -681,7 +686,7 @@ class _Buffers:
             "step": tracer.step,
             "region_radius": None if tracer.region is None else tracer.region.radius,
             "method": tracer.method.name if tracer.curved else "straight",
-        }
+        } | ({} if self.star_images is None else {"star_images": self.star_images})
 
 
 _SUMMARY_FIELDS = (
