@@ -88,8 +88,8 @@ class StarField(Background):
                 f"star {int(np.argmax(bad))}: direction, magnitude and temperature must be "
                 "finite, the direction non-zero and the temperature positive"
             )
-        if not (math.isfinite(flux_zero) and flux_zero > 0):
-            raise ValueError(f"flux_zero must be positive, got {flux_zero!r}")
+        if not (math.isfinite(flux_zero) and flux_zero >= 0):
+            raise ValueError(f"flux_zero must be a number >= 0, got {flux_zero!r}")
         self.local_directions = d / length[:, None]
         self.magnitudes, self.temperatures = m, t
         self.flux_zero = float(flux_zero)

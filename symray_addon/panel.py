@@ -318,6 +318,13 @@ class RENDER_PT_symray_output(SymRayPanelMixin, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.prop(settings, "background")
+        if settings.background == "STARS":
+            layout.prop(settings, "star_catalog")
+            column = layout.column()
+            column.enabled = not settings.star_catalog.strip()
+            column.prop(settings, "star_count")
+            column.prop(settings, "star_seed")
+            layout.prop(settings, "star_brightness")
         layout.prop(settings, "image_name")
         layout.prop(settings, "exr_path")
 

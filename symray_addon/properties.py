@@ -98,6 +98,12 @@ BACKGROUND_ITEMS = [
     ),
     ("WORLD", "World", "The world: its environment texture or its background colour"),
     ("PROCEDURAL", "Procedural Sky", "SymRay's procedural star field and grid"),
+    (
+        "STARS",
+        "Point Stars",
+        "Stars as points, each lensed image with its magnification (a seeded random sky or a "
+        "CSV catalogue), over the Milky Way band",
+    ),
 ]
 
 LIGHTING_ITEMS = [
@@ -363,6 +369,30 @@ class SymRaySettings(bpy.types.PropertyGroup):
         items=BACKGROUND_ITEMS,
         default="AUTO",
         description="What rays that escape to infinity see",
+    )
+    star_count: bpy.props.IntProperty(  # type: ignore[valid-type]
+        name="Stars",
+        default=9000,
+        min=0,
+        soft_max=200_000,
+        description="How many random stars (magnitudes -1.5 to 6.5, about the naked-eye sky)",
+    )
+    star_seed: bpy.props.IntProperty(  # type: ignore[valid-type]
+        name="Seed", default=0, min=0, description="The random star field's seed"
+    )
+    star_catalog: bpy.props.StringProperty(  # type: ignore[valid-type]
+        name="Catalogue",
+        default="",
+        subtype="FILE_PATH",
+        description="A CSV of stars (header: ra, dec in degrees, mag, optional b-v); empty: "
+        "the random field",
+    )
+    star_brightness: bpy.props.FloatProperty(  # type: ignore[valid-type]
+        name="Star Brightness",
+        default=1.0,
+        min=0.0,
+        soft_max=100.0,
+        description="Scales every star's flux (a magnitude-0 star: 1e-6 radiance x sr)",
     )
     lighting: bpy.props.EnumProperty(  # type: ignore[valid-type]
         name="Surface Lighting",

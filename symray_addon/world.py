@@ -15,6 +15,7 @@ import numpy as np
 from mathutils import Euler
 
 from ..core.sky import Background
+from ..core.stars import FLUX_ZERO, StarField
 from .materials import image_pixels, node_tree_of
 
 
@@ -67,15 +68,31 @@ def _environment(node: bpy.types.Node, strength: float) -> Background | None:
     )
 
 
+def point_stars(settings: Any) -> StarField:
+    """The StarField of ``scene.symray``'s star settings: its catalogue (a CSV; ValueError
+    naming the file and line when it cannot be read) or the seeded random field."""
+    options = {"flux_zero": FLUX_ZERO * float(settings.star_brightness)}
+    path = settings.star_catalog.strip()
+    if not path:
+        return StarField.random(int(settings.star_count), int(settings.star_seed), **options)
+    try:
+        return StarField.from_csv(bpy.path.abspath(path), **options)
+    except OSError as error:
+        raise ValueError(f"cannot read the star catalogue {path!r}: {error.strerror}") from None
+
+
 def world_background(scene: bpy.types.Scene, mode: str = "AUTO") -> Any:
     """The ``background=`` for core.Scene: "procedural", an rgba tuple or a Background.
 
-    ``mode``: 'PROCEDURAL', 'WORLD' (texture or colour of the world, black without one) or
+    ``mode``: 'PROCEDURAL', 'STARS' (point stars: point_stars), 'WORLD' (texture or colour
+    of the world, black without one) or
     'AUTO' (the world's environment texture or plain colour; the procedural sky when the
     scene has no world, or a world whose nodes SymRay cannot read).
     """
     if mode == "PROCEDURAL":
         return "procedural"
+    if mode == "STARS":
+        return point_stars(scene.symray)
     world = scene.world
     if world is None:
         return "procedural" if mode == "AUTO" else (0.0, 0.0, 0.0, 1.0)
