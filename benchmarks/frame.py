@@ -2,6 +2,10 @@
 
     PYTHONPATH=<checkout> python benchmarks/frame.py OUT.npz --width W --height H
         [--method gauss4 --tolerance RAD | --tolerance-px PX [--samples N] [--magnification]]
+        [--disk] [--stars COUNT]
+
+``--disk`` adds an accretion disk (r_out 10 rg, physical look); ``--stars COUNT`` replaces the
+procedural (texture) sky by COUNT random point stars over the Milky Way (core.StarField).
 
 Renders with core.render (error pass on), then saves the time, the rays, and what each
 pixel's centre sees (escape direction, or the unit vector to the hit point; NaN where
@@ -84,8 +88,16 @@ def main() -> None:
         action="store_true",
         help="also the magnification pass (ray differentials)",
     )
+    parser.add_argument("--disk", action="store_true", help="add an accretion disk")
+    parser.add_argument(
+        "--stars", type=int, default=0, help="point stars instead of the texture sky"
+    )
     args = parser.parse_args()
     scene, cam = kerr_board_scene(), camera(args.width, args.height)
+    if args.disk:
+        scene.disk = core.AccretionDisk(r_out=10.0)
+    if args.stars:
+        scene.background = core.StarField.random(args.stars, seed=1)
     kwargs = {"method": args.method} if args.method else {}
     if args.tolerance_px is not None:
         kwargs.update(tolerance_px=args.tolerance_px, samples=args.samples)
@@ -104,7 +116,9 @@ def main() -> None:
     rays = result.summary.get("rays", cam.width * cam.height)
     np.savez(args.out, seconds=seconds, rays=rays, seen=seen, ending=ending,
              steps=result.summary["steps"])  # fmt: skip
-    print(f"{seconds:.2f} s, {rays} rays, {result.summary['steps']} steps")
+    images = result.summary.get("star_images")
+    stars = "" if images is None else f", {images} star images"
+    print(f"{seconds:.2f} s, {rays} rays, {result.summary['steps']} steps{stars}")
 
 
 if __name__ == "__main__":
