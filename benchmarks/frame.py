@@ -17,6 +17,7 @@ from the ``direction`` pass. Uses only names that exist in every version since t
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 
 import numpy as np
@@ -94,10 +95,10 @@ def main() -> None:
     )
     args = parser.parse_args()
     scene, cam = kerr_board_scene(), camera(args.width, args.height)
-    if args.disk:
-        scene.disk = core.AccretionDisk(r_out=10.0)
+    if args.disk:  # Scene binds the disk to its model
+        scene = dataclasses.replace(scene, disk=core.AccretionDisk(r_out=10.0))
     if args.stars:
-        scene.background = core.StarField.random(args.stars, seed=1)
+        scene = dataclasses.replace(scene, background=core.StarField.random(args.stars, seed=1))
     kwargs = {"method": args.method} if args.method else {}
     if args.tolerance_px is not None:
         kwargs.update(tolerance_px=args.tolerance_px, samples=args.samples)
