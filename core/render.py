@@ -632,7 +632,7 @@ class _Buffers:
             self.passes["direction"].reshape(h, w, 3),
             (self.ending == ENDING["escaped"]).reshape(h, w),
             self.passes["transmittance"].reshape(h, w),
-            self.camera, self.stars, self.motion, pixel_filter, filter_size, tracer,
+            self.camera, self.stars, tracer, self.motion, pixel_filter, filter_size,
         )  # fmt: skip
 
     def _doppler(self, idx) -> np.ndarray:
