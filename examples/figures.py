@@ -21,8 +21,9 @@ that data at tiny sizes) and a plotting step (matplotlib, Agg backend, imported 
 - fig13   a relativistic thin accretion disk around Schwarzschild and Kerr (a/M = 0.9)
           holes at inclination 80 deg: its colour and its redshift pass g
 - fig14   moving observers (core.render's ``observer``): at 6 M from an a/M = 0.9 hole
-          with its disk, a static camera, one on the circular orbit and one falling in;
-          flat space seen at rest and at 0.9 c (aberration, Doppler shift, beaming)
+          with its disk and point stars (core.StarField), a static camera, one on the
+          circular orbit and one falling in; flat space seen at rest and at 0.9 c
+          (aberration, Doppler shift, beaming)
 """
 
 from __future__ import annotations
@@ -314,21 +315,32 @@ OBSERVER_RADIUS = 6.0 * M
 """fig14's camera: 6 M from the hole, in its equatorial plane."""
 
 
+def star_sky(width: int) -> core.StarField:
+    """fig14's sky: 6000 point stars (core.StarField, seed 14) over the Milky Way, bright
+    enough that a 2nd-magnitude star fills its pixel at an image ``width`` pixels wide
+    (120 degrees across); its flux is kept as the image size changes."""
+    pixel = (math.radians(120.0) / width) ** 2  # the pixel's solid angle, about
+    return core.StarField.random(6000, seed=14, brightest=-1.5, faintest=6.0,
+                                 flux_zero=pixel / 10 ** (-0.4 * 2.0))  # fmt: skip
+
+
 def observer_views(width: int, height: int, method: str = "gauss4", tolerance: float = 1e-6):
     """fig14's renders by name: an a/M = 0.9 hole (Kerr–Schild) with a disk from the ISCO to
-    5 M, seen from OBSERVER_RADIUS on its equator ("static", "orbit", "infall", looking at
-    the hole); flat space with textured spheres seen at rest and moving at 0.9 c towards
-    where the camera looks ("flat", "flat 0.9c")."""
+    5 M and point stars (star_sky), seen from OBSERVER_RADIUS on its equator ("static",
+    "orbit", "infall", looking at the hole); flat space with textured spheres and the same
+    stars seen at rest and moving at 0.9 c towards where the camera looks ("flat",
+    "flat 0.9c")."""
     model = hm.kerr(rg=RG, a=0.45, chart="kerr_schild")
     disk = core.AccretionDisk(r_out=5.0 * M, temperature=6000.0, exposure=1.0)
-    scene = core.Scene(model=model, disk=disk, background=sky())
+    stars = star_sky(width)
+    scene = core.Scene(model=model, disk=disk, background=stars)
     cam = camera((0.0, -OBSERVER_RADIUS, 0.0), (0.0, 0.0, 0.0), 120.0, width, height)
     passes = ("ending", "redshift", "doppler")
     views = {}
     for observer in ("static", "orbit", "infall"):
         views[observer] = render(f"fig14 {observer}", scene, cam, method, tolerance=tolerance,
                                  observer=observer, passes=passes)  # fmt: skip
-    flat = core.Scene(model=None, objects=textured_spheres(), background=sky())
+    flat = core.Scene(model=None, objects=textured_spheres(), background=stars)
     ahead = camera((0.0, -12.0, 0.0), (0.0, 0.0, 0.0), 70.0, width, height)
     views["flat"] = render("fig14 flat", flat, ahead, method, passes=("ending", "doppler"))
     views["flat 0.9c"] = render("fig14 flat 0.9c", flat, ahead, method, observer=(0.0, 0.9, 0.0),
@@ -694,8 +706,8 @@ def fig14(args) -> str:
     fig.colorbar(image, ax=axes[1, 2], fraction=0.035)
     fig.suptitle(
         "Moving observers: aberration shrinks what lies ahead (the falling camera's shadow, "
-        "the spheres at 0.9 c)\nand Doppler shift and beaming brighten and blue it; the "
-        "orbiting camera sees the sky it moves towards bluer"
+        "the spheres at 0.9 c) and crowds the stars there;\nDoppler shift and beaming "
+        "brighten and blue it; the orbiting camera sees the sky it moves towards bluer"
     )
     return _save(fig, "fig14_observers", args.out)
 

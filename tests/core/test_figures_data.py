@@ -149,7 +149,9 @@ def test_fig14_moving_observers_shrink_what_lies_ahead_and_shift_it():
     """At 6 M from an a/M = 0.9 hole the falling camera sees a smaller shadow than the
     static one (aberration towards the hole); the orbiting camera's Doppler factor is above
     1 on the side it moves to (right) and below on the other; in flat space at 0.9 c towards
-    the view the spheres ahead shrink and the camera sees every pixel blueshifted."""
+    the view the spheres ahead shrink, the point stars crowd into the view (more than 3x as
+    many images as at rest: the rest frame's solid angle ahead is compressed up to
+    (1 + β)/(1 - β) = 19x) and the camera sees every pixel blueshifted."""
     views = figures.observer_views(48, 36, tolerance=1e-5)
     captured = {name: np.count_nonzero(views[name].passes["ending"] == core.ENDING["captured"])
                 for name in ("static", "infall")}  # fmt: skip
@@ -160,3 +162,5 @@ def test_fig14_moving_observers_shrink_what_lies_ahead_and_shift_it():
             for name in ("flat", "flat 0.9c")}  # fmt: skip
     assert 0 < hits["flat 0.9c"] < 0.25 * hits["flat"]
     assert views["flat 0.9c"].passes["doppler"].min() > 1.0
+    stars = {name: views[name].summary["star_images"] for name in ("flat", "flat 0.9c")}
+    assert 0 < 3 * stars["flat"] < stars["flat 0.9c"]
