@@ -2,10 +2,12 @@
 
     PYTHONPATH=<checkout> python benchmarks/frame.py OUT.npz --width W --height H
         [--method gauss4 --tolerance RAD | --tolerance-px PX [--samples N] [--magnification]]
-        [--disk] [--stars COUNT]
+        [--disk] [--stars COUNT] [--env-sky WIDTH [--unfiltered]]
 
 ``--disk`` adds an accretion disk (r_out 10 rg, physical look); ``--stars COUNT`` replaces the
-procedural (texture) sky by COUNT random point stars over the Milky Way (core.StarField).
+procedural (texture) sky by COUNT random point stars over the Milky Way (core.StarField);
+``--env-sky WIDTH`` by an equirect image (filtered over each pixel's footprint, core.mipmap,
+unless ``--unfiltered``).
 
 Renders with core.render (error pass on), then saves the time, the rays, and what each
 pixel's centre sees (escape direction, or the unit vector to the hit point; NaN where
@@ -75,6 +77,18 @@ def _old_directions(scene, cam, method: str, tolerance: float) -> tuple:
     return seen.reshape(cam.height, cam.width, 3), rays.ending.reshape(cam.height, cam.width)
 
 
+def _env_sky(width: int, unfiltered: bool):
+    """A seeded noise sky (width, width / 2): texel noise over smooth blobs; with
+    ``unfiltered`` a callable doing the plain bilinear lookup (which no checkout filters)."""
+    rng = np.random.default_rng(3)
+    image = 0.4 + 0.3 * rng.random((width // 2, width, 3))
+    coarse = rng.random((8, 16, 3))
+    image *= np.repeat(np.repeat(coarse, width // 16, axis=0), width // 16, axis=1)
+    if unfiltered:
+        return lambda d: core.sky.equirect_lookup(image, d)
+    return core.Background(image)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("out")
@@ -93,12 +107,24 @@ def main() -> None:
     parser.add_argument(
         "--stars", type=int, default=0, help="point stars instead of the texture sky"
     )
+    parser.add_argument(
+        "--env-sky",
+        type=int,
+        default=0,
+        help="an equirect noise image this many texels wide as the sky (filtered over each "
+        "pixel's footprint where the checkout does that)",
+    )
+    parser.add_argument(
+        "--unfiltered", action="store_true", help="with --env-sky: looked up at one point"
+    )
     args = parser.parse_args()
     scene, cam = kerr_board_scene(), camera(args.width, args.height)
     if args.disk:  # Scene binds the disk to its model
         scene = dataclasses.replace(scene, disk=core.AccretionDisk(r_out=10.0))
     if args.stars:
         scene = dataclasses.replace(scene, background=core.StarField.random(args.stars, seed=1))
+    if args.env_sky:
+        scene = dataclasses.replace(scene, background=_env_sky(args.env_sky, args.unfiltered))
     kwargs = {"method": args.method} if args.method else {}
     if args.tolerance_px is not None:
         kwargs.update(tolerance_px=args.tolerance_px, samples=args.samples)

@@ -169,6 +169,8 @@ def render(
     if with_tangents:  # refused by name before anything is traced
         tracer.check_tangents()
         camera.direction_tangents(np.zeros((1, 2)))
+    # a texture sky is filtered over each pixel's footprint where the rays can carry it
+    footprints = background.filters and tracer.supports_tangents and camera.kind != "ortho"
     image = _Buffers(n, with_error, camera.width, passes, pixel_angle)
     image.hold_stars(background, camera)
     image.camera, image.motion = camera, moving
@@ -183,7 +185,7 @@ def render(
             pixel_filter=pixel_filter, filter_size=filter_size, with_error=with_error,
             far_field=_far_field_error(tracer), pixel_angle=pixel_angle,
             budget=_integration_budget(tolerance_px, pixel_angle, tracer),
-            tangents=with_tangents,
+            tangents=with_tangents or footprints, magnification=with_tangents,
         )  # fmt: skip
         tile_list = _tiles_for(camera, count)
         chunks = [(k, k + 1) for k in range(len(tile_list))]
@@ -193,7 +195,9 @@ def render(
         # not below _MIN_CHUNK rays: per-step work is Python overhead on small batches
         size = max(_MIN_CHUNK, min(chunk_size, -(-n // (2 * count))))
         chunks = [(s, min(s + size, n)) for s in range(0, n, size)]
-        work = _span_work(tracer, camera, with_error, _far_field_error(tracer), with_tangents)
+        work = _span_work(
+            tracer, camera, with_error, _far_field_error(tracer), with_tangents or footprints
+        )
     cancelled = workers_module.CancelLatch(should_cancel)
     done = 0
     for span, chunk in workers_module.run_chunks(work, chunks, kind, count, cancelled):
@@ -732,7 +736,9 @@ def shade(rays: RayResults, background: Background) -> np.ndarray:
     color[hit] = rays.surface[hit]
     escaped = rays.ending == ENDING["escaped"]
     if escaped.any():
-        color[escaped] = background(rays.direction[escaped])
+        carried = rays.sky_jacobian.shape[1] == 2  # ray differentials: the pixel's footprint
+        footprint = rays.sky_jacobian[escaped] if carried else None
+        color[escaped] = background(rays.direction[escaped], footprint)
     moving = np.flatnonzero((escaped | hit & (rays.object_id != DISK_ID)) & (rays.doppler != 1.0))
     if moving.size:  # static emitters seen by a moving camera (the disk's g has it already)
         color[moving, :3] = doppler_shift(color[moving, :3], rays.doppler[moving])

@@ -269,6 +269,7 @@ class TileSampler:
         pixel_angle: float = 1.0,
         budget: float = np.inf,
         tangents: bool = False,
+        magnification: bool = False,
     ) -> None:
         self.tracer, self.camera, self.background, self.shade = tracer, camera, background, shade
         self.interpolation = float(interpolation)  # radians; 0: trace every pixel
@@ -281,7 +282,8 @@ class TileSampler:
         self.far_field = far_field  # error of escaped rays beyond the region, radians
         self.pixel_angle = pixel_angle  # radians (core.Camera.pixel_angle)
         self.budget = budget  # radians: a traced ray's integration error above it is redone
-        self.with_tangents = tangents  # ray differentials: the magnification pass
+        self.with_tangents = tangents  # ray differentials: sky footprints, magnification
+        self.with_magnification = magnification  # the pass: blocks where ln |μ| is bilinear
         self._origin = (0, 0)  # image (row, column) of the current tile's node (0, 0)
         self.rays = 0
         self.error_rays = 0
@@ -471,7 +473,7 @@ class TileSampler:
             deviation[disk] = self._radius_deviations(nodes, on_disk, width)
         worst = _worst(deviation)
         accepted = alike & (INTERPOLATION_SAFETY * worst <= self.interpolation)
-        if self.with_tangents:
+        if self.with_magnification:
             accepted &= _smooth_magnification(nodes, nine, ending)
         return accepted, deviation
 
@@ -647,12 +649,13 @@ class TileSampler:
         colour = np.zeros((b.size, 4))
         colour[:, 3] = 1.0
         sky = ending == ENDING["escaped"]
-        if sky.any():
-            colour[sky] = self.background(d[sky])
+        jacobian = blend(nodes.jacobian)[sky] if self.with_tangents and sky.any() else None
+        if sky.any():  # over the footprint of the nodes' ray differentials, blended
+            colour[sky] = self.background(d[sky], jacobian)
         out.direction[rows] = np.where(sky[:, None], d, np.nan)
-        if self.with_tangents and sky.any():  # the nodes' ray differentials, blended
+        if jacobian is not None:
             seen = self.camera.direction_tangents(self._image_xy(y[sky], x[sky]))
-            out.magnification[rows[sky]] = magnification(seen, blend(nodes.jacobian)[sky])
+            out.magnification[rows[sky]] = magnification(seen, jacobian)
         disk = np.flatnonzero((ending == ENDING["hit"]) & (nodes.object_id[bj, bi] == DISK_ID))
         if disk.size:  # the disk's light at the interpolated radius and g
             sub = [(j[disk], i[disk]) for j, i in corners]

@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from .mipmap import MipMap, bilinear, texel_footprint
+
 __all__ = [
     "Background",
     "direction_to_equirect",
@@ -73,14 +75,7 @@ def equirect_lookup(image: Any, directions: Any, interpolation: str = "linear") 
         return img[yi, xi].astype(np.float64)
     if interpolation != "linear":
         raise ValueError(f"interpolation must be 'linear' or 'closest', got {interpolation!r}")
-    x0, y0 = np.floor(x), np.floor(y)
-    fx, fy = (x - x0)[..., None], (y - y0)[..., None]
-    xa, xb = x0.astype(np.int64) % w, (x0.astype(np.int64) + 1) % w
-    ya = np.clip(y0.astype(np.int64), 0, h - 1)
-    yb = np.clip(y0.astype(np.int64) + 1, 0, h - 1)
-    top = img[ya, xa] * (1 - fx) + img[ya, xb] * fx
-    bottom = img[yb, xa] * (1 - fx) + img[yb, xb] * fx
-    return (top * (1 - fy) + bottom * fy).astype(np.float64)
+    return bilinear(img, x, y).astype(np.float64)
 
 
 # -- hashing (deterministic, stateless) ----------------------------------------------------
@@ -300,39 +295,59 @@ class Background:
         """Build from a spec: "procedural", (r, g, b[, a]), (h, w, 3|4) array or callable."""
         self.strength = float(strength)
         self.matrix = None if matrix is None else np.asarray(matrix, dtype=np.float64)
-        self._fn = self._make(spec, grid, star_size, interpolation)
+        self._fn, self._mipmap = self._make(spec, grid, star_size, interpolation)
+
+    @property
+    def filters(self) -> bool:
+        """Whether a footprint changes what this background shows (a bilinear equirect
+        texture: core.mipmap), so a render carries ray differentials for it."""
+        return self._mipmap is not None or (isinstance(self._fn, Background) and self._fn.filters)
 
     @staticmethod
-    def _make(spec: Any, grid: bool, star_size: float, interp: str) -> Callable:
+    def _make(spec: Any, grid: bool, star_size: float, interp: str) -> tuple[Callable, Any]:
+        """(the lookup of directions, the pyramid of a bilinear equirect texture or None)."""
         if isinstance(spec, Background):
-            return spec
+            return spec, None
         if isinstance(spec, str):
             if spec not in ("procedural", "milky_way"):
                 raise ValueError(
                     f"background string must be 'procedural' or 'milky_way', got {spec!r}"
                 )
             stars = spec == "procedural"  # milky_way: the galaxy band and gradient only
-            return lambda d: procedural_sky(d, grid=grid, stars=stars, star_size=star_size)
+            return lambda d: procedural_sky(d, grid=grid, stars=stars, star_size=star_size), None
         if callable(spec):
-            return spec
+            return spec, None
         arr = np.asarray(spec, dtype=np.float64)
         if arr.ndim == 1 and arr.shape[0] in (3, 4):
-            return lambda d: np.broadcast_to(arr, (d.shape[0], arr.shape[0]))
+            return lambda d: np.broadcast_to(arr, (d.shape[0], arr.shape[0])), None
         if arr.ndim == 3 and arr.shape[2] in (3, 4):
-            return lambda d: equirect_lookup(arr, d, interp)
+            mipmap = MipMap(arr) if interp == "linear" else None
+            return lambda d: equirect_lookup(arr, d, interp), mipmap
         raise ValueError(
             "background must be 'procedural', an rgb(a) tuple, an (h, w, 3|4) array or a "
             f"callable, got an array of shape {arr.shape}"
         )
 
-    def __call__(self, directions: Any) -> np.ndarray:
-        """Linear RGBA (N, 4) seen along world directions (N, 3); alpha 1 unless given."""
+    def __call__(self, directions: Any, footprint: np.ndarray | None = None) -> np.ndarray:
+        """Linear RGBA (N, 4) seen along world directions (N, 3); alpha 1 unless given.
+        ``footprint`` (N, 2, 3): the directions' derivatives along image x and y (ray
+        differentials); a texture is then averaged over each pixel's footprint
+        (core.mipmap; NaN rows: a point, as without)."""
         d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
         if self.matrix is not None:
             d = d @ self.matrix
-        c = np.asarray(self._fn(d), dtype=np.float64)
+            footprint = None if footprint is None else footprint @ self.matrix
+        c = np.asarray(self._lookup(d, footprint), dtype=np.float64)
         out = np.ones((d.shape[0], 4))
         out[:, :3] = c[:, :3] * self.strength
         if c.shape[1] == 4:
             out[:, 3] = c[:, 3]
         return out
+
+    def _lookup(self, d: np.ndarray, footprint: np.ndarray | None) -> np.ndarray:
+        if footprint is None or not self.filters:
+            return self._fn(d)
+        if self._mipmap is None:  # a Background wrapping a filtering one
+            return self._fn(d, footprint)
+        uv = direction_to_equirect(d)
+        return self._mipmap.lookup(uv, texel_footprint(d, footprint, self._mipmap.size))

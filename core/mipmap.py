@@ -1,0 +1,128 @@
+"""Footprint filtering of an equirectangular sky (issue 26): what a pixel sees of a texture
+is the texture averaged over the pixel's footprint on the sky, not one bilinear texel.
+
+The footprint comes from the ray differentials (``RayResults.sky_jacobian`` J: the final
+direction's derivatives along image x and y, carried through the lens by dual numbers).
+Taken into the texture's texel space at full size, J gives two vectors a = ∂(X, Y)/∂x and
+b = ∂(X, Y)/∂y (X = u w, Y = (1 − v) h, sky.direction_to_equirect's u, v), whose 2×2 matrix
+has singular values σ₁ ≥ σ₂ (the footprint's long and short extents, texels) along U's
+columns. The texture is looked up as GPUs filter anisotropically: n = ⌈σ₁/σ₂⌉ taps
+(at most MAX_ANISOTROPY) spread evenly over the long extent, each a trilinear lookup in the
+pyramid of box-filtered halvings (MipMap) at the level whose texel is max(σ₁/n, σ₂) wide,
+averaged. A footprint of at most one texel (a magnified sky) is the plain bilinear lookup,
+exactly: filtering changes nothing where the texture is resolved.
+
+Approximations: a box filter along the long axis (not an elliptical Gaussian); at odd sizes
+a halving pads one column (wrapped in longitude) or row (repeated at a pole), so a coarse
+level's texels sit up to half a texel off their span; lookups past a pole clamp to it.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+MAX_ANISOTROPY = 8
+"""Taps along a footprint's long axis at most (a longer one is taken blurrier across)."""
+
+
+def halve(image: np.ndarray) -> np.ndarray:
+    """An equirectangular image (h, w, c) at half its size per side (rounded up): the mean of
+    each 2×2 block, an odd width padded by its first column (longitude wraps), an odd
+    height by its last row."""
+    h, w = image.shape[:2]
+    if w > 1 and w % 2:
+        image = np.concatenate([image, image[:, :1]], axis=1)
+    if h > 1 and h % 2:
+        image = np.concatenate([image, image[-1:]], axis=0)
+    h, w = image.shape[:2]
+    rows, columns = max(h // 2, 1), max(w // 2, 1)
+    return image.reshape(rows, h // rows, columns, w // columns, -1).mean(axis=(1, 3))
+
+
+def bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Bilinear samples (N, c) of ``image`` (h, w, c) at texel coordinates x, y (texel
+    centres at integers, row 0 at the top): wrapping in x (longitude), clamped in y."""
+    h, w = image.shape[:2]
+    x0, y0 = np.floor(x), np.floor(y)
+    fx, fy = (x - x0)[..., None], (y - y0)[..., None]
+    xa = x0.astype(np.int64) % w
+    xb = (xa + 1) % w
+    ya = np.clip(y0.astype(np.int64), 0, h - 1)
+    yb = np.clip(y0.astype(np.int64) + 1, 0, h - 1)
+    top = image[ya, xa] * (1 - fx) + image[ya, xb] * fx
+    bottom = image[yb, xa] * (1 - fx) + image[yb, xb] * fx
+    return top * (1 - fy) + bottom * fy
+
+
+def texel_footprint(directions: np.ndarray, jacobian: np.ndarray, size: tuple[int, int]):
+    """The footprint matrices (N, 2, 2) in full-size texels: column k = ∂(X, Y)/∂(image
+    coordinate k), for unit ``directions`` (N, 3) and their derivatives ``jacobian``
+    (N, 2, 3) on an equirectangular texture of ``size`` (h, w)."""
+    h, w = size
+    x, y, z = (directions[:, i, None] for i in range(3))
+    jx, jy, jz = (jacobian[:, :, i] for i in range(3))
+    rho2 = x * x + y * y
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d_lon = (x * jy - y * jx) / rho2
+        d_lat = (jz * rho2 - z * (x * jx + y * jy)) / (np.sqrt(rho2) * (rho2 + z * z))
+    # X = u w with u = 1/2 - lon / 2π; Y = (1 - v) h with v = 1/2 + lat / π
+    return np.stack([-w / (2 * math.pi) * d_lon, -h / math.pi * d_lat], axis=1)
+
+
+class MipMap:
+    """An equirectangular image (h, w, c) and its halvings down to one texel (``levels``);
+    ``lookup`` filters it over footprints (the module)."""
+
+    def __init__(self, image: np.ndarray) -> None:
+        self.levels = [np.asarray(image)]
+        while self.levels[-1].shape[0] > 1 or self.levels[-1].shape[1] > 1:
+            self.levels.append(halve(self.levels[-1]))
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(h, w) of the full-size image."""
+        h, w = self.levels[0].shape[:2]
+        return h, w
+
+    def lookup(self, uv: np.ndarray, footprint: np.ndarray) -> np.ndarray:
+        """The image (N, c) at equirect ``uv`` (N, 2) averaged over ``footprint`` (N, 2, 2,
+        texel_footprint); a footprint that is not finite is taken as a point."""
+        footprint = np.where(np.isfinite(footprint), footprint, 0.0)
+        left, extents, _ = np.linalg.svd(footprint)
+        long, short = extents[:, 0], extents[:, 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            taps = np.where(long > 1.0, np.ceil(long / short), 1.0)
+        taps = np.clip(np.nan_to_num(taps, nan=1.0), 1, MAX_ANISOTROPY).astype(np.int64)
+        texel = np.maximum(np.maximum(long / taps, short), 1.0)
+        level = np.minimum(np.log2(texel), len(self.levels) - 1.0)
+        owner, rank = np.nonzero(np.arange(MAX_ANISOTROPY)[None, :] < taps[:, None])
+        along = ((rank + 0.5) / taps[owner] - 0.5) * long[owner]
+        h, w = self.size
+        x = uv[owner, 0] * w + along * left[owner, 0, 0]
+        y = (1.0 - uv[owner, 1]) * h + along * left[owner, 1, 0]
+        samples = self._trilinear(x / w, y / h, level[owner])
+        out = np.zeros((uv.shape[0], samples.shape[1]))
+        np.add.at(out, owner, samples / taps[owner, None])
+        return out
+
+    def _trilinear(self, across: np.ndarray, down: np.ndarray, level: np.ndarray) -> np.ndarray:
+        """Samples at fractions (across, down) of the image's width and height, blended
+        between the two levels around ``level``."""
+        out = np.zeros((across.size, self.levels[0].shape[2]))
+        lower = np.floor(level).astype(np.int64)
+        blend = level - lower
+        for k in np.unique(lower):
+            at = np.flatnonzero(lower == k)
+            out[at] = self._at_level(int(k), across[at], down[at])
+            mixed = at[blend[at] > 0.0]
+            if mixed.size and k + 1 < len(self.levels):
+                upper = self._at_level(int(k) + 1, across[mixed], down[mixed])
+                out[mixed] += blend[mixed, None] * (upper - out[mixed])
+        return out
+
+    def _at_level(self, k: int, across: np.ndarray, down: np.ndarray) -> np.ndarray:
+        image = self.levels[k]
+        h, w = image.shape[:2]
+        return bilinear(image, across * w - 0.5, down * h - 0.5)

@@ -1,0 +1,108 @@
+"""Footprint filtering of a texture sky (core.mipmap, issue 26): checked against finite
+differences of the equirect map, the plain bilinear lookup where the texture is resolved,
+and renders supersampled 8x8 per pixel."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import core
+from core import hamiltonians as hm
+from core.mipmap import MipMap, halve, texel_footprint
+from core.sky import direction_to_equirect, equirect_lookup
+
+
+def _directions(n: int, seed: int = 0) -> np.ndarray:
+    d = np.random.default_rng(seed).normal(size=(n, 3))
+    return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+
+def _checker(h: int, w: int, cell: int) -> np.ndarray:
+    """A black and white checker of ``cell``-texel squares, (h, w, 3)."""
+    jj, ii = np.mgrid[0:h, 0:w]
+    return np.repeat((((jj // cell + ii // cell) % 2) == 0)[..., None], 3, axis=2) * 1.0
+
+
+def test_the_footprint_matrix_is_the_equirect_maps_derivative():
+    """texel_footprint against central differences of direction_to_equirect along each
+    column of the Jacobian (w and h texels per unit of u and v): 1e-6 relative."""
+    d = _directions(400)
+    d = d[np.abs(d[:, 2]) < 0.95]  # away from the poles, where longitude is not smooth
+    rng = np.random.default_rng(1)
+    jacobian = rng.normal(size=(d.shape[0], 2, 3)) * 1e-3
+    jacobian -= np.sum(jacobian * d[:, None], axis=2, keepdims=True) * d[:, None]  # tangent
+    h, w = 256, 512
+    step = 1e-4
+    for k in range(2):
+        ahead, behind = d + step * jacobian[:, k], d - step * jacobian[:, k]
+        ahead /= np.linalg.norm(ahead, axis=1, keepdims=True)
+        behind /= np.linalg.norm(behind, axis=1, keepdims=True)
+        duv = (direction_to_equirect(ahead) - direction_to_equirect(behind)) / (2 * step)
+        expected = duv * np.array([w, -h])
+        got = texel_footprint(d, jacobian, (h, w))[:, :, k]
+        scale = np.linalg.norm(expected, axis=1)
+        assert np.all(np.linalg.norm(got - expected, axis=1) <= 1e-6 * scale + 1e-12)
+
+
+def test_a_resolved_texture_is_looked_up_as_before():
+    """A footprint of at most one texel (a magnified sky), with or without the background's
+    rotation, gives exactly the plain bilinear lookup; NaN footprints (no differentials)
+    too."""
+    image = np.random.default_rng(2).random((64, 128, 3))
+    d = _directions(2000, seed=3)
+    small = np.random.default_rng(4).normal(size=(2000, 2, 3)) * 1e-3  # < 0.1 texel
+    turn = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    for matrix in (None, turn):
+        background = core.Background(image, matrix=matrix)
+        plain = background(d)
+        np.testing.assert_array_equal(background(d, small), plain)
+        np.testing.assert_array_equal(background(d, np.full_like(small, np.nan)), plain)
+    looked = equirect_lookup(image, d @ turn)
+    np.testing.assert_allclose(core.Background(image, matrix=turn)(d)[:, :3], looked, atol=0)
+
+
+def test_filtering_keeps_a_constant_sky_and_each_levels_mean():
+    """Every footprint of a constant image gives the constant (the taps' and levels' weights
+    sum to 1), and each halving of an even-sized image keeps its mean."""
+    d = _directions(3000, seed=5)
+    wide = (
+        np.random.default_rng(6).normal(size=(3000, 2, 3)) * np.logspace(-3, 0, 3000)[:, None, None]
+    )
+    constant = core.Background(np.full((32, 64, 3), 0.37))
+    np.testing.assert_allclose(constant(d, wide)[:, :3], 0.37, atol=1e-12)
+    image = np.random.default_rng(7).random((64, 128, 3))
+    for level in MipMap(image).levels[:6]:
+        np.testing.assert_allclose(level.mean(axis=(0, 1)), image.mean(axis=(0, 1)), atol=1e-12)
+    assert halve(np.zeros((5, 7, 3))).shape == (3, 4, 3)
+
+
+def _camera(width: int, height: int) -> core.Camera:
+    return core.Camera.perspective((0, -30, 0), (0, 0, 0), (0, 0, 1), 40, width, height)
+
+
+@pytest.mark.parametrize("model", [None, "schwarzschild"])
+@pytest.mark.parametrize(
+    "accuracy", [{"tolerance": 1e-7}, {"tolerance_px": 0.5}], ids=["dense", "adaptive"]
+)
+def test_a_minified_sky_is_the_supersampled_one_not_its_moire(model, accuracy):
+    """A 2-texel checker sky seen at ~1.4 texels a pixel (flat space) and demagnified further
+    around a Schwarzschild hole: with ray differentials each sky pixel is within 0.04 on
+    average (measured 0.023) of the same view rendered at 8x8 rays a pixel and averaged,
+    where the plain bilinear lookup is off by ~0.26 (moiré: the checker aliased)."""
+    model = None if model is None else hm.schwarzschild(1.0)
+    image = _checker(512, 1024, 2)
+    plain_sky = core.Background(lambda d: equirect_lookup(image, d))
+    k, (w, h) = 8, (40, 30)
+    fine = core.render(core.Scene(model=model, background=plain_sky), _camera(k * w, k * h),
+                       tolerance=1e-7, passes=("ending",))  # fmt: skip
+    reference = fine.rgba[..., 0].reshape(h, k, w, k).mean(axis=(1, 3))
+    sky = (fine.passes["ending"] == core.ENDING["escaped"]).reshape(h, k, w, k).all(axis=(1, 3))
+    errors = {}
+    for name, background in (("filtered", core.Background(image)), ("plain", plain_sky)):
+        out = core.render(core.Scene(model=model, background=background), _camera(w, h),
+                          workers=1, **accuracy)  # fmt: skip
+        errors[name] = np.abs(out.rgba[..., 0] - reference)[sky].mean()
+    assert sky.sum() > 1000
+    assert errors["filtered"] < 0.04
+    assert errors["plain"] > 5 * errors["filtered"]
