@@ -47,6 +47,10 @@ class Dual:
 
     def __add__(self, other) -> Dual:
         if isinstance(other, Dual):
+            shared = _shared(self.d, other.d)
+            if shared is not None:  # the hot path of DualRows: no products by 1
+                k, ga, gb = shared
+                return Dual(self.v + other.v, {k: ga + gb})
             return Dual(self.v + other.v, _combine(self.d, 1.0, other.d, 1.0))
         return Dual(self.v + other, self.d)
 
@@ -54,6 +58,10 @@ class Dual:
 
     def __sub__(self, other) -> Dual:
         if isinstance(other, Dual):
+            shared = _shared(self.d, other.d)
+            if shared is not None:
+                k, ga, gb = shared
+                return Dual(self.v - other.v, {k: ga - gb})
             return Dual(self.v - other.v, _combine(self.d, 1.0, other.d, -1.0))
         return Dual(self.v - other, self.d)
 
@@ -100,10 +108,21 @@ def _scale(d: Partials, factor) -> Partials:
     return {k: _times(g, factor) for k, g in d.items()}
 
 
+def _shared(da: Partials, db: Partials):
+    """(key, da's, db's) where both hold that one key alone (core.dual.DualRows), else None."""
+    if len(da) == 1 and len(db) == 1:
+        ((k, ga),) = da.items()
+        gb = db.get(k)
+        if gb is not None:
+            return k, ga, gb
+    return None
+
+
 def _combine(da: Partials, fa, db: Partials, fb) -> Partials:
     """fa * da + fb * db, touching only the partials that exist."""
-    if len(da) == 1 and da.keys() == db.keys():  # one shared key (core.dual.DualRows)
-        (k, ga), (gb,) = next(iter(da.items())), db.values()
+    shared = _shared(da, db)
+    if shared is not None:
+        k, ga, gb = shared
         return {k: _times(ga, fa) + _times(gb, fb)}
     out = {k: _times(g, fa) for k, g in da.items()}
     for k, g in db.items():

@@ -71,6 +71,41 @@ def texel_footprint(directions: np.ndarray, jacobian: np.ndarray, size: tuple[in
     return np.stack([-w / (2 * math.pi) * d_lon, -h / math.pi * d_lat], axis=1)
 
 
+def _extents(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The singular values σ₁ ≥ σ₂ (N,) of 2×2 matrices m (N, 2, 2) and the unit vector
+    (N, 2) along which m stretches most (the first left singular vector), in closed form:
+    from the eigenvalues of m mᵀ = [[p, r], [r, q]]."""
+    p = m[:, 0, 0] ** 2 + m[:, 0, 1] ** 2
+    q = m[:, 1, 0] ** 2 + m[:, 1, 1] ** 2
+    r = m[:, 0, 0] * m[:, 1, 0] + m[:, 0, 1] * m[:, 1, 1]
+    mean, spread = 0.5 * (p + q), np.hypot(0.5 * (p - q), r)
+    angle = 0.5 * np.arctan2(2.0 * r, p - q)
+    long = np.sqrt(mean + spread)
+    short = np.sqrt(np.maximum(mean - spread, 0.0))
+    return long, short, np.stack([np.cos(angle), np.sin(angle)], axis=1)
+
+
+def map_footprint(directions: np.ndarray, sky: np.ndarray) -> np.ndarray:
+    """Footprints (H, W, 2, 3) from a map of pixel centres' unit ``directions`` (H, W, 3):
+    the derivatives along x and y by central differences where both neighbours see the sky
+    (``sky`` (H, W)), one-sided towards the one that does, NaN where neither (screen-space
+    derivatives, as a GPU takes them: no ray differentials needed)."""
+    out = []
+    for axis in (1, 0):
+        step = np.diff(directions, axis=axis)
+        both = np.delete(sky, 0, axis=axis) & np.delete(sky, -1, axis=axis)
+        step = np.where(both[..., None], step, np.nan)
+        pad = [(0, 0)] * 3
+        pad[axis] = (1, 0)
+        before = np.pad(step, pad, constant_values=np.nan)
+        pad[axis] = (0, 1)
+        after = np.pad(step, pad, constant_values=np.nan)
+        central = 0.5 * (before + after)
+        one_sided = np.where(np.isnan(before), after, before)
+        out.append(np.where(np.isnan(central), one_sided, central))
+    return np.stack(out, axis=-2)
+
+
 class MipMap:
     """An equirectangular image (h, w, c) and its halvings down to one texel (``levels``);
     ``lookup`` filters it over footprints (the module)."""
@@ -90,8 +125,7 @@ class MipMap:
         """The image (N, c) at equirect ``uv`` (N, 2) averaged over ``footprint`` (N, 2, 2,
         texel_footprint); a footprint that is not finite is taken as a point."""
         footprint = np.where(np.isfinite(footprint), footprint, 0.0)
-        left, extents, _ = np.linalg.svd(footprint)
-        long, short = extents[:, 0], extents[:, 1]
+        long, short, axis = _extents(footprint)
         with np.errstate(divide="ignore", invalid="ignore"):
             taps = np.where(long > 1.0, np.ceil(long / short), 1.0)
         taps = np.clip(np.nan_to_num(taps, nan=1.0), 1, MAX_ANISOTROPY).astype(np.int64)
@@ -100,8 +134,8 @@ class MipMap:
         owner, rank = np.nonzero(np.arange(MAX_ANISOTROPY)[None, :] < taps[:, None])
         along = ((rank + 0.5) / taps[owner] - 0.5) * long[owner]
         h, w = self.size
-        x = uv[owner, 0] * w + along * left[owner, 0, 0]
-        y = (1.0 - uv[owner, 1]) * h + along * left[owner, 1, 0]
+        x = uv[owner, 0] * w + along * axis[owner, 0]
+        y = (1.0 - uv[owner, 1]) * h + along * axis[owner, 1]
         samples = self._trilinear(x / w, y / h, level[owner])
         out = np.zeros((uv.shape[0], samples.shape[1]))
         np.add.at(out, owner, samples / taps[owner, None])

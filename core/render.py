@@ -169,7 +169,9 @@ def render(
     if with_tangents:  # refused by name before anything is traced
         tracer.check_tangents()
         camera.direction_tangents(np.zeros((1, 2)))
-    # a texture sky is filtered over each pixel's footprint where the rays can carry it
+    # a texture sky is filtered over each pixel's footprint: adaptive renders take it from
+    # their pixel centres' directions (core.sampling), dense ones from ray differentials
+    # where the rays can carry them
     footprints = background.filters and tracer.supports_tangents and camera.kind != "ortho"
     image = _Buffers(n, with_error, camera.width, passes, pixel_angle)
     image.hold_stars(background, camera)
@@ -185,7 +187,7 @@ def render(
             pixel_filter=pixel_filter, filter_size=filter_size, with_error=with_error,
             far_field=_far_field_error(tracer), pixel_angle=pixel_angle,
             budget=_integration_budget(tolerance_px, pixel_angle, tracer),
-            tangents=with_tangents or footprints, magnification=with_tangents,
+            tangents=with_tangents, magnification=with_tangents,
         )  # fmt: skip
         tile_list = _tiles_for(camera, count)
         chunks = [(k, k + 1) for k in range(len(tile_list))]

@@ -60,6 +60,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import Hits
+from .mipmap import map_footprint
 from .motion import shift as doppler_shift
 from .passes import BY_NAME
 from .sky import Background
@@ -569,6 +570,8 @@ class TileSampler:
                 "transmittance",
             ):  # fmt: skip
                 getattr(centre, name)[missed] = getattr(again, name)
+        if self.background.filters and not self.with_tangents:
+            self._filter_sky(centre, (h + 2, w + 2), jj, ii)
         rgba = centre.rgba.reshape(h + 2, w + 2, 4)
         error = centre.error.reshape(h + 2, w + 2)
         ending = centre.ending.reshape(h + 2, w + 2)
@@ -596,6 +599,27 @@ class TileSampler:
             {name: data.astype(BY_NAME[name].dtype, copy=False) for name, data in passes.items()},
             energy, self.rays, self.error_rays,
         )  # fmt: skip
+
+    def _filter_sky(self, centre: _Points, shape: tuple[int, int], jj, ii) -> None:
+        """The sky seen at the pixel centres (a grid ``shape``, rows jj, columns ii) averaged
+        over each pixel's footprint, taken from the centres' own directions
+        (core.mipmap.map_footprint): the sky's share of each colour (its transmittance
+        times the sky, Doppler shifted for a moving camera) replaced by the filtered one."""
+        sky = centre.ending == ENDING["escaped"]
+        footprint = map_footprint(centre.direction.reshape(shape + (3,)), sky.reshape(shape))
+        rows = np.flatnonzero(sky)
+        if rows.size == 0:
+            return
+        d = centre.direction[rows]
+        plain = self.background(d)
+        filtered = self.background(d, footprint.reshape(-1, 2, 3)[rows])
+        moving = self.tracer.motion
+        if moving is not None:
+            _, seen = self.camera.rays_at(self._image_xy(jj[rows] * 1.0, ii[rows] * 1.0))
+            g = moving.colour_shift(seen)
+            plain[:, :3] = doppler_shift(plain[:, :3], g)
+            filtered[:, :3] = doppler_shift(filtered[:, :3], g)
+        centre.rgba[rows] += centre.transmittance[rows, None] * (filtered - plain)
 
     def _evaluate(self, nodes: _Nodes, blocks: _Blocks, y, x) -> _Points:
         """Colour, ending and error at lattice points (y, x) (node units, (M,)): a traced

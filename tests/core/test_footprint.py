@@ -81,28 +81,41 @@ def _camera(width: int, height: int) -> core.Camera:
     return core.Camera.perspective((0, -30, 0), (0, 0, 0), (0, 0, 1), 40, width, height)
 
 
+CASES = {
+    "dense": {"tolerance": 1e-7},  # ray differentials
+    "adaptive": {"tolerance_px": 0.5},  # the pixel centres' differences
+    "adaptive, magnification": {"tolerance_px": 0.5, "passes": ("ending", "magnification")},
+    "adaptive, moving": {"tolerance_px": 0.5, "observer": (0.0, 0.3, 0.0)},
+}
+
+
 @pytest.mark.parametrize("model", [None, "schwarzschild"])
-@pytest.mark.parametrize(
-    "accuracy", [{"tolerance": 1e-7}, {"tolerance_px": 0.5}], ids=["dense", "adaptive"]
-)
-def test_a_minified_sky_is_the_supersampled_one_not_its_moire(model, accuracy):
+@pytest.mark.parametrize("case", list(CASES))
+def test_a_minified_sky_is_the_supersampled_one_not_its_moire(model, case):
     """A 2-texel checker sky seen at ~1.4 texels a pixel (flat space) and demagnified further
-    around a Schwarzschild hole: with ray differentials each sky pixel is within 0.04 on
-    average (measured 0.023) of the same view rendered at 8x8 rays a pixel and averaged,
-    where the plain bilinear lookup is off by ~0.26 (moiré: the checker aliased)."""
+    around a Schwarzschild hole: filtered, the sky pixels are within 8 % on average of the
+    same view rendered at 8x8 rays a pixel and averaged (measured 1.3-5.7 %: the box along
+    the footprint's long axis and the mip level's blur), where the plain bilinear lookup is
+    off by 35-56 % (moiré: the checker aliased). The footprint comes
+    from ray differentials (dense renders; adaptive ones with the magnification pass) or
+    from the pixel centres' directions (adaptive renders); a camera moving at 0.3 c sees
+    the grey checker Doppler shifted, which for one chromaticity is linear in brightness,
+    so filtering and shifting commute there."""
     model = None if model is None else hm.schwarzschild(1.0)
+    options = dict(CASES[case])
+    observer = options.pop("observer", "static")
     image = _checker(512, 1024, 2)
     plain_sky = core.Background(lambda d: equirect_lookup(image, d))
     k, (w, h) = 8, (40, 30)
     fine = core.render(core.Scene(model=model, background=plain_sky), _camera(k * w, k * h),
-                       tolerance=1e-7, passes=("ending",))  # fmt: skip
-    reference = fine.rgba[..., 0].reshape(h, k, w, k).mean(axis=(1, 3))
+                       tolerance=1e-7, passes=("ending",), observer=observer)  # fmt: skip
+    reference = fine.rgba[..., :3].reshape(h, k, w, k, 3).mean(axis=(1, 3))
     sky = (fine.passes["ending"] == core.ENDING["escaped"]).reshape(h, k, w, k).all(axis=(1, 3))
     errors = {}
     for name, background in (("filtered", core.Background(image)), ("plain", plain_sky)):
         out = core.render(core.Scene(model=model, background=background), _camera(w, h),
-                          workers=1, **accuracy)  # fmt: skip
-        errors[name] = np.abs(out.rgba[..., 0] - reference)[sky].mean()
+                          workers=1, observer=observer, **options)  # fmt: skip
+        errors[name] = np.abs(out.rgba[..., :3] - reference)[sky].mean() / reference[sky].mean()
     assert sky.sum() > 1000
-    assert errors["filtered"] < 0.04
+    assert errors["filtered"] < 0.08
     assert errors["plain"] > 5 * errors["filtered"]
