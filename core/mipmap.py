@@ -106,6 +106,22 @@ def map_footprint(directions: np.ndarray, sky: np.ndarray) -> np.ndarray:
     return np.stack(out, axis=-2)
 
 
+def span_footprint(directions: np.ndarray, sky: np.ndarray, start: int, width: int) -> np.ndarray:
+    """Footprints (n, 2, 3) of the pixels [start, start + n) of an image ``width`` wide (row
+    by row) from their own ``directions`` (n, 3) where they see the sky (``sky`` (n,)):
+    map_footprint on the rows the span covers, a neighbour outside the span taken as not
+    seeing the sky."""
+    n = directions.shape[0]
+    first = start % width
+    rows = -(-(first + n) // width)
+    grid = np.full((rows * width, 3), np.nan)
+    grid[first : first + n] = directions
+    seen = np.zeros(rows * width, dtype=bool)
+    seen[first : first + n] = sky
+    footprint = map_footprint(grid.reshape(rows, width, 3), seen.reshape(rows, width))
+    return footprint.reshape(-1, 2, 3)[first : first + n]
+
+
 class MipMap:
     """An equirectangular image (h, w, c) and its halvings down to one texel (``levels``);
     ``lookup`` filters it over footprints (the module)."""

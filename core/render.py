@@ -32,6 +32,7 @@ from .geometry import Intersector
 from .geometry.hits import box_corners
 from .imageio import FAILED_COLOR
 from .integrators import Splitting
+from .mipmap import span_footprint
 from .motion import check_observer, observer_motion
 from .motion import shift as doppler_shift
 from .observer import ObserverError, check_camera
@@ -169,10 +170,6 @@ def render(
     if with_tangents:  # refused by name before anything is traced
         tracer.check_tangents()
         camera.direction_tangents(np.zeros((1, 2)))
-    # a texture sky is filtered over each pixel's footprint: adaptive renders take it from
-    # their pixel centres' directions (core.sampling), dense ones from ray differentials
-    # where the rays can carry them
-    footprints = background.filters and tracer.supports_tangents and camera.kind != "ortho"
     image = _Buffers(n, with_error, camera.width, passes, pixel_angle)
     image.hold_stars(background, camera)
     image.camera, image.motion = camera, moving
@@ -197,9 +194,7 @@ def render(
         # not below _MIN_CHUNK rays: per-step work is Python overhead on small batches
         size = max(_MIN_CHUNK, min(chunk_size, -(-n // (2 * count))))
         chunks = [(s, min(s + size, n)) for s in range(0, n, size)]
-        work = _span_work(
-            tracer, camera, with_error, _far_field_error(tracer), with_tangents or footprints
-        )
+        work = _span_work(tracer, camera, with_error, _far_field_error(tracer), with_tangents)
     cancelled = workers_module.CancelLatch(should_cancel)
     done = 0
     for span, chunk in workers_module.run_chunks(work, chunks, kind, count, cancelled):
@@ -559,7 +554,11 @@ class _Buffers:
             return self._store_tile(*chunk)
         a, b = span
         rays, seen, error = chunk
-        self.rgba[a:b] = shade(rays, background)
+        footprint = None  # a texture sky's: the pixels' own directions (core.mipmap)
+        if background.filters and rays.sky_jacobian.shape[1] != 2:
+            sky = rays.ending == ENDING["escaped"]
+            footprint = span_footprint(rays.direction, sky, a, self.width)
+        self.rgba[a:b] = shade(rays, background, footprint)
         self._put(slice(a, b), traced_passes(rays, seen, error))
         self.rays += b - a
         if error is not None:
@@ -722,8 +721,10 @@ def summary_text(summary: dict) -> str:
     return ", ".join(parts)
 
 
-def shade(rays: RayResults, background: Background) -> np.ndarray:
+def shade(rays: RayResults, background: Background, footprint=None) -> np.ndarray:
     """RGBA (N, 4) of traced rays: surfaces, sky, black horizon, volumes; debug colours.
+    The sky over each pixel's ``footprint`` (N, 2, 3), else over the ray differentials the
+    rays carry, if any (core.mipmap).
     Sky and surfaces take the Doppler shift of a moving camera (core.motion.shift; volumes'
     light does not: a documented approximation).
 
@@ -738,9 +739,10 @@ def shade(rays: RayResults, background: Background) -> np.ndarray:
     color[hit] = rays.surface[hit]
     escaped = rays.ending == ENDING["escaped"]
     if escaped.any():
-        carried = rays.sky_jacobian.shape[1] == 2  # ray differentials: the pixel's footprint
-        footprint = rays.sky_jacobian[escaped] if carried else None
-        color[escaped] = background(rays.direction[escaped], footprint)
+        if footprint is None and rays.sky_jacobian.shape[1] == 2:  # ray differentials
+            footprint = rays.sky_jacobian
+        seen = None if footprint is None else footprint[escaped]
+        color[escaped] = background(rays.direction[escaped], seen)
     moving = np.flatnonzero((escaped | hit & (rays.object_id != DISK_ID)) & (rays.doppler != 1.0))
     if moving.size:  # static emitters seen by a moving camera (the disk's g has it already)
         color[moving, :3] = doppler_shift(color[moving, :3], rays.doppler[moving])

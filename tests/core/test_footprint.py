@@ -9,7 +9,7 @@ import pytest
 
 import core
 from core import hamiltonians as hm
-from core.mipmap import MipMap, halve, texel_footprint
+from core.mipmap import MipMap, halve, map_footprint, span_footprint, texel_footprint
 from core.sky import direction_to_equirect, equirect_lookup
 
 
@@ -82,10 +82,11 @@ def _camera(width: int, height: int) -> core.Camera:
 
 
 CASES = {
-    "dense": {"tolerance": 1e-7},  # ray differentials
-    "adaptive": {"tolerance_px": 0.5},  # the pixel centres' differences
+    "dense": {"tolerance": 1e-7},  # the pixel centres' differences, chunk by chunk
+    "adaptive": {"tolerance_px": 0.5},  # the pixel centres' differences, tile by tile
     "adaptive, magnification": {"tolerance_px": 0.5, "passes": ("ending", "magnification")},
     "adaptive, moving": {"tolerance_px": 0.5, "observer": (0.0, 0.3, 0.0)},
+    "dense, gauss4": {"tolerance": 1e-7, "method": "gauss4"},  # no ray differentials
 }
 
 
@@ -93,14 +94,15 @@ CASES = {
 @pytest.mark.parametrize("case", list(CASES))
 def test_a_minified_sky_is_the_supersampled_one_not_its_moire(model, case):
     """A 2-texel checker sky seen at ~1.4 texels a pixel (flat space) and demagnified further
-    around a Schwarzschild hole: filtered, the sky pixels are within 8 % on average of the
-    same view rendered at 8x8 rays a pixel and averaged (measured 1.3-5.7 %: the box along
-    the footprint's long axis and the mip level's blur), where the plain bilinear lookup is
+        around a Schwarzschild hole: filtered, the sky pixels are within 8 % on average of the
+        same view rendered at 8x8 rays a pixel and averaged (measured 1.3-5.7 %: the box along
+        the footprint's long axis and the mip level's blur), where the plain bilinear lookup is
     off by 35-56 % (moiré: the checker aliased). The footprint comes
-    from ray differentials (dense renders; adaptive ones with the magnification pass) or
-    from the pixel centres' directions (adaptive renders); a camera moving at 0.3 c sees
-    the grey checker Doppler shifted, which for one chromaticity is linear in brightness,
-    so filtering and shifting commute there."""
+        from the pixel centres' own directions (any method: gauss4 carries no ray
+        differentials), or from ray differentials where the magnification pass carries them;
+        a camera moving at 0.3 c sees
+        the grey checker Doppler shifted, which for one chromaticity is linear in brightness,
+        so filtering and shifting commute there."""
     model = None if model is None else hm.schwarzschild(1.0)
     options = dict(CASES[case])
     observer = options.pop("observer", "static")
@@ -119,3 +121,27 @@ def test_a_minified_sky_is_the_supersampled_one_not_its_moire(model, case):
     assert sky.sum() > 1000
     assert errors["filtered"] < 0.08
     assert errors["plain"] > 5 * errors["filtered"]
+
+
+def test_a_span_of_pixels_takes_its_footprints_from_its_own_rows():
+    """span_footprint on pixels [37, 121) of a 16-wide image equals map_footprint of the
+    whole image wherever a pixel's four neighbours lie in the span, and is one-sided (still
+    finite) where one does not; map_footprint is the central difference of a smooth map to
+    its second order."""
+    h, w = 10, 16
+    yy, xx = np.mgrid[0:h, 0:w] * 0.01
+    d = np.stack([np.sin(xx) * np.cos(yy), np.cos(xx) * np.cos(yy), np.sin(yy)], axis=-1)
+    sky = np.ones((h, w), dtype=bool)
+    whole = map_footprint(d, sky).reshape(-1, 2, 3)
+    expected_x = np.stack([np.cos(xx) * np.cos(yy), -np.sin(xx) * np.cos(yy), 0 * xx], -1) * 0.01
+    inner = (slice(1, -1), slice(1, -1))
+    np.testing.assert_allclose(
+        whole.reshape(h, w, 2, 3)[inner][..., 0, :], expected_x[inner], atol=3e-7
+    )  # fmt: skip; (0.01 rad)^3 / 6: the second order
+    start, stop = 37, 121
+    span = span_footprint(d.reshape(-1, 3)[start:stop], np.ones(stop - start, bool), start, w)
+    flat = np.arange(start, stop)
+    inside = (flat - w >= start) & (flat + w < stop) & (flat % w > 0) & (flat % w < w - 1)
+    inside &= (flat - 1 >= start) & (flat + 1 < stop)
+    np.testing.assert_array_equal(span[inside], whole[flat[inside]])
+    assert np.isfinite(span).all()
