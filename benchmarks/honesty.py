@@ -30,7 +30,7 @@ as soon as core.passes has one. The columns, with their targets:
 - ``colour%``: share of the pixels whose RGBA differs from the reference's by more than
   0.1 in a channel (<= 0.2 %);
 - ``images``: connected components (8-neighbours) of the reference's hit pixels (and, in
-  the star scene, of pixels brighter than BRIGHT) / those lost: no pixel of the same kind
+  the star scenes, of pixels brighter than BRIGHT) / those lost: no pixel of the same kind
   in the run (a hit; brighter than BRIGHT / 2) within the component grown by 1 px (0 lost);
 - ``rays/px`` and ``seconds`` of the run (its summary).
 
@@ -40,8 +40,8 @@ hole at tolerance_px=0.25, samples=16, box filter, against the same columns supe
 reference (>= 0.9).
 
 The scenes are SCENES (each builder's docstring says what it shows): far_small,
-thin_front, stars, mirage_grazing, near_tangent, disk_high_spin, schwarzschild and
-user_metric. 2 cores: --quick ~2.5 min with its references rendered (~1.6 min of it);
+thin_front, stars, point_stars, mirage_grazing, near_tangent, disk_high_spin, schwarzschild
+and user_metric. 2 cores: --quick ~2.5 min with its references rendered (~1.6 min of it);
 the full 160x90 run ~5 min (references ~3 min, cached after the first run).
 
 A table row per (scene, T), a line counting the rows that miss each target, and the CSV
@@ -95,7 +95,7 @@ float32: a direction to ~6e-8 rad, 1e-5 px of these cameras; a hit point to ~1e-
 distance)."""
 COLOUR_STEP = 0.1
 """A pixel's colour differs when a channel differs from the reference's by more than this."""
-BRIGHT = {"stars": 0.05}
+BRIGHT = {"stars": 0.05, "point_stars": 0.05}
 """Scenes whose bright pixels (luminance above this) also count as lensed images."""
 TARGETS = {
     "over_tol_pct": ("<=", 0.5),
@@ -169,6 +169,18 @@ def stars(width: int, height: int) -> tuple[core.Scene, core.Camera]:
     hole seen from 20 rg: lensed, doubled and crowded near the photon ring."""
     cam = _camera((0, -20, 1), (0, 0, 0), width, height, fov_deg=50.0)
     return core.Scene(model=hm.schwarzschild(rg=1.0), background=_star_sky), cam
+
+
+def point_stars(width: int, height: int) -> tuple[core.Scene, core.Camera]:
+    """2000 point stars (core.StarField, no diffuse sky; a 5th-magnitude star fills a
+    pixel) behind a Kerr hole (a/M = 0.9) seen from 15 rg: each star's lensed images,
+    magnified and drawn at their true places, crowded and demagnified near the photon
+    ring."""
+    cam = _camera((0, -15, 1), (0, 0, 0), width, height, fov_deg=50.0)
+    pixel = (math.radians(50.0) / width) ** 2
+    field = core.StarField.random(2000, seed=23, diffuse=(0.0, 0.0, 0.0),
+                                  flux_zero=pixel / 10 ** (-0.4 * 5.0))  # fmt: skip
+    return core.Scene(model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"), background=field), cam
 
 
 def mirage_grazing(width: int, height: int) -> tuple[core.Scene, core.Camera]:
@@ -249,6 +261,7 @@ SCENES: dict[str, Callable[[int, int], tuple[core.Scene, core.Camera]]] = {
     "far_small": far_small,
     "thin_front": thin_front,
     "stars": stars,
+    "point_stars": point_stars,
     "mirage_grazing": mirage_grazing,
     "near_tangent": near_tangent,
     "disk_high_spin": disk_high_spin,
