@@ -1,9 +1,11 @@
 """Footprint filtering of an equirectangular sky (issue 26): what a pixel sees of a texture
 is the texture averaged over the pixel's footprint on the sky, not one bilinear texel.
 
-The footprint comes from the ray differentials (``RayResults.sky_jacobian`` J: the final
-direction's derivatives along image x and y, carried through the lens by dual numbers).
-Taken into the texture's texel space at full size, J gives two vectors a = ∂(X, Y)/∂x and
+The footprint J (N, 2, 3) is the seen direction's derivatives along image x and y: from a
+map of the pixel centres' own directions (``map_footprint``, ``span_footprint``: screen-space
+differences, as a GPU takes them; no rays traced for it), or the ray differentials a render
+carries anyway (``RayResults.sky_jacobian``, the magnification pass). Taken into the
+texture's texel space at full size, J gives two vectors a = ∂(X, Y)/∂x and
 b = ∂(X, Y)/∂y (X = u w, Y = (1 − v) h, sky.direction_to_equirect's u, v), whose 2×2 matrix
 has singular values σ₁ ≥ σ₂ (the footprint's long and short extents, texels) along U's
 columns. The texture is looked up as GPUs filter anisotropically: n = ⌈σ₁/σ₂⌉ taps
