@@ -48,6 +48,7 @@ import numpy as np
 
 from . import workers
 from .camera import Camera
+from .mipmap import span_footprint
 from .render import (
     TRACE_SHARE,
     ExposureProbe,
@@ -356,15 +357,40 @@ def resample(image: ViewImage, camera: Camera, scene: Scene) -> tuple[np.ndarray
         inside = np.isfinite(x) & (x >= 0) & (y >= 0) & (x <= old_w - 1) & (y <= old_h - 1)
         idx = np.flatnonzero(inside)
         if idx.size:
-            colour, ok = _interpolate(image, x[idx], y[idx], scene)
+            colour, ok, sky = _interpolate(image, x[idx], y[idx], scene)
+            _look_up_sky(colour, sky, idx, pixels, w, scene)
             rgba[pixels[idx[ok]]] = colour[ok]
             covered[pixels[idx[ok]]] = True
     return rgba.reshape(h, w, 4), covered.reshape(h, w)
 
 
-def _interpolate(image: ViewImage, x, y, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-    """Colour (M, 4) at old-image points (x, y) (pixel-centre units) and whether their
-    cell's four centres end alike (else not ok)."""
+def _look_up_sky(colour, sky: np.ndarray, idx: np.ndarray, pixels: np.ndarray, width: int,
+                 scene: Scene) -> None:  # fmt: skip
+    """The sky seen at a resampled chunk's points ``idx`` (``sky``: (M, 3) directions, NaN
+    where none), in place in ``colour``: a texture sky over each pixel's footprint, from
+    the chunk's own directions (core.mipmap.span_footprint), as a fresh render has it."""
+    rows = np.flatnonzero(np.isfinite(sky[:, 0]))
+    if rows.size == 0:
+        return
+    background = _background(scene)
+    footprint = None
+    if background.filters:
+        directions = np.full((pixels.size, 3), np.nan)
+        directions[idx] = sky
+        seen = np.isfinite(directions[:, 0])
+        footprint = span_footprint(directions, seen, int(pixels[0]), width)[idx[rows]]
+    colour[rows] = background(sky[rows], footprint)
+
+
+def _background(scene: Scene) -> Background:
+    background = scene.background
+    return background if isinstance(background, Background) else Background(background)
+
+
+def _interpolate(image: ViewImage, x, y, scene: Scene) -> tuple[np.ndarray, ...]:
+    """Colour (M, 4) at old-image points (x, y) (pixel-centre units), whether their cell's
+    four centres end alike (else not ok), and the sky's directions there (M, 3; NaN where
+    no sky is looked up)."""
     old_h, old_w = image.rgba.shape[:2]
     i0 = np.clip(np.floor(x).astype(np.int64), 0, max(old_w - 2, 0))
     j0 = np.clip(np.floor(y).astype(np.int64), 0, max(old_h - 2, 0))
@@ -397,11 +423,10 @@ def _interpolate(image: ViewImage, x, y, scene: Scene) -> tuple[np.ndarray, np.n
     captured = np.flatnonzero(alike & (end == ENDING["captured"]))
     colour[captured] = blend(image.rgba, captured)
     escaped = np.flatnonzero(alike & sky)
-    if escaped.size:
+    seen = np.full((x.size, 3), np.nan)
+    if escaped.size:  # the sky itself is looked up by the caller (_look_up_sky)
         d = blend(image.passes["direction"], escaped)
-        background = scene.background
-        background = background if isinstance(background, Background) else Background(background)
-        colour[escaped] = background(d / np.linalg.norm(d, axis=1, keepdims=True))
+        seen[escaped] = d / np.linalg.norm(d, axis=1, keepdims=True)
     disk = np.flatnonzero(alike & disk_cell & (end == ENDING["hit"]))
     if disk.size and scene.disk is not None and scene.disk.opacity >= 1.0:
         exposure = image.summary.get("disk_exposure", scene.disk.exposure)
@@ -409,7 +434,7 @@ def _interpolate(image: ViewImage, x, y, scene: Scene) -> tuple[np.ndarray, np.n
         g = np.asarray(image.passes["redshift"], dtype=np.float64)
         colour[disk, :3] = bound.colour(blend(g, disk), blend(_radius_map(image, scene), disk))
         colour[disk, 3] = blend(image.rgba[..., 3], disk)
-    return colour.astype(np.float32), alike
+    return colour.astype(np.float32), alike, seen
 
 
 def _radius_map(image: ViewImage, scene: Scene) -> np.ndarray:
