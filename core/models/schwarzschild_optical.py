@@ -28,6 +28,7 @@ import numpy as np
 
 from .. import dual
 from ..charts import IsotropicChart
+from ..dual import DualRows
 from ..integrators.splitting import SplitSystem
 from .medium import Medium
 
@@ -151,13 +152,32 @@ class LogarithmicSplit(SplitSystem):
 
     def kick(self, Q, P, t) -> None:
         """Exact flow of −ln B over t (q fixed): p += t ∇ln(n² − 1). In place, row by row
-        (arrays, or core.dual.DualRows: with its tangent map)."""
+        (arrays), or on core.dual.DualRows with its tangent map written out: c = t f(ρ²),
+        dc = t f'(ρ²) 2 q·dq, dp += dc q + c dq."""
+        if isinstance(Q, DualRows):
+            q, dq = Q.value, Q.tangent
+            f = self._radial_factor(dual.Dual.variable(np.einsum("ij,ij->j", q, q), 0))
+            c = t * f.v
+            dc = (2.0 * t * f.d[0]) * np.einsum("ij,kij->kj", q, dq)
+            P.tangent += dc[:, None, :] * q + c * dq
+            P.value += c * q
+            return
         c = t * self._force_factor(Q)
         for i in range(3):
             P[i] += c * Q[i]
 
     def drift(self, Q, P, t) -> None:
-        """Exact flow of ln A over t (p fixed): q += t p / A(p). In place, row by row."""
+        """Exact flow of ln A over t (p fixed): q += t p / A(p). In place, row by row
+        (arrays), or on core.dual.DualRows with its tangent map written out: c = t / A,
+        dc = -c (p·dp) / A, dq += dc p + c dp."""
+        if isinstance(Q, DualRows):
+            p, dp = P.value, P.tangent
+            A = 0.5 * np.einsum("ij,ij->j", p, p) - self.H0
+            c = t / A
+            dc = (-c / A) * np.einsum("ij,kij->kj", p, dp)
+            Q.tangent += dc[:, None, :] * p + c * dp
+            Q.value += c * p
+            return
         c = t / (0.5 * (P[0] * P[0] + P[1] * P[1] + P[2] * P[2]) - self.H0)
         for i in range(3):
             Q[i] += c * P[i]
