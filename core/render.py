@@ -157,11 +157,7 @@ def render(
     interpolation = 0.0
     if tolerance_px is not None:
         interpolation = (1.0 - TRACE_SHARE) * tolerance_px * pixel_angle
-    background = (
-        scene.background
-        if isinstance(scene.background, Background)
-        else Background(scene.background)
-    )
+    background = Background.of(scene.background)
     n = camera.n_pixels
     # with tolerance_px the companion run always goes: its estimate picks the rays to redo
     with_error = "error" in passes or "error_px" in passes or tolerance_px is not None

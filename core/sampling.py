@@ -320,8 +320,8 @@ class TileSampler:
                 cancel=cancel,
             )
             rays, coarse = both.take(slice(0, n)), both.take(slice(n, None))
-        else:  # the companion needs no differentials: a batch of its own is cheaper (1.76x
-            # a plain traced ray, not 2.0x: the Kerr board, benchmarks/frame.py)
+        else:  # the companion needs no differentials: a batch of its own costs less than
+            # carrying them through its half of a shared batch (benchmarks/frame.py)
             rays = self.tracer.trace(origins, directions, step=step, cancel=cancel, tangents=seen)
             coarse = self.tracer.trace(origins, directions, step=COMPANION_RATIO * step,
                                        cancel=cancel)  # fmt: skip

@@ -297,10 +297,15 @@ class Background:
         self.matrix = None if matrix is None else np.asarray(matrix, dtype=np.float64)
         self._fn, self._mipmap = self._make(spec, grid, star_size, interpolation)
 
+    @classmethod
+    def of(cls, spec: Any) -> Background:
+        """``spec`` itself when it is a Background, else the Background it describes."""
+        return spec if isinstance(spec, Background) else cls(spec)
+
     @property
     def filters(self) -> bool:
         """Whether a footprint changes what this background shows (a bilinear equirect
-        texture: core.mipmap), so a render carries ray differentials for it."""
+        texture: core.mipmap), so a render looks its sky up over each pixel's footprint."""
         return self._mipmap is not None or (isinstance(self._fn, Background) and self._fn.filters)
 
     @staticmethod
@@ -330,9 +335,9 @@ class Background:
 
     def __call__(self, directions: Any, footprint: np.ndarray | None = None) -> np.ndarray:
         """Linear RGBA (N, 4) seen along world directions (N, 3); alpha 1 unless given.
-        ``footprint`` (N, 2, 3): the directions' derivatives along image x and y (ray
-        differentials); a texture is then averaged over each pixel's footprint
-        (core.mipmap; NaN rows: a point, as without)."""
+        ``footprint`` (N, 2, 3): the directions' derivatives along image x and y (each
+        pixel's footprint on the sky); a texture is then averaged over it (core.mipmap; NaN
+        rows: a point, as without)."""
         d = np.asarray(directions, dtype=np.float64).reshape(-1, 3)
         if self.matrix is not None:
             d = d @ self.matrix

@@ -372,7 +372,7 @@ def _look_up_sky(colour, sky: np.ndarray, idx: np.ndarray, pixels: np.ndarray, w
     rows = np.flatnonzero(np.isfinite(sky[:, 0]))
     if rows.size == 0:
         return
-    background = _background(scene)
+    background = Background.of(scene.background)
     footprint = None
     if background.filters:
         directions = np.full((pixels.size, 3), np.nan)
@@ -380,11 +380,6 @@ def _look_up_sky(colour, sky: np.ndarray, idx: np.ndarray, pixels: np.ndarray, w
         seen = np.isfinite(directions[:, 0])
         footprint = span_footprint(directions, seen, int(pixels[0]), width)[idx[rows]]
     colour[rows] = background(sky[rows], footprint)
-
-
-def _background(scene: Scene) -> Background:
-    background = scene.background
-    return background if isinstance(background, Background) else Background(background)
 
 
 def _interpolate(image: ViewImage, x, y, scene: Scene) -> tuple[np.ndarray, ...]:

@@ -125,16 +125,20 @@ class KerrBoyerLindquist(Hamiltonian):
         return V, sigma, (dV_s, dV_t, dV_E, dV_L), dsig
 
     def curvature(self, Q: np.ndarray, P: np.ndarray, H0=0.0):
-        """V's gradient and Hessian in (s, theta, E, L), for the kick's tangent map
-        (SqrtSplit.kick on rows with derivatives): (V, (V_s, V_t, V_E, V_L), H) with H the
-        dict of second derivatives by pairs ("ss", "sE", ...; V_st = V_tL = 0), each (N,).
-        With r' = dr/ds = b sh, r'' = b ch = r - M, Delta = r'^2 and q = P / Delta:
-        V_s = 2 q r r' E - q^2 Delta_s / 2 + H0 Sigma_s, V_E = q (r^2 + a^2) + a L
-        - a^2 E sin^2 theta, V_L = a (E - q), differentiated once more."""
+        """V, its gradient (dV/ds, dV/dtheta, dV/dE, dV/dL) (``parts``) and its Hessian in
+        (s, theta, E, L), for the kick's tangent map (SqrtSplit.kick on rows with
+        derivatives): (V, gradient, H) with H the dict of second derivatives by pairs ("ss",
+        "sE", ...; V_st = V_tL = 0), each (N,). With r' = dr/ds = b sh, r'' = b ch,
+        Delta = r'^2 and q = P / Delta, ``parts``' gradient reads V_s = 2 q r r' E
+        - q^2 Delta_s / 2 + H0 Sigma_s, V_theta = -a^2 sin cos (E^2 + 2 H0),
+        V_E = q (r^2 + a^2) + a L - a^2 E sin^2 theta, V_L = a (E - q): differentiated
+        once more here."""
+        V, _, gradient, _ = self.parts(Q, P, H0)
         s, theta = Q[1], Q[2]
         E, L, a, b = -P[0], P[3], self.a, self.b
         sh, ch = np.sinh(s), np.cosh(s)
         r, r1, r2 = self.mass + b * ch, b * sh, b * ch
+        st, ct = np.sin(theta), np.cos(theta)
         with np.errstate(divide="ignore", invalid="ignore"):
             delta = r1 * r1
             ra2 = r * r + a * a
@@ -143,16 +147,6 @@ class KerrBoyerLindquist(Hamiltonian):
             rr1 = r * r1
             q_s = (2.0 * rr1 * E - q * delta_s) / delta
             q_E = ra2 / delta
-            st, ct = np.sin(theta), np.cos(theta)
-            V = 0.5 * q * q * delta + a * E * L - 0.5 * (a * E * st) ** 2
-            V = V + H0 * (r * r + a * a * ct * ct)
-            gradient = (
-                2.0 * q * rr1 * E - 0.5 * q * q * delta_s + H0 * 2.0 * rr1,
-                -a * a * st * ct * (E * E + 2.0 * H0),
-                q * ra2 + a * L - a * a * E * st * st,
-                a * (E - q),
-            )
-            cos2 = ct * ct - st * st
             hessian = {
                 "ss": 2.0 * E * (q_s * rr1 + q * (r1 * r1 + r * r2))
                 - q * q_s * delta_s
@@ -160,7 +154,7 @@ class KerrBoyerLindquist(Hamiltonian):
                 + H0 * 2.0 * (r1 * r1 + r * r2),
                 "sE": 2.0 * rr1 * (q + E * q_E) - q * q_E * delta_s,
                 "sL": -a * q_s,
-                "tt": -a * a * cos2 * (E * E + 2.0 * H0),
+                "tt": -a * a * (ct * ct - st * st) * (E * E + 2.0 * H0),
                 "tE": -2.0 * a * a * E * st * ct,
                 "EE": q_E * ra2 - a * a * st * st,
                 "EL": a * (1.0 - ra2 / delta),
