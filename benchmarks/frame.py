@@ -45,9 +45,17 @@ class _Textured:
         return hits
 
 
-def kerr_board_scene():
+def kerr_board_scene(cells: int = 0):
     """Kerr a/M = 0.9 (rg = 1, Kerr-Schild), a 16 rg checker board 12 rg behind the hole
-    (the scene of benchmarks/image_quality.py; repeated here for old checkouts)."""
+    (the scene of benchmarks/image_quality.py; repeated here for old checkouts); ``cells``
+    > 0: a checker of that many cells a side as the plane's own colour (averaged over each
+    pixel's footprint where the checkout does that)."""
+    if cells:
+        return core.Scene(model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"),
+                          objects=[core.Plane(point=(0, 12, 0), normal=(0, -1, 0),
+                                              u_axis=(1, 0, 0), extent=(16, 16),
+                                              color=core.checker(cells, cells))],
+                          background="procedural")  # fmt: skip
     plane = core.Plane(point=(0, 12, 0), normal=(0, -1, 0), u_axis=(1, 0, 0),
                        extent=(16, 16))  # fmt: skip
     board = _Textured(plane, core.checker(8, 8))
@@ -117,8 +125,15 @@ def main() -> None:
     parser.add_argument(
         "--unfiltered", action="store_true", help="with --env-sky: looked up at one point"
     )
+    parser.add_argument(
+        "--board-cells",
+        type=int,
+        default=0,
+        help="the board's checker as the plane's own colour, this many cells a side "
+        "(filtered over each pixel's footprint where the checkout does that)",
+    )
     args = parser.parse_args()
-    scene, cam = kerr_board_scene(), camera(args.width, args.height)
+    scene, cam = kerr_board_scene(args.board_cells), camera(args.width, args.height)
     if args.disk:  # Scene binds the disk to its model
         scene = dataclasses.replace(scene, disk=core.AccretionDisk(r_out=10.0))
     if args.stars:

@@ -1,5 +1,6 @@
-"""Footprint filtering of an equirectangular sky (issue 26): what a pixel sees of a texture
-is the texture averaged over the pixel's footprint on the sky, not one bilinear texel.
+"""Footprint filtering of textures (issue 26): what a pixel sees of a texture is the texture
+averaged over the pixel's footprint on it, not one bilinear texel: an equirectangular sky,
+and image textures on surfaces.
 
 The footprint J (N, 2, 3) is the seen direction's derivatives along image x and y: from a
 map of the pixel centres' own directions (``map_footprint``, ``span_footprint``: screen-space
@@ -13,6 +14,11 @@ columns. The texture is looked up as GPUs filter anisotropically: n = ⌈σ₁/�
 pyramid of box-filtered halvings (MipMap) at the level whose texel is max(σ₁/n, σ₂) wide,
 averaged. A footprint of at most one texel (a magnified sky) is the plain bilinear lookup,
 exactly: filtering changes nothing where the texture is resolved.
+
+Surfaces (core.geometry.hits' ``filters``): the footprint on a surface is the hit point's
+derivatives along image x and y (``surface_footprint``, differences of neighbouring hit
+points on the same object); each surface takes it into its own uv, and an image texture
+on it is a MipMap of its own wrap (``WRAP_MODES``), looked up the same way (``texels``).
 
 Approximations: a box filter along the long axis (not an elliptical Gaussian); at odd sizes
 a halving pads one column (wrapped in longitude) or row (repeated at a pole), so a coarse
@@ -29,30 +35,49 @@ MAX_ANISOTROPY = 8
 """Taps along a footprint's long axis at most (a longer one is taken blurrier across)."""
 
 
-def halve(image: np.ndarray) -> np.ndarray:
-    """An equirectangular image (h, w, c) at half its size per side (rounded up): the mean of
-    each 2×2 block, an odd width padded by its first column (longitude wraps), an odd
-    height by its last row."""
+WRAP_MODES = ("repeat", "extend", "mirror")
+"""How texel indices past an image's edge are taken (Blender's Image Texture extensions:
+REPEAT tiles, EXTEND clamps to the edge, MIRROR reflects; CLIP is EXTEND then zero outside,
+left to the caller)."""
+SKY_WRAP = ("repeat", "extend")
+"""An equirectangular sky: longitude wraps, latitude stops at the poles."""
+
+
+def wrap_index(i: np.ndarray, n: int, mode: str) -> np.ndarray:
+    """Integer texel indices ``i`` taken into [0, n) by ``mode`` (WRAP_MODES)."""
+    if mode == "repeat":
+        return np.mod(i, n)
+    if mode == "mirror":
+        period = np.mod(i, 2 * n)
+        return np.where(period < n, period, 2 * n - 1 - period)
+    return np.clip(i, 0, n - 1)
+
+
+def halve(image: np.ndarray, wrap: tuple[str, str] = SKY_WRAP) -> np.ndarray:
+    """An image (h, w, c) at half its size per side (rounded up): the mean of each 2×2
+    block, an odd width (height) padded by the texel that follows its last by ``wrap`` (x, y):
+    the first column (row) where it repeats, else the last."""
     h, w = image.shape[:2]
     if w > 1 and w % 2:
-        image = np.concatenate([image, image[:, :1]], axis=1)
+        image = np.concatenate([image, image[:, wrap_index(np.array([w]), w, wrap[0])]], axis=1)
     if h > 1 and h % 2:
-        image = np.concatenate([image, image[-1:]], axis=0)
+        image = np.concatenate([image, image[wrap_index(np.array([h]), h, wrap[1])]], axis=0)
     h, w = image.shape[:2]
     rows, columns = max(h // 2, 1), max(w // 2, 1)
     return image.reshape(rows, h // rows, columns, w // columns, -1).mean(axis=(1, 3))
 
 
-def bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+def bilinear(
+    image: np.ndarray, x: np.ndarray, y: np.ndarray, wrap: tuple[str, str] = SKY_WRAP
+) -> np.ndarray:
     """Bilinear samples (N, c) of ``image`` (h, w, c) at texel coordinates x, y (texel
-    centres at integers, row 0 at the top): wrapping in x (longitude), clamped in y."""
+    centres at integers, row 0 at the top), indices past the edges taken by ``wrap`` (x, y)."""
     h, w = image.shape[:2]
     x0, y0 = np.floor(x), np.floor(y)
     fx, fy = (x - x0)[..., None], (y - y0)[..., None]
-    xa = x0.astype(np.int64) % w
-    xb = (xa + 1) % w
-    ya = np.clip(y0.astype(np.int64), 0, h - 1)
-    yb = np.clip(y0.astype(np.int64) + 1, 0, h - 1)
+    xi, yi = x0.astype(np.int64), y0.astype(np.int64)
+    xa, xb = wrap_index(xi, w, wrap[0]), wrap_index(xi + 1, w, wrap[0])
+    ya, yb = wrap_index(yi, h, wrap[1]), wrap_index(yi + 1, h, wrap[1])
     top = image[ya, xa] * (1 - fx) + image[ya, xb] * fx
     bottom = image[yb, xa] * (1 - fx) + image[yb, xb] * fx
     return top * (1 - fy) + bottom * fy
@@ -73,10 +98,10 @@ def texel_footprint(directions: np.ndarray, jacobian: np.ndarray, size: tuple[in
     return np.stack([-w / (2 * math.pi) * d_lon, -h / math.pi * d_lat], axis=1)
 
 
-def _extents(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The singular values σ₁ ≥ σ₂ (N,) of 2×2 matrices m (N, 2, 2) and the unit vector
-    (N, 2) along which m stretches most (the first left singular vector), in closed form:
-    from the eigenvalues of m mᵀ = [[p, r], [r, q]]."""
+def extents(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A footprint's long and short extents: the singular values σ₁ ≥ σ₂ (N,) of 2×2
+    matrices m (N, 2, 2), and the unit vector (N, 2) along which m stretches most (the first
+    left singular vector), in closed form: from the eigenvalues of m mᵀ = [[p, r], [r, q]]."""
     p = m[:, 0, 0] ** 2 + m[:, 0, 1] ** 2
     q = m[:, 1, 0] ** 2 + m[:, 1, 1] ** 2
     r = m[:, 0, 0] * m[:, 1, 0] + m[:, 0, 1] * m[:, 1, 1]
@@ -87,25 +112,62 @@ def _extents(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return long, short, np.stack([np.cos(angle), np.sin(angle)], axis=1)
 
 
-def map_footprint(directions: np.ndarray, sky: np.ndarray) -> np.ndarray:
-    """Footprints (H, W, 2, 3) from a map of pixel centres' unit ``directions`` (H, W, 3):
-    the derivatives along x and y by central differences where both neighbours see the sky
-    (``sky`` (H, W)), one-sided towards the one that does, NaN where neither (screen-space
-    derivatives, as a GPU takes them: no ray differentials needed)."""
+DEPTH_JUMP = 4.0
+"""Where both one-sided differences are on the same surface but one is more than this many
+times the other, the surface folds or hides part of itself between them (a depth jump):
+the smaller is the footprint (``screen_differences`` with ``jumps``)."""
+
+
+def screen_differences(values: np.ndarray, label: np.ndarray, jumps: bool = False) -> np.ndarray:
+    """Derivatives (H, W, 2, c) along image x and y of a map of ``values`` (H, W, c) by
+    differences between neighbours of the same ``label`` (H, W; below 0: none): central
+    where both neighbours share it, one-sided towards the one that does, NaN where neither
+    (screen-space derivatives, as a GPU takes them); with ``jumps``, the smaller one-sided
+    difference where the two differ more than DEPTH_JUMP-fold."""
     out = []
     for axis in (1, 0):
-        step = np.diff(directions, axis=axis)
-        both = np.delete(sky, 0, axis=axis) & np.delete(sky, -1, axis=axis)
+        step = np.diff(values, axis=axis)
+        ends = np.delete(label, 0, axis=axis)
+        both = (ends == np.delete(label, -1, axis=axis)) & (ends >= 0)
         step = np.where(both[..., None], step, np.nan)
-        pad = [(0, 0)] * 3
+        pad = [(0, 0)] * values.ndim
         pad[axis] = (1, 0)
         before = np.pad(step, pad, constant_values=np.nan)
         pad[axis] = (0, 1)
         after = np.pad(step, pad, constant_values=np.nan)
         central = 0.5 * (before + after)
         one_sided = np.where(np.isnan(before), after, before)
+        if jumps:
+            nb, na = np.linalg.norm(before, axis=-1), np.linalg.norm(after, axis=-1)
+            jump = (np.maximum(nb, na) > DEPTH_JUMP * np.minimum(nb, na))[..., None]
+            central = np.where(jump, np.where((nb <= na)[..., None], before, after), central)
         out.append(np.where(np.isnan(central), one_sided, central))
     return np.stack(out, axis=-2)
+
+
+def map_footprint(directions: np.ndarray, sky: np.ndarray) -> np.ndarray:
+    """Footprints (H, W, 2, 3) from a map of pixel centres' unit ``directions`` (H, W, 3)
+    where they see the sky (``sky`` (H, W)): screen_differences among the sky's pixels (no
+    ray differentials needed)."""
+    return screen_differences(directions, np.where(sky, 0, -1))
+
+
+def span_differences(
+    values: np.ndarray, label: np.ndarray, start: int, width: int, jumps: bool = False
+) -> np.ndarray:
+    """screen_differences (n, 2, c) of the pixels [start, start + n) of an image ``width``
+    wide (row by row), from their own ``values`` (n, c) and ``label`` (n,), on the rows the
+    span covers; a neighbour outside the span is taken as unlabelled."""
+    n, c = values.shape
+    first = start % width
+    rows = -(-(first + n) // width)
+    grid = np.full((rows * width, c), np.nan)
+    grid[first : first + n] = values
+    labels = np.full(rows * width, -1, dtype=np.int64)
+    labels[first : first + n] = label
+    shape = (rows, width)
+    out = screen_differences(grid.reshape(shape + (c,)), labels.reshape(shape), jumps)
+    return out.reshape(-1, 2, c)[first : first + n]
 
 
 def span_footprint(directions: np.ndarray, sky: np.ndarray, start: int, width: int) -> np.ndarray:
@@ -113,25 +175,31 @@ def span_footprint(directions: np.ndarray, sky: np.ndarray, start: int, width: i
     by row) from their own ``directions`` (n, 3) where they see the sky (``sky`` (n,)):
     map_footprint on the rows the span covers, a neighbour outside the span taken as not
     seeing the sky."""
-    n = directions.shape[0]
-    first = start % width
-    rows = -(-(first + n) // width)
-    grid = np.full((rows * width, 3), np.nan)
-    grid[first : first + n] = directions
-    seen = np.zeros(rows * width, dtype=bool)
-    seen[first : first + n] = sky
-    footprint = map_footprint(grid.reshape(rows, width, 3), seen.reshape(rows, width))
-    return footprint.reshape(-1, 2, 3)[first : first + n]
+    return span_differences(directions, np.where(sky, 0, -1), start, width)
+
+
+def surface_footprint(
+    position: np.ndarray, surface: np.ndarray, start: int, width: int
+) -> np.ndarray:
+    """Footprints (n, 2, 3) on surfaces (∂(hit point)/∂(image x, y), world units) of the
+    pixels [start, start + n) of an image ``width`` wide from their hit points ``position``
+    (n, 3) and the ``surface`` (n,) each is on (an object id; below 0: none):
+    span_differences among pixels on the same surface, a depth jump taken as one."""
+    return span_differences(position, surface, start, width, jumps=True)
 
 
 class MipMap:
-    """An equirectangular image (h, w, c) and its halvings down to one texel (``levels``);
-    ``lookup`` filters it over footprints (the module)."""
+    """An image (h, w, c), row 0 at the top, and its halvings down to one texel
+    (``levels``); ``lookup`` filters it over footprints (the module). ``wrap`` (x, y)
+    (WRAP_MODES): an equirectangular sky's by default; a surface's texture its own."""
 
-    def __init__(self, image: np.ndarray) -> None:
+    def __init__(self, image: np.ndarray, wrap: tuple[str, str] = SKY_WRAP) -> None:
+        if wrap[0] not in WRAP_MODES or wrap[1] not in WRAP_MODES:
+            raise ValueError(f"wrap must be two of {WRAP_MODES}, got {wrap}")
+        self.wrap = wrap
         self.levels = [np.asarray(image)]
         while self.levels[-1].shape[0] > 1 or self.levels[-1].shape[1] > 1:
-            self.levels.append(halve(self.levels[-1]))
+            self.levels.append(halve(self.levels[-1], wrap))
 
     @property
     def size(self) -> tuple[int, int]:
@@ -139,11 +207,18 @@ class MipMap:
         h, w = self.levels[0].shape[:2]
         return h, w
 
+    def texels(self, uv_footprint: np.ndarray) -> np.ndarray:
+        """Footprints (N, 2, 2) in full-size texels from footprints in uv (column k =
+        ∂(u, v)/∂(image coordinate k); v up, as ``lookup`` takes it)."""
+        h, w = self.size
+        return uv_footprint * np.array([w, -h], dtype=np.float64)[None, :, None]
+
     def lookup(self, uv: np.ndarray, footprint: np.ndarray) -> np.ndarray:
-        """The image (N, c) at equirect ``uv`` (N, 2) averaged over ``footprint`` (N, 2, 2,
-        texel_footprint); a footprint that is not finite is taken as a point."""
+        """The image (N, c) at ``uv`` (N, 2; u across, v up from the bottom row) averaged
+        over ``footprint`` (N, 2, 2, in texels: texel_footprint, ``texels``); a footprint
+        that is not finite is taken as a point."""
         footprint = np.where(np.isfinite(footprint), footprint, 0.0)
-        long, short, axis = _extents(footprint)
+        long, short, axis = extents(footprint)
         with np.errstate(divide="ignore", invalid="ignore"):
             taps = np.where(long > 1.0, np.ceil(long / short), 1.0)
         taps = np.clip(np.nan_to_num(taps, nan=1.0), 1, MAX_ANISOTROPY).astype(np.int64)
@@ -177,4 +252,4 @@ class MipMap:
     def _at_level(self, k: int, across: np.ndarray, down: np.ndarray) -> np.ndarray:
         image = self.levels[k]
         h, w = image.shape[:2]
-        return bilinear(image, across * w - 0.5, down * h - 0.5)
+        return bilinear(image, across * w - 0.5, down * h - 0.5, self.wrap)

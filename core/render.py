@@ -54,6 +54,7 @@ from .star_images import draw_stars
 from .stars import StarField
 from .tracing import ENDING, FAR_FIELD_CONSTANT, RayResults, Scene, TraceOptions, Tracer
 from .tracing.scene import DISK_ID
+from .tracing.segments import filter_surfaces
 from .tracing.steps import DEFAULT_METHOD
 
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
@@ -330,7 +331,10 @@ def _span_work(tracer: Tracer, camera, with_error: bool, far_field: float, tange
         origins, directions = camera.rays(*span)
         seen = camera.direction_tangents(camera.pixel_centres(*span)) if tangents else None
         chunk = _trace_chunk(tracer, origins, directions, with_error, cancel, far_field, seen)
-        return None if cancel() else chunk
+        if cancel():
+            return None
+        filter_surfaces(tracer.geometry, chunk[0], span[0], camera.width)
+        return chunk
 
     return work
 

@@ -60,7 +60,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import Hits
-from .mipmap import map_footprint
+from .mipmap import map_footprint, surface_footprint
 from .motion import shift as doppler_shift
 from .passes import BY_NAME
 from .sky import Background
@@ -242,6 +242,7 @@ class _Nodes:
         self.object_id = np.full(shape, -1, dtype=np.int32)
         self.position = np.zeros(shape + (3,))  # hit points (world)
         self.tangent = np.zeros(shape + (3,))  # the hitting chords' directions
+        self.surface = np.zeros(shape + (4,))  # the surface's colour where hit
         self.redshift = np.full(shape, np.nan)  # g on the accretion disk
         self.radius = np.full(shape, np.nan)  # Boyer–Lindquist r of a hit on the disk
         self.flipped = np.zeros(shape, dtype=bool)  # two of its runs ended on different things
@@ -360,6 +361,7 @@ class TileSampler:
         nodes.object_id[jj, ii] = rays.object_id
         nodes.position[jj, ii] = rays.position
         nodes.tangent[jj, ii] = rays.tangent
+        nodes.surface[jj, ii] = rays.surface
         nodes.redshift[jj, ii] = rays.redshift
         on_disk = np.flatnonzero(hit & (rays.object_id == DISK_ID))
         nodes.radius[jj, ii] = np.nan
@@ -572,11 +574,13 @@ class TileSampler:
             again = self._evaluate(nodes, blocks, jj[missed] * 1.0, ii[missed] * 1.0)
             for name in (
                 "rgba", "ending", "error", "direction", "redshift", "position", "magnification",
-                "transmittance",
+                "transmittance", "object_id", "tangent", "surface",
             ):  # fmt: skip
                 getattr(centre, name)[missed] = getattr(again, name)
         if self.background.filters and not self.with_tangents:
             self._filter_sky(centre, (h + 2, w + 2), jj, ii)
+        if self.tracer.geometry.filters:
+            self._filter_surfaces(centre, (h + 2, w + 2), jj, ii)
         rgba = centre.rgba.reshape(h + 2, w + 2, 4)
         error = centre.error.reshape(h + 2, w + 2)
         ending = centre.ending.reshape(h + 2, w + 2)
@@ -626,6 +630,36 @@ class TileSampler:
             filtered[:, :3] = doppler_shift(filtered[:, :3], g)
         centre.rgba[rows] += centre.transmittance[rows, None] * (filtered - plain)
 
+    def _filter_surfaces(self, centre: _Points, shape: tuple[int, int], jj, ii) -> None:
+        """The surfaces seen at the pixel centres (a grid ``shape``, rows jj, columns ii)
+        averaged over each pixel's footprint there, from neighbouring centres' hit points
+        on the same object (core.mipmap.surface_footprint; SceneGeometry.colour_over): the
+        surface's share of each colour (its transmittance times the surface, Doppler
+        shifted for a moving camera) replaced by the filtered one. Centres past the image's
+        edges are not neighbours (as on a whole image: core.viewport.reshade_surfaces)."""
+        row, column = self._origin[0] + jj, self._origin[1] + ii
+        inside = (
+            (row >= 0) & (row < self.camera.height) & (column >= 0) & (column < self.camera.width)
+        )
+        hit = (centre.ending == ENDING["hit"]) & (centre.object_id >= 0) & inside
+        label = np.where(hit, centre.object_id, -1)
+        footprint = surface_footprint(centre.position, label, 0, shape[1])
+        rows = np.flatnonzero(hit & np.all(np.isfinite(footprint), axis=(1, 2)))
+        if rows.size == 0:
+            return
+        colour, found = self.tracer.geometry.colour_over(
+            centre.position[rows], centre.tangent[rows], centre.object_id[rows], footprint[rows]
+        )
+        rows, filtered = rows[found], colour[found]
+        plain = centre.surface[rows].copy()
+        moving = self.tracer.motion
+        if moving is not None:
+            _, seen = self.camera.rays_at(self._image_xy(jj[rows] * 1.0, ii[rows] * 1.0))
+            g = moving.colour_shift(seen)
+            plain[:, :3] = doppler_shift(plain[:, :3], g)
+            filtered[:, :3] = doppler_shift(filtered[:, :3], g)
+        centre.rgba[rows] += centre.transmittance[rows, None] * (filtered - plain)
+
     def _evaluate(self, nodes: _Nodes, blocks: _Blocks, y, x) -> _Points:
         """Colour, ending and error at lattice points (y, x) (node units, (M,)): a traced
         node's own where a point is one, else interpolated in its accepted block; points in
@@ -634,6 +668,7 @@ class TileSampler:
         out = _Points(
             np.zeros((m, 4)), np.full(m, -1, dtype=np.int8), np.zeros(m), np.full((m, 3), np.nan),
             np.full(m, np.nan), np.full((m, 3), np.nan), np.full(m, np.nan), np.ones(m),
+            np.full(m, -1, dtype=np.int32), np.zeros((m, 3)), np.zeros((m, 4)),
         )  # fmt: skip
         cell_j = np.clip(np.floor(y).astype(np.int64), 0, blocks.block.shape[0] - 1)
         cell_i = np.clip(np.floor(x).astype(np.int64), 0, blocks.block.shape[1] - 1)
@@ -652,8 +687,11 @@ class TileSampler:
         out.redshift[t] = nodes.redshift[nj[t], ni[t]]
         out.magnification[t] = nodes.magnification[nj[t], ni[t]]
         out.transmittance[t] = nodes.transmittance[nj[t], ni[t]]
-        hit = out.ending[t] == ENDING["hit"]
-        out.position[t[hit]] = nodes.position[nj[t[hit]], ni[t[hit]]]
+        hit = t[out.ending[t] == ENDING["hit"]]
+        out.position[hit] = nodes.position[nj[hit], ni[hit]]
+        out.object_id[hit] = nodes.object_id[nj[hit], ni[hit]]
+        out.tangent[hit] = nodes.tangent[nj[hit], ni[hit]]
+        out.surface[hit] = nodes.surface[nj[hit], ni[hit]]
         return out
 
     def _interpolate(self, nodes: _Nodes, blocks: _Blocks, b, y, x, out: _Points, rows):
@@ -706,7 +744,10 @@ class TileSampler:
             ok = found.hit
             colour[hit[ok]] = found.color[ok]
             ending[hit[~ok]] = -1  # missed its object (an edge): trace this point
-            out.position[rows[hit[ok]]] = found.position[ok]
+            at = rows[hit[ok]]
+            out.position[at] = found.position[ok]
+            out.object_id[at], out.surface[at] = found.object_id[ok], found.color[ok]
+            out.tangent[at] = blend(nodes.tangent)[hit[ok]]
             seen = found.position[ok] - origins[ok]
             out.direction[rows[hit[ok]]] = seen / np.linalg.norm(seen, axis=1, keepdims=True)
         moving = self.tracer.motion
@@ -870,6 +911,9 @@ class _Points:
     magnification: np.ndarray
     transmittance: np.ndarray
     """1 where interpolated: blocks are only where nothing lies in front (_Nodes.plain)."""
+    object_id: np.ndarray
+    tangent: np.ndarray
+    surface: np.ndarray
 
 
 class _Blocks:

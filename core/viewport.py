@@ -48,7 +48,8 @@ import numpy as np
 
 from . import workers
 from .camera import Camera
-from .mipmap import span_footprint
+from .geometry import filters
+from .mipmap import span_footprint, surface_footprint
 from .render import (
     TRACE_SHARE,
     ExposureProbe,
@@ -59,6 +60,7 @@ from .render import (
 )
 from .sky import Background
 from .tracing import ENDING, Scene
+from .tracing.segments import SceneGeometry
 
 LEVELS = (8, 4, 1)
 """Downscale factors per side of a view's successive images (the last: full size). No 1/2
@@ -314,6 +316,7 @@ def reshade_surfaces(image: ViewImage, scene: Scene) -> tuple[np.ndarray, np.nda
     pixels = np.flatnonzero(surface)
     objects = scene.intersector(disk=False)
     eye = image.camera.frame.position
+    label = np.full(h * w, -1, dtype=np.int64)
     for start in range(0, pixels.size, RESAMPLE_CHUNK):
         chunk = pixels[start : start + RESAMPLE_CHUNK]
         point = image.passes["position"].reshape(-1, 3)[chunk].astype(np.float64)
@@ -322,7 +325,28 @@ def reshade_surfaces(image: ViewImage, scene: Scene) -> tuple[np.ndarray, np.nda
         hits = objects.intersect(point - reach * direction, point + reach * direction)
         rgba[chunk[hits.hit]] = hits.color[hits.hit]
         found[chunk] = hits.hit
+        label[chunk[hits.hit]] = hits.object_id[hits.hit]
+    if filters(objects):
+        _filter_surfaces(image, objects, label, rgba)
     return rgba.reshape(h, w, 4), found.reshape(h, w)
+
+
+def _filter_surfaces(image: ViewImage, objects, label: np.ndarray, rgba: np.ndarray) -> None:
+    """Surface colours ``rgba`` (h w, 4) of ``image``'s pixels on the ``objects`` (an
+    intersector) ``label`` says (h w,: object ids; -1: none) averaged over each pixel's
+    footprint, in place, as a fresh render has them (core.tracing.segments)."""
+    w = image.rgba.shape[1]
+    position = image.passes["position"].reshape(-1, 3).astype(np.float64)
+    footprint = surface_footprint(position, label, 0, w)
+    rows = np.flatnonzero((label >= 0) & np.all(np.isfinite(footprint), axis=(1, 2)))
+    direction = image.passes["direction"].reshape(-1, 3).astype(np.float64)
+    geometry = SceneGeometry(objects, [])
+    for start in range(0, rows.size, RESAMPLE_CHUNK):
+        chunk = rows[start : start + RESAMPLE_CHUNK]
+        colour, found = geometry.colour_over(
+            position[chunk], direction[chunk], label[chunk], footprint[chunk]
+        )
+        rgba[chunk[found]] = colour[found]
 
 
 def _probe_options(options: dict) -> dict:

@@ -18,7 +18,7 @@ import bpy
 import numpy as np
 from mathutils.bvhtree import BVHTree
 
-from ..core.intersect import Hits
+from ..core.intersect import Hits, barycentric_gradients
 from .materials import MaterialSampler, material_sampler, unsupported_nodes
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
@@ -78,16 +78,9 @@ class BVHIntersector:
         norm = np.linalg.norm(normal, axis=1, keepdims=True)
         self.face_normals = normal / np.where(norm > 0.0, norm, 1.0)  # as ray_cast reports
         # per face: barycentric weights w1, w2 of a point p are rows of _bary @ (p - v0)
-        d11, d12, d22 = (np.einsum("ij,ij->i", u, v) for u, v in ((e1, e1), (e1, e2), (e2, e2)))
-        den = d11 * d22 - d12 * d12
-        den = np.where(den == 0.0, 1.0, den)[:, None]
-        self._bary = np.stack(
-            [
-                (d22[:, None] * e1 - d12[:, None] * e2) / den,
-                (d11[:, None] * e2 - d12[:, None] * e1) / den,
-            ],
-            axis=1,
-        )
+        self._bary = barycentric_gradients(e1, e2)
+        self.filters = any(m.filters for m in self.materials)
+        """Whether a material averages over footprints (core.geometry.hits)."""
         self._tree = BVHTree.FromPolygons(
             self.vertices.tolist(), self.triangles.tolist(), all_triangles=True, epsilon=0.0
         )
@@ -102,8 +95,10 @@ class BVHIntersector:
         """``BVHTree.ray_cast`` on the underlying tree (location, normal, index, distance)."""
         return self._tree.ray_cast(origin, direction, distance)
 
-    def intersect(self, a: np.ndarray, b: np.ndarray) -> Hits:
-        """First hit along each straight segment a -> b ((N, 3) world space), as Hits."""
+    def intersect(self, a: np.ndarray, b: np.ndarray, footprint: np.ndarray | None = None) -> Hits:
+        """First hit along each straight segment a -> b ((N, 3) world space), as Hits;
+        coloured over each segment's ``footprint`` (N, 2, 3: ∂(hit point)/∂(image x, y))
+        where given."""
         a = np.asarray(a, dtype=np.float64).reshape(-1, 3)
         b = np.asarray(b, dtype=np.float64).reshape(-1, 3)
         n = a.shape[0]
@@ -129,7 +124,9 @@ class BVHIntersector:
             dtype=np.float64,
         ).reshape(-1, 2)
         hit = ~np.isnan(found[:, 0])
-        return self._hits(n, a, d, length, rows[hit], found[hit, 0].astype(np.int64), found[hit, 1])
+        seen = None if footprint is None else footprint[rows[hit]]
+        face, dist = found[hit, 0].astype(np.int64), found[hit, 1]
+        return self._hits(n, a, d, length, rows[hit], face, dist, seen)
 
     def _hits(
         self,
@@ -140,8 +137,10 @@ class BVHIntersector:
         rows: np.ndarray,
         face: np.ndarray,
         dist: np.ndarray,
+        footprint: np.ndarray | None = None,
     ) -> Hits:
-        """Hits for ``n`` segments a -> a + d from the faces and distances of ``rows``."""
+        """Hits for ``n`` segments a -> a + d from the faces and distances of ``rows``,
+        coloured over the hits' ``footprint`` (M, 2, 3) where given."""
         hits = Hits.miss(n)
         if len(rows):
             loc = a[rows] + (dist / length[rows])[:, None] * d[rows]
@@ -153,7 +152,7 @@ class BVHIntersector:
             hits.position[rows] = loc
             hits.normal[rows] = nor
             hits.uv[rows] = uv
-            hits.color[rows] = self._color(face, uv)
+            hits.color[rows] = self._color(face, uv, self._uv_footprint(face, nor, footprint))
         return hits
 
     def _uv_at(self, face: np.ndarray, point: np.ndarray) -> np.ndarray:
@@ -167,13 +166,28 @@ class BVHIntersector:
             + w[:, 1:] * (corners[:, 2] - corners[:, 0])
         )
 
-    def _color(self, face: np.ndarray, uv: np.ndarray) -> np.ndarray:
-        """Material colours (M, 4) at the given hits."""
+    def _uv_footprint(self, face: np.ndarray, normal: np.ndarray, footprint) -> np.ndarray | None:
+        """∂(u, v)/∂(image x, y) (M, 2, 2) on faces ``face`` from the hit points' derivatives
+        ``footprint`` (M, 2, 3), taken into each face's plane; None where not given."""
+        if footprint is None:
+            return None
+        footprint = (
+            footprint - np.einsum("mkj,mj->mk", footprint, normal)[..., None] * normal[:, None]
+        )
+        weights = np.einsum("mij,mkj->mik", self._bary[face], footprint)  # (M, w1 w2, x y)
+        corners = self.tri_uv[face]
+        edges = np.stack([corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]], axis=2)
+        return edges @ weights
+
+    def _color(self, face: np.ndarray, uv: np.ndarray, footprint=None) -> np.ndarray:
+        """Material colours (M, 4) at the given hits, over their uv ``footprint`` (M, 2, 2)
+        where given."""
         mat = self.tri_material[face]
         out = np.empty((len(face), 4))
         for index in np.unique(mat).tolist():
             mask = mat == index
-            out[mask] = self.materials[index].sample(uv[mask])
+            seen = None if footprint is None else footprint[mask]
+            out[mask] = self.materials[index].sample(uv[mask], seen)
         return out
 
 

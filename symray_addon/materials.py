@@ -16,10 +16,12 @@ for sRGB byte images.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import bpy
 import numpy as np
+
+from ..core.mipmap import MipMap, bilinear, wrap_index
 
 DEFAULT_COLOR = (0.8, 0.8, 0.8, 1.0)
 """Colour of faces without a material (Blender's default surface)."""
@@ -27,9 +29,14 @@ MISSING_TEXTURE_COLOR = (1.0, 0.0, 1.0, 1.0)
 """Colour of a texture whose image has no pixels (Blender's magenta)."""
 
 
+EXTENSION_WRAP = {"REPEAT": "repeat", "EXTEND": "extend", "CLIP": "extend", "MIRROR": "mirror"}
+"""An Image Texture's extension as core.mipmap's wrap mode (CLIP: zero outside, after)."""
+
+
 @dataclass
 class MaterialSampler:
-    """Colour of one material at given UVs: ``base`` times an optional texture."""
+    """Colour of one material at given UVs: ``base`` times an optional texture, a linear
+    (not Closest) texture averaged over each pixel's footprint where given (core.mipmap)."""
 
     base: np.ndarray
     image: np.ndarray | None = None
@@ -38,26 +45,44 @@ class MaterialSampler:
     extension: str = "REPEAT"
     emission: np.ndarray | None = None
     """Emitted radiance (3,) added to the colour (linear RGB), or None."""
+    _pyramid: MipMap | None = field(default=None, init=False, repr=False, compare=False)
 
-    def sample(self, uv: np.ndarray) -> np.ndarray:
-        """RGBA (M, 4) float64 at texture coordinates ``uv`` (M, 2)."""
+    @property
+    def filters(self) -> bool:
+        """Whether a footprint changes its colour (a linear image texture)."""
+        return self.image is not None and not self.closest
+
+    def sample(self, uv: np.ndarray, footprint: np.ndarray | None = None) -> np.ndarray:
+        """RGBA (M, 4) float64 at texture coordinates ``uv`` (M, 2), averaged over
+        ``footprint`` (M, 2, 2: ∂(u, v)/∂(image x, y)) where given."""
         m = uv.shape[0]
         out = np.broadcast_to(self.base, (m, 4)).astype(np.float64)
         if self.image is not None and m:
-            out = out * sample_image(self.image, uv, self.closest, self.extension)
+            if footprint is not None and self.filters:
+                texture = self._filtered(uv, footprint)
+            else:
+                texture = sample_image(self.image, uv, self.closest, self.extension)
+            out = out * texture
         if self.emission is not None:
             out[:, :3] += self.emission
         return out
 
+    def _filtered(self, uv: np.ndarray, footprint: np.ndarray) -> np.ndarray:
+        """The texture averaged over footprints (core.mipmap.MipMap on the image turned
+        top row first, as it takes them); zero outside [0, 1]² for CLIP."""
+        if self._pyramid is None:
+            wrap = EXTENSION_WRAP.get(self.extension, "repeat")
+            assert self.image is not None
+            self._pyramid = MipMap(self.image[::-1].astype(np.float64), (wrap, wrap))
+        out = self._pyramid.lookup(uv, self._pyramid.texels(footprint))
+        if self.extension == "CLIP":
+            out[_outside(uv)] = 0.0
+        return out
 
-def _wrap(i: np.ndarray, n: int, extension: str) -> np.ndarray:
-    """Integer texel indices mapped into [0, n) by the texture's extension mode."""
-    if extension in ("EXTEND", "CLIP"):
-        return np.clip(i, 0, n - 1)
-    if extension == "MIRROR":
-        period = np.mod(i, 2 * n)
-        return np.where(period < n, period, 2 * n - 1 - period)
-    return np.mod(i, n)
+
+def _outside(uv: np.ndarray) -> np.ndarray:
+    """(M,) whether each uv lies outside [0, 1]²."""
+    return (uv[:, 0] < 0) | (uv[:, 0] > 1) | (uv[:, 1] < 0) | (uv[:, 1] > 1)
 
 
 def sample_image(
@@ -67,25 +92,15 @@ def sample_image(
     h, w = image.shape[:2]
     x = uv[:, 0] * w - 0.5
     y = uv[:, 1] * h - 0.5
+    mode = EXTENSION_WRAP.get(extension, "repeat")
     if closest:
-        xi = _wrap(np.floor(x + 0.5).astype(np.int64), w, extension)
-        yi = _wrap(np.floor(y + 0.5).astype(np.int64), h, extension)
+        xi = wrap_index(np.floor(x + 0.5).astype(np.int64), w, mode)
+        yi = wrap_index(np.floor(y + 0.5).astype(np.int64), h, mode)
         out = image[yi, xi].astype(np.float64)
     else:
-        x0, y0 = np.floor(x), np.floor(y)
-        fx, fy = (x - x0)[:, None], (y - y0)[:, None]
-        xa, ya = x0.astype(np.int64), y0.astype(np.int64)
-        xa_, xb_ = _wrap(xa, w, extension), _wrap(xa + 1, w, extension)
-        ya_, yb_ = _wrap(ya, h, extension), _wrap(ya + 1, h, extension)
-        out = (
-            (1 - fx) * (1 - fy) * image[ya_, xa_]
-            + fx * (1 - fy) * image[ya_, xb_]
-            + (1 - fx) * fy * image[yb_, xa_]
-            + fx * fy * image[yb_, xb_]
-        )
+        out = bilinear(image, x, y, (mode, mode)).astype(np.float64)
     if extension == "CLIP":
-        outside = (uv[:, 0] < 0) | (uv[:, 0] > 1) | (uv[:, 1] < 0) | (uv[:, 1] > 1)
-        out[outside] = 0.0
+        out[_outside(uv)] = 0.0
     return out
 
 

@@ -7,14 +7,15 @@ an intersector has ``bounds`` and ``intersect(a, b) -> Hits``, see hits.py).
 
 from .disk import AccretionDisk
 from .group import Group
-from .hits import Hits, Intersector, segment_meets_box, segment_overlaps
-from .mesh import TriangleMesh
+from .hits import Hits, Intersector, filters, segment_meets_box, segment_overlaps
+from .mesh import TriangleMesh, barycentric_gradients
 from .primitives import Disk, Plane, Sphere
-from .textures import Texture, checker, colormap
+from .textures import Checker, Texture, checker, colormap
 from .volumes import Volume
 
 __all__ = [
     "AccretionDisk",
+    "Checker",
     "Disk",
     "Group",
     "Hits",
@@ -24,8 +25,10 @@ __all__ = [
     "Texture",
     "TriangleMesh",
     "Volume",
+    "barycentric_gradients",
     "checker",
     "colormap",
+    "filters",
     "segment_meets_box",
     "segment_overlaps",
 ]

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from .hits import _INF, Hits, _segments, segment_overlaps
+from .hits import _INF, Hits, _segments, filters, segment_overlaps
 
 
 class Group:
@@ -37,12 +37,22 @@ class Group:
             lo, hi = np.full(3, _INF), np.full(3, -_INF)
         self.bounds = (lo, hi)
 
-    def intersect(self, a: np.ndarray, b: np.ndarray) -> Hits:
-        """Nearest hit of each segment a -> b (N, 3) over all members."""
+    @property
+    def filters(self) -> bool:
+        """Whether a member colours over footprints (core.geometry.hits.filters)."""
+        return any(filters(obj) for obj in self.objects)
+
+    def intersect(self, a: np.ndarray, b: np.ndarray, footprint: np.ndarray | None = None) -> Hits:
+        """Nearest hit of each segment a -> b (N, 3) over all members, those that filter
+        coloured over ``footprint`` (N, 2, 3) where given."""
         a, b = _segments(a, b)
         out = Hits.miss(a.shape[0])
         for obj, oid in zip(self.objects, self.ids, strict=True):
             rows = np.flatnonzero(segment_overlaps(a, b, *obj.bounds))
             if rows.size:
-                out.merge(rows, obj.intersect(a[rows], b[rows]), oid)
+                if footprint is not None and filters(obj):
+                    hits = obj.intersect(a[rows], b[rows], footprint[rows])
+                else:
+                    hits = obj.intersect(a[rows], b[rows])
+                out.merge(rows, hits, oid)
         return out

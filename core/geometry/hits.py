@@ -5,6 +5,12 @@ and ``intersect(a, b) -> Hits`` for segment ends a, b of shape (N, 3). Hits repo
 nearest hit along each segment; where ``hit`` is False, ``t`` is +inf, ``object_id`` is -1
 and the other fields are 0. Normals are the geometric, outward (sphere) or user-given
 (plane, disk, mesh winding) unit normals, not flipped towards the ray.
+
+An intersector whose colours can be averaged over each pixel's footprint says so by a
+true ``filters`` attribute and then takes ``intersect(a, b, footprint)``, ``footprint``
+(N, 2, 3) the hit point's derivatives along image x and y (world units; NaN: a point):
+renders find them (core.mipmap.surface_footprint) and cast again through each hit point
+with them (core.tracing.segments.SceneGeometry.colour_over).
 """
 
 from __future__ import annotations
@@ -72,6 +78,11 @@ class Intersector(Protocol):
     bounds: tuple[np.ndarray, np.ndarray]
 
     def intersect(self, a: np.ndarray, b: np.ndarray) -> Hits: ...
+
+
+def filters(intersector: Any) -> bool:
+    """Whether an intersector colours over footprints (the module)."""
+    return bool(getattr(intersector, "filters", False))
 
 
 def _segments(a: Any, b: Any) -> tuple[np.ndarray, np.ndarray]:

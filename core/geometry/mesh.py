@@ -22,6 +22,22 @@ def _morton(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     return code
 
 
+def barycentric_gradients(e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
+    """(F, 2, 3) per triangle of edges e1 = v1 − v0, e2 = v2 − v0 (F, 3): the rows that take
+    p − v0 to the barycentric weights (w1, w2) of its projection on the triangle's plane
+    (zero rows for a degenerate triangle)."""
+    d11, d12, d22 = (np.einsum("ij,ij->i", u, v) for u, v in ((e1, e1), (e1, e2), (e2, e2)))
+    den = d11 * d22 - d12 * d12
+    den = np.where(den == 0.0, 1.0, den)[:, None]
+    return np.stack(
+        [
+            (d22[:, None] * e1 - d12[:, None] * e2) / den,
+            (d11[:, None] * e2 - d12[:, None] * e1) / den,
+        ],
+        axis=1,
+    )
+
+
 class TriangleMesh(_Primitive):
     """Triangle soup: a BVH over blocks of triangles, vectorised Moller-Trumbore at the leaves.
 
@@ -61,6 +77,7 @@ class TriangleMesh(_Primitive):
         n = np.cross(self.e1, self.e2)
         ln = np.linalg.norm(n, axis=1, keepdims=True)
         self.face_normal = np.where(ln > 0, n / np.where(ln > 0, ln, 1), 0.0)
+        self._gradients = barycentric_gradients(self.e1, self.e2)
         self.uvs = None if uvs is None else np.asarray(uvs, np.float64).reshape(-1, 3, 2)[order]
         self.color = _rgba(color)
         self.object_id = int(object_id)
@@ -130,7 +147,15 @@ class TriangleMesh(_Primitive):
         else:
             c = self.uvs[fi]
             uv = (1 - bu - bv)[:, None] * c[:, 0] + bu[:, None] * c[:, 1] + bv[:, None] * c[:, 2]
-        return rows, t, p, self.face_normal[fi], uv
+        return rows, t, p, self.face_normal[fi], uv, fi
+
+    def _uv_derivatives(self, p, n, dp, part):
+        weights = np.einsum("mij,mkj->mik", self._gradients[part], dp)  # (M, 2 weights, 2)
+        if self.uvs is None:
+            return weights
+        c = self.uvs[part]
+        edges = np.stack([c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]], axis=2)  # (M, 2 uv, 2 weights)
+        return edges @ weights
 
     def _leaf(self, a, d, rows, blk: int, best) -> None:
         """Test segments ``rows`` against one block of triangles; update ``best`` in place."""

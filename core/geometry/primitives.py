@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from .hits import _INF, Hits, _fill, _segments
-from .textures import Texture, _rgba, _shade
+from .textures import Texture, _rgba, _shade, texture_filters
 
 
 def _vec(v: Any, name: str) -> np.ndarray:
@@ -48,14 +48,32 @@ class _Primitive:
     object_id: int
     bounds: tuple[np.ndarray, np.ndarray]
 
-    def intersect(self, a: np.ndarray, b: np.ndarray) -> Hits:
-        """Nearest hit of each segment a -> b (N, 3) with this object."""
+    @property
+    def filters(self) -> bool:
+        """Whether its colour averages over footprints (core.geometry.textures)."""
+        return texture_filters(self.color)
+
+    def intersect(self, a: np.ndarray, b: np.ndarray, footprint: np.ndarray | None = None) -> Hits:
+        """Nearest hit of each segment a -> b (N, 3) with this object; coloured over each
+        segment's ``footprint`` (N, 2, 3: ∂(hit point)/∂(image x, y)) where given."""
         a, b = _segments(a, b)
-        rows, t, p, n, uv = self._hit(a, b)
-        c = _shade(self.color, uv, p, n)
+        rows, t, p, n, uv, part = self._hit(a, b)
+        uv_footprint = None
+        if footprint is not None and self.filters:
+            seen = footprint[rows]
+            along = np.einsum("mkj,mj->mk", seen, n)
+            uv_footprint = self._uv_derivatives(p, n, seen - along[..., None] * n[:, None], part)
+        c = _shade(self.color, uv, p, n, uv_footprint)
         return _fill(a.shape[0], rows, t, p, n, uv, c, self.object_id)
 
-    def _hit(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
+    def _hit(self, a: np.ndarray, b: np.ndarray) -> tuple:
+        """(rows, t, position, normal, uv, part) of the segments that hit; ``part`` what
+        ``_uv_derivatives`` needs besides (a mesh's faces), else None."""
+        raise NotImplementedError
+
+    def _uv_derivatives(self, p: np.ndarray, n: np.ndarray, dp: np.ndarray, part) -> np.ndarray:
+        """(M, 2, 2) ∂(u, v)/∂(image x, y) at hit points p from their derivatives ``dp``
+        (M, 2, 3), in the surface's tangent plane."""
         raise NotImplementedError
 
 
@@ -100,7 +118,16 @@ class Sphere(_Primitive):
             0.5 + np.arctan2(n[:, 1], n[:, 0]) / (2 * np.pi),
             0.5 + np.arcsin(np.clip(n[:, 2], -1, 1)) / np.pi,
         ], axis=1)  # fmt: skip
-        return rows, t, p, n, uv
+        return rows, t, p, n, uv, None
+
+    def _uv_derivatives(self, p, n, dp, part):
+        dn = dp / self.radius  # the unit normal's derivatives
+        x, y, z = (n[:, None, i] for i in range(3))
+        rho2 = x * x + y * y
+        with np.errstate(divide="ignore", invalid="ignore"):
+            du = (x * dn[..., 1] - y * dn[..., 0]) / rho2 / (2 * np.pi)
+            dv = dn[..., 2] / np.sqrt(rho2) / np.pi
+        return np.stack([du, dv], axis=1)
 
 
 class Plane(_Primitive):
@@ -163,7 +190,11 @@ class Plane(_Primitive):
             inside = np.all((uv >= 0) & (uv <= 1), axis=1)
             rows, t, p, uv = rows[inside], t[inside], p[inside], uv[inside]
         n = np.broadcast_to(self.normal, p.shape).copy()
-        return rows, t, p, n, uv
+        return rows, t, p, n, uv, None
+
+    def _uv_derivatives(self, p, n, dp, part):
+        size = (self.tile, self.tile) if self.extent is None else self.extent
+        return np.stack([dp @ self.u_axis / size[0], dp @ self.v_axis / size[1]], axis=1)
 
 
 class Disk(_Primitive):
@@ -215,4 +246,14 @@ class Disk(_Primitive):
         ang = np.arctan2(y, x) / (2 * np.pi)
         uv = np.stack([(r - self.r_in) / (self.r_out - self.r_in), ang - np.floor(ang)], axis=1)
         n = np.broadcast_to(self.normal, p.shape).copy()
-        return rows, t, p, n, uv
+        return rows, t, p, n, uv, None
+
+    def _uv_derivatives(self, p, n, dp, part):
+        local = p - self.center
+        x, y = (local @ self.u_axis)[:, None], (local @ self.v_axis)[:, None]
+        dx, dy = dp @ self.u_axis, dp @ self.v_axis
+        r2 = x * x + y * y
+        with np.errstate(divide="ignore", invalid="ignore"):
+            du = (x * dx + y * dy) / np.sqrt(r2) / (self.r_out - self.r_in)
+            dv = (x * dy - y * dx) / r2 / (2 * np.pi)
+        return np.stack([du, dv], axis=1)

@@ -11,8 +11,9 @@ from typing import Any
 
 import numpy as np
 
-from ..geometry import Hits, Intersector, segment_overlaps
+from ..geometry import Hits, Intersector, filters, segment_overlaps
 from ..geometry.hits import box_corners
+from ..mipmap import surface_footprint
 from .clearance import VOLUME_ID, Bound, shape_distance
 from .scene import ENDING
 
@@ -109,8 +110,14 @@ class SceneGeometry:
         out.tangent[rows[h]] = chord / np.linalg.norm(chord, axis=1, keepdims=True)
         return h
 
-    def cast(self, a: np.ndarray, b: np.ndarray) -> Hits:
-        """Nearest surface hits of segments a -> b, querying only segments near geometry.
+    @property
+    def filters(self) -> bool:
+        """Whether some surface's colour averages over footprints (core.geometry.hits)."""
+        return filters(self.objects)
+
+    def cast(self, a: np.ndarray, b: np.ndarray, footprint: np.ndarray | None = None) -> Hits:
+        """Nearest surface hits of segments a -> b, querying only segments near geometry;
+        coloured over ``footprint`` (N, 2, 3) where given and the objects filter.
 
         When most segments are near, all of them go (an intersector answers misses for the
         others; cheaper than gathering the near ones and scattering their hits back).
@@ -120,12 +127,33 @@ class SceneGeometry:
             return Hits.miss(a.shape[0])
         near = segment_overlaps(a, b, lo, hi)
         rows = np.flatnonzero(near)
+        if footprint is not None and not self.filters:
+            footprint = None
         if rows.size > 0.5 * a.shape[0]:
-            return self.objects.intersect(a, b)
+            return self._intersect(a, b, footprint)
         hits = Hits.miss(a.shape[0])
         if rows.size:
-            hits.merge(rows, self.objects.intersect(a[rows], b[rows]))
+            seen = None if footprint is None else footprint[rows]
+            hits.merge(rows, self._intersect(a[rows], b[rows], seen))
         return hits
+
+    def _intersect(self, a: np.ndarray, b: np.ndarray, footprint: np.ndarray | None) -> Hits:
+        """The objects' hits of segments a -> b, over ``footprint`` where not None."""
+        if footprint is None:
+            return self.objects.intersect(a, b)
+        return self.objects.intersect(a, b, footprint)  # type: ignore[call-arg]
+
+    def colour_over(
+        self, position: np.ndarray, tangent: np.ndarray, object_id: np.ndarray, footprint
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(colours (M, 4), found (M,)) of surfaces at hit points ``position`` (M, 3)
+        averaged over their ``footprint`` (M, 2, 3): a segment through each along its
+        hitting chord's unit ``tangent``, as far either side as the footprint reaches, cast
+        with it; not ``found`` where it meets something other than ``object_id`` first."""
+        reach = np.max(np.linalg.norm(footprint, axis=2), axis=1)
+        reach = (reach + 1e-9 * (1.0 + np.linalg.norm(position, axis=1)))[:, None]
+        hits = self.cast(position - reach * tangent, position + reach * tangent, footprint)
+        return hits.color, hits.hit & (hits.object_id == object_id)
 
     def volume_light(
         self, a: np.ndarray, b: np.ndarray, hits: Hits
@@ -175,3 +203,22 @@ class SceneGeometry:
         corners = box_corners(lo, hi)
         local = to_local(corners)
         return local.min(axis=0), local.max(axis=0)
+
+
+def filter_surfaces(geometry: SceneGeometry, rays: RayResults, start: int, width: int) -> None:
+    """The surface colours of ``rays`` (the pixels [start, start + N) of an image ``width``
+    wide, row by row) averaged over each pixel's footprint there, in place: the footprint
+    from neighbouring pixels' hit points on the same object (core.mipmap.surface_footprint),
+    the colour cast again through each hit point with it (SceneGeometry.colour_over). The
+    accretion disk's pixels (no texture) and those without a neighbour keep theirs."""
+    if not geometry.filters:
+        return
+    hit = (rays.ending == ENDING["hit"]) & (rays.object_id >= 0)
+    label = np.where(hit, rays.object_id, -1)
+    footprint = surface_footprint(rays.position, label, start, width)
+    rows = np.flatnonzero(hit & np.all(np.isfinite(footprint), axis=(1, 2)))
+    if rows.size:
+        colour, found = geometry.colour_over(
+            rays.position[rows], rays.tangent[rows], rays.object_id[rows], footprint[rows]
+        )
+        rays.surface[rows[found]] = colour[found]

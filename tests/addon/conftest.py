@@ -123,9 +123,11 @@ def scene(addon: Addon):
 @pytest.fixture
 def factory_scene(addon: Addon):
     """Blender's factory startup scene (Cube, Light, Camera in "Collection", the grey
-    World) with SymRay as the render engine at a small resolution; nothing else changed."""
+    World) with SymRay as the render engine at a small resolution; nothing else changed.
+    No bake is cached from an earlier test (the cache lives as long as the process)."""
     import bpy
 
+    addon.module("symray_addon.bake").clear_cache()
     bpy.ops.wm.read_homefile(use_factory_startup=True)
     sc = bpy.context.scene
     sc.render.engine = "SYMRAY"
