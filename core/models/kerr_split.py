@@ -44,7 +44,7 @@ and from the tracer's Kerr–Schild frame.
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -66,6 +66,21 @@ def capture_radius(mass: float, a: float) -> float:
     r_plus = mass + b
     r_ph = 2.0 * mass * (1.0 + math.cos(2.0 / 3.0 * math.acos(-abs(a) / mass)))
     return r_plus + 0.5 * (r_ph - r_plus)
+
+
+class _Terms(NamedTuple):
+    """What KerrBoyerLindquist's V and its derivatives are made of (``_terms``)."""
+
+    E: Any
+    L: Any
+    sh: Any
+    ch: Any
+    r: Any
+    delta: Any
+    st: Any
+    ct: Any
+    ra2: Any
+    pr: Any
 
 
 class KerrBoyerLindquist(Hamiltonian):
@@ -103,25 +118,33 @@ class KerrBoyerLindquist(Hamiltonian):
         """The potential V and its derivatives (dV/ds, dV/dtheta, dV/dE, dV/dL), with Sigma
         and (dSigma/ds, dSigma/dtheta); each (N,). V = P^2 / (2 Delta) + a E L
         - a^2 E^2 sin^2(theta) / 2 + H0 Sigma (the module's U plus L^2 / (2 sin^2 theta))."""
+        return self._parts(self._terms(Q, P), H0, derivatives)
+
+    def _terms(self, Q: np.ndarray, P: np.ndarray) -> _Terms:
+        """What V and its derivatives are made of at (Q, P) (arrays or Duals)."""
         s, theta = Q[1], Q[2]
         E, L, a, b = -P[0], P[3], self.a, self.b
         sh, ch = dual.sinh(s), dual.cosh(s)
         r = self.mass + b * ch
-        delta = (b * sh) ** 2
         st, ct = dual.sin(theta), dual.cos(theta)
         ra2 = r * r + a * a
-        pr = ra2 * E - a * L
-        sigma = r * r + a * a * ct * ct
+        return _Terms(E, L, sh, ch, r, (b * sh) ** 2, st, ct, ra2, ra2 * E - a * L)
+
+    def _parts(self, t: _Terms, H0, derivatives: bool):
+        """``parts`` from its terms."""
+        a, b = self.a, self.b
+        sigma = t.r * t.r + a * a * t.ct * t.ct
         with np.errstate(divide="ignore", invalid="ignore"):
-            V = pr * pr / (2.0 * delta) + a * E * L - 0.5 * (a * E * st) ** 2 + H0 * sigma
+            pr, E, L, st, ct = t.pr, t.E, t.L, t.st, t.ct
+            V = pr * pr / (2.0 * t.delta) + a * E * L - 0.5 * (a * E * st) ** 2 + H0 * sigma
             if not derivatives:
                 return V, sigma
-            dsig = (2.0 * r * b * sh, -2.0 * a * a * ct * st)
+            dsig = (2.0 * t.r * b * t.sh, -2.0 * a * a * ct * st)
             # d/ds of P^2/(2 Delta) = (P 2 r E / Delta - P^2 (r - M) / Delta^2) dr/ds, dr/ds = b sh
-            dV_s = (pr * 2.0 * r * E - pr * pr * b * ch / delta) / (b * sh) + H0 * dsig[0]
+            dV_s = (pr * 2.0 * t.r * E - pr * pr * b * t.ch / t.delta) / (b * t.sh) + H0 * dsig[0]
             dV_t = -a * a * E * E * st * ct + H0 * dsig[1]
-            dV_E = pr * ra2 / delta + a * L - a * a * E * st * st
-            dV_L = -a * pr / delta + a * E
+            dV_E = pr * t.ra2 / t.delta + a * L - a * a * E * st * st
+            dV_L = -a * pr / t.delta + a * E
         return V, sigma, (dV_s, dV_t, dV_E, dV_L), dsig
 
     def curvature(self, Q: np.ndarray, P: np.ndarray, H0=0.0):
@@ -133,16 +156,13 @@ class KerrBoyerLindquist(Hamiltonian):
         - q^2 Delta_s / 2 + H0 Sigma_s, V_theta = -a^2 sin cos (E^2 + 2 H0),
         V_E = q (r^2 + a^2) + a L - a^2 E sin^2 theta, V_L = a (E - q): differentiated
         once more here."""
-        V, _, gradient, _ = self.parts(Q, P, H0)
-        s, theta = Q[1], Q[2]
-        E, L, a, b = -P[0], P[3], self.a, self.b
-        sh, ch = np.sinh(s), np.cosh(s)
-        r, r1, r2 = self.mass + b * ch, b * sh, b * ch
-        st, ct = np.sin(theta), np.cos(theta)
+        terms = self._terms(Q, P)
+        V, _, gradient, _ = self._parts(terms, H0, True)
+        E, a, b = terms.E, self.a, self.b
+        r, r1, r2 = terms.r, b * terms.sh, b * terms.ch
+        st, ct, delta, ra2 = terms.st, terms.ct, terms.delta, terms.ra2
         with np.errstate(divide="ignore", invalid="ignore"):
-            delta = r1 * r1
-            ra2 = r * r + a * a
-            q = (ra2 * E - a * L) / delta
+            q = terms.pr / delta
             delta_s, delta_ss = 2.0 * r1 * r2, 2.0 * (r2 * r2 + r1 * r1)
             rr1 = r * r1
             q_s = (2.0 * rr1 * E - q * delta_s) / delta
@@ -394,35 +414,33 @@ def sphere_geodesic_tangents(Q: DualRows, P: Any, c: np.ndarray, dc: np.ndarray)
     theta, p_theta, L = q[2], p[2], p[3]
     d_theta, d_p_theta, dL = dq[:, 2], dp[:, 2], dp[:, 3]
     st, ct = np.sin(theta), np.cos(theta)
-    d_st, d_ct = ct * d_theta, -st * d_theta
     with np.errstate(divide="ignore", invalid="ignore"):
         spin = L / st
-        d_spin = (dL - spin * d_st) / st
+        d_spin = (dL - (spin * ct) * d_theta) / st
         size = np.sqrt(p_theta * p_theta + spin * spin)
+        inverse_size = np.where(size > 0, 1.0 / size, 0.0)
         d_size = (p_theta * d_p_theta + spin * d_spin) / size
         omega = c * size
         d_omega = dc * size + c * d_size
         cw, sin_w = np.cos(omega), np.sin(omega)
-        moving = size > 0
-        sw = np.where(moving, sin_w / size, 0.0)
-        d_sw = np.where(moving, (cw * d_omega - sw * d_size) / size, 0.0)
+        sw = sin_w * inverse_size
+        d_sw = (cw * d_omega - sw * d_size) * inverse_size
         d_cw = -sin_w * d_omega
     along_rho = cw * st + sw * p_theta * ct
-    d_rho_part = (
-        d_cw * st + cw * d_st + (d_sw * p_theta + sw * d_p_theta) * ct + sw * p_theta * d_ct
-    )
+    down = cw * ct - sw * p_theta * st
+    # d(along_rho), d(down) with d(sin θ) = cos θ dθ, d(cos θ) = -sin θ dθ gathered
+    d_rho_part = st * d_cw + (p_theta * ct) * d_sw + (sw * ct) * d_p_theta + down * d_theta
+    d_down = ct * d_cw - (p_theta * st) * d_sw - (sw * st) * d_p_theta - along_rho * d_theta
     along_phi = sw * spin
-    d_phi_part = d_sw * spin + sw * d_spin
+    d_phi_part = spin * d_sw + sw * d_spin
     rho2 = along_rho * along_rho + along_phi * along_phi
     rho = np.sqrt(rho2)
     d_rho = (along_rho * d_rho_part + along_phi * d_phi_part) / rho
-    down = cw * ct - sw * p_theta * st
-    d_down = d_cw * ct + cw * d_ct - (d_sw * p_theta + sw * d_p_theta) * st - sw * p_theta * d_st
     with np.errstate(divide="ignore", invalid="ignore"):
         new_p_theta = (p_theta * along_rho + spin * ct * along_phi) / rho
         d_top = (
-            d_p_theta * along_rho + p_theta * d_rho_part
-            + (d_spin * ct + spin * d_ct) * along_phi + spin * ct * d_phi_part
+            along_rho * d_p_theta + p_theta * d_rho_part + (along_phi * ct) * d_spin
+            - (along_phi * spin * st) * d_theta + (spin * ct) * d_phi_part
         )  # fmt: skip
         dq[:, 2] = (down * d_rho - rho * d_down) / (rho2 + down * down)
         dq[:, 3] += (along_rho * d_phi_part - along_phi * d_rho_part) / rho2
