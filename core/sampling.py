@@ -127,6 +127,13 @@ ray passes within the integration's error of an edge); it keeps this error."""
 NEAR_MISS = 2.0
 """A traced ray that missed every object by less than NEAR_MISS x its integration error
 (its clearance, in radians like the error) may have hit one: it reports a flip (FLIP)."""
+EDGE_REACH = 4.0
+"""A hit moved on its surface to test for the surface's edge (TileSampler._near_edge) is
+looked for EDGE_REACH x the move along its chord either side (a curved surface curves away
+from its tangent plane)."""
+EDGE_STRETCH = 100.0
+"""... and moved along the ray's trace on the surface at most EDGE_STRETCH x as far as
+across it (a surface seen within 0.6° of grazing counts as seen at 0.6°)."""
 COMPANION_RATIO = 2.0
 """The error pass traces each camera ray again at COMPANION_RATIO x the step: for a method
 of order p the ray's error is |d_h - d_rh| / (r^p - 1) (Richardson); 1 / r of the cost."""
@@ -377,9 +384,45 @@ class TileSampler:
         err = np.where(nodes.flipped[jj, ii], np.maximum(err, FLIP), err)
         nodes.integration[jj, ii] = err  # a flip is traced again (RETRACE), a near miss not
         near_miss = rays.clearance < NEAR_MISS * err  # it may have hit something
+        near_miss |= self._near_edge(rays, jj, ii, err)  # it may have missed its object
         far = np.where(escaped, self.far_field, 0.0)
         err = np.where(near_miss, np.maximum(err, FLIP), err + far)
         nodes.error[jj, ii] = np.where(rays.ending == ENDING["failed"], np.inf, err)
+
+    def _near_edge(self, rays: RayResults, jj, ii, err: np.ndarray) -> np.ndarray:
+        """(M,) which rays that hit an object pass within NEAR_MISS x their error of its
+        edge (they may have missed it). The error, as seen from the camera at the hit's
+        distance, is a move across the ray; on the surface (its tangent plane, from a cast
+        through the hit point) that reaches as far across the ray and 1/|cos| as far along
+        its trace (at most EDGE_STRETCH times: grazing). Segments along the hitting chord
+        through the four points so moved, EDGE_REACH x their move long either side, must
+        each meet the same object first."""
+        rows = np.flatnonzero((rays.ending == ENDING["hit"]) & (err > 0) & np.isfinite(err))
+        out = np.zeros(rays.ending.shape, dtype=bool)
+        if rows.size == 0:
+            return out
+        origins, _ = self.camera.rays_at(self._image_xy(jj[rows] * 1.0, ii[rows] * 1.0))
+        p, t, own = rays.position[rows], rays.tangent[rows], rays.object_id[rows]
+        move = NEAR_MISS * err[rows] * np.linalg.norm(p - origins, axis=1)
+        reach = (EDGE_REACH * move)[:, None] * t
+        found = self.tracer.geometry.cast(p - reach, p + reach)
+        n = found.normal
+        cos = np.abs(np.einsum("ij,ij->i", n, t))
+        side = np.cross(n, t)
+        trace = t - np.einsum("ij,ij->i", t, n)[:, None] * n  # the ray on the surface
+        lengths = [move, move * np.minimum(1.0 / np.maximum(cos, 1e-12), EDGE_STRETCH)]
+        ways = []
+        for direction, length in zip((side, trace), lengths, strict=True):
+            norm = np.linalg.norm(direction, axis=1, keepdims=True)
+            unit = np.where(norm > 0, direction / np.where(norm > 0, norm, 1.0), 0.0)
+            ways += [length[:, None] * unit, -length[:, None] * unit]
+        moved = np.concatenate([p + w for w in ways])
+        along = np.concatenate([(EDGE_REACH * np.maximum(length, move))[:, None] * t
+                                for length in lengths for _ in (0, 1)])  # fmt: skip
+        hits = self.tracer.geometry.cast(moved - along, moved + along)
+        same = (hits.hit & (hits.object_id == np.tile(own, 4))).reshape(4, -1).all(axis=0)
+        out[rows] = ~(found.hit & (found.object_id == own) & same)
+        return out
 
     def _retrace(self, nodes: _Nodes, cancel) -> None:
         """Trace the nodes whose integration error exceeds ``budget`` again at half the
