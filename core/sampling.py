@@ -60,13 +60,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import Hits
-from .mipmap import map_footprint, surface_footprint
+from .mipmap import map_footprint
 from .motion import shift as doppler_shift
 from .passes import BY_NAME
 from .sky import Background
 from .tracing import ENDING, RayResults, Tracer
 from .tracing.differentials import magnification
 from .tracing.scene import DISK_ID
+from .tracing.segments import surface_colours
 
 TILE = 512
 """``tiles``' default: squares of TILE - 1 pixels (core.render makes bands instead)."""
@@ -679,15 +680,8 @@ class TileSampler:
         if rows.size == 0:
             return
         d = centre.direction[rows]
-        plain = self.background(d)
         filtered = self.background(d, footprint.reshape(-1, 2, 3)[rows])
-        moving = self.tracer.motion
-        if moving is not None:
-            _, seen = self.camera.rays_at(self._image_xy(jj[rows] * 1.0, ii[rows] * 1.0))
-            g = moving.colour_shift(seen)
-            plain[:, :3] = doppler_shift(plain[:, :3], g)
-            filtered[:, :3] = doppler_shift(filtered[:, :3], g)
-        centre.rgba[rows] += centre.transmittance[rows, None] * (filtered - plain)
+        self._replace_share(centre, rows, jj, ii, self.background(d), filtered)
 
     def _filter_surfaces(self, centre: _Points, shape: tuple[int, int], jj, ii) -> None:
         """The surfaces seen at the pixel centres (a grid ``shape``, rows jj, columns ii)
@@ -702,15 +696,16 @@ class TileSampler:
         )
         hit = (centre.ending == ENDING["hit"]) & (centre.object_id >= 0) & inside
         label = np.where(hit, centre.object_id, -1)
-        footprint = surface_footprint(centre.position, label, 0, shape[1])
-        rows = np.flatnonzero(hit & np.all(np.isfinite(footprint), axis=(1, 2)))
-        if rows.size == 0:
-            return
-        colour, found = self.tracer.geometry.colour_over(
-            centre.position[rows], centre.tangent[rows], centre.object_id[rows], footprint[rows]
+        rows, colour = surface_colours(
+            self.tracer.geometry, centre.position, centre.tangent, label, 0, shape[1]
         )
-        rows, filtered = rows[found], colour[found]
-        plain = centre.surface[rows].copy()
+        if rows.size:
+            self._replace_share(centre, rows, jj, ii, centre.surface[rows].copy(), colour)
+
+    def _replace_share(self, centre: _Points, rows, jj, ii, plain, filtered) -> None:
+        """In place: the centres ``rows``' colours with the share of ``plain`` (what they
+        show of the sky or a surface, unshifted) in them, its transmittance times it, Doppler
+        shifted for a moving camera, replaced by ``filtered``'s."""
         moving = self.tracer.motion
         if moving is not None:
             _, seen = self.camera.rays_at(self._image_xy(jj[rows] * 1.0, ii[rows] * 1.0))

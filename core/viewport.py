@@ -49,7 +49,7 @@ import numpy as np
 from . import workers
 from .camera import Camera
 from .geometry import filters
-from .mipmap import span_footprint, surface_footprint
+from .mipmap import span_footprint
 from .render import (
     TRACE_SHARE,
     ExposureProbe,
@@ -60,7 +60,7 @@ from .render import (
 )
 from .sky import Background
 from .tracing import ENDING, Scene
-from .tracing.segments import SceneGeometry
+from .tracing.segments import SceneGeometry, surface_colours
 
 LEVELS = (8, 4, 1)
 """Downscale factors per side of a view's successive images (the last: full size). No 1/2
@@ -334,19 +334,14 @@ def reshade_surfaces(image: ViewImage, scene: Scene) -> tuple[np.ndarray, np.nda
 def _filter_surfaces(image: ViewImage, objects, label: np.ndarray, rgba: np.ndarray) -> None:
     """Surface colours ``rgba`` (h w, 4) of ``image``'s pixels on the ``objects`` (an
     intersector) ``label`` says (h w,: object ids; -1: none) averaged over each pixel's
-    footprint, in place, as a fresh render has them (core.tracing.segments)."""
-    w = image.rgba.shape[1]
+    footprint, in place, as a fresh render has them (core.tracing.segments.surface_colours,
+    the whole image's neighbours)."""
     position = image.passes["position"].reshape(-1, 3).astype(np.float64)
-    footprint = surface_footprint(position, label, 0, w)
-    rows = np.flatnonzero((label >= 0) & np.all(np.isfinite(footprint), axis=(1, 2)))
     direction = image.passes["direction"].reshape(-1, 3).astype(np.float64)
     geometry = SceneGeometry(objects, [])
-    for start in range(0, rows.size, RESAMPLE_CHUNK):
-        chunk = rows[start : start + RESAMPLE_CHUNK]
-        colour, found = geometry.colour_over(
-            position[chunk], direction[chunk], label[chunk], footprint[chunk]
-        )
-        rgba[chunk[found]] = colour[found]
+    width = image.rgba.shape[1]
+    rows, colour = surface_colours(geometry, position, direction, label, 0, width)
+    rgba[rows] = colour
 
 
 def _probe_options(options: dict) -> dict:

@@ -205,20 +205,43 @@ class SceneGeometry:
         return local.min(axis=0), local.max(axis=0)
 
 
+SURFACE_CHUNK = 1 << 16
+"""Hit points cast again at once by surface_colours (memory stays bounded)."""
+
+
+def surface_colours(
+    geometry: SceneGeometry, position: np.ndarray, tangent: np.ndarray, label: np.ndarray,
+    start: int, width: int,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """(rows, colours (M, 4)): surface colours averaged over each pixel's footprint, for
+    the pixels [start, start + N) of an image ``width`` wide (row by row) with hit points
+    ``position`` (N, 3) along hitting chords ``tangent`` (N, 3) on the objects ``label``
+    (N,; below 0: none, not a neighbour). The footprint from neighbouring pixels' hit points
+    on the same object (core.mipmap.surface_footprint), the colour cast again through each
+    hit point with it (SceneGeometry.colour_over); pixels without a neighbour, or whose
+    segment meets another object first, are not among ``rows``."""
+    footprint = surface_footprint(position, label, start, width)
+    rows = np.flatnonzero((label >= 0) & np.all(np.isfinite(footprint), axis=(1, 2)))
+    found_rows, colours = [], []
+    for first in range(0, rows.size, SURFACE_CHUNK):
+        part = rows[first : first + SURFACE_CHUNK]
+        colour, found = geometry.colour_over(
+            position[part], tangent[part], label[part], footprint[part]
+        )
+        found_rows.append(part[found])
+        colours.append(colour[found])
+    if not found_rows:
+        return rows, np.zeros((0, 4))
+    return np.concatenate(found_rows), np.concatenate(colours)
+
+
 def filter_surfaces(geometry: SceneGeometry, rays: RayResults, start: int, width: int) -> None:
     """The surface colours of ``rays`` (the pixels [start, start + N) of an image ``width``
-    wide, row by row) averaged over each pixel's footprint there, in place: the footprint
-    from neighbouring pixels' hit points on the same object (core.mipmap.surface_footprint),
-    the colour cast again through each hit point with it (SceneGeometry.colour_over). The
-    accretion disk's pixels (no texture) and those without a neighbour keep theirs."""
+    wide, row by row) averaged over each pixel's footprint there, in place
+    (surface_colours). The accretion disk's pixels (no texture) keep theirs."""
     if not geometry.filters:
         return
     hit = (rays.ending == ENDING["hit"]) & (rays.object_id >= 0)
     label = np.where(hit, rays.object_id, -1)
-    footprint = surface_footprint(rays.position, label, start, width)
-    rows = np.flatnonzero(hit & np.all(np.isfinite(footprint), axis=(1, 2)))
-    if rows.size:
-        colour, found = geometry.colour_over(
-            rays.position[rows], rays.tangent[rows], rays.object_id[rows], footprint[rows]
-        )
-        rays.surface[rows[found]] = colour[found]
+    rows, colour = surface_colours(geometry, rays.position, rays.tangent, label, start, width)
+    rays.surface[rows] = colour
