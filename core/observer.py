@@ -56,8 +56,11 @@ def spacetime_momenta(model, chart, S: np.ndarray, D: np.ndarray):
     """(Q, P) (4, N) for photons at spatial coords S seen along local Cartesian directions D.
     The observer's frame is set up once per distinct start (a camera's rays share one)."""
     n_rays = S.shape[1]
-    points, where = np.unique(S, axis=1, return_inverse=True)
-    where = where.reshape(-1)
+    if n_rays and (S == S[:, :1]).all():  # one camera's rays: no sort
+        points, where = S[:, :1], np.zeros(n_rays, dtype=np.intp)
+    else:
+        points, where = np.unique(S, axis=1, return_inverse=True)
+        where = where.reshape(-1)
     g, u, E = _observer_frames(model, chart, points)
     k = -u[where] + np.einsum("nia,an->ni", E[where], D)
     P = np.ascontiguousarray(np.einsum("nij,nj->in", g[where], k))

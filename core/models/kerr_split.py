@@ -39,6 +39,11 @@ captured (falling_soa), so a camera anywhere outside r+ sees out along its outgo
 The model is the renderer's form of a Kerr–Schild Kerr for an explicit splitting
 (KerrSchild.for_backward_tracing): its chart (core.charts.KerrBLChart) maps positions to
 and from the tracer's Kerr–Schild frame.
+
+On rows with derivatives (core.dual.DualRows: ray differentials) the flows carry their tangent
+map, written out (_drift_tangents, sphere_geodesic_tangents, _kick_tangents), for every
+coordinate but t: t is cyclic and is read by nothing a ray's derivatives give (its escape
+direction), so its derivative is left as it started, which saves a sixth of the work.
 """
 
 from __future__ import annotations
@@ -151,7 +156,8 @@ class KerrBoyerLindquist(Hamiltonian):
         """V, its gradient (dV/ds, dV/dtheta, dV/dE, dV/dL) (``parts``) and its Hessian in
         (s, theta, E, L), for the kick's tangent map (SqrtSplit.kick on rows with
         derivatives): (V, gradient, H) with H the dict of second derivatives by pairs ("ss",
-        "sE", ...; V_st = V_tL = 0), each (N,). With r' = dr/ds = b sh, r'' = b ch,
+        "sE", ...; V_st = V_tL = 0; V_EE, which only t's derivative would need, is left
+        out), each (N,). With r' = dr/ds = b sh, r'' = b ch,
         Delta = r'^2 and q = P / Delta, ``parts``' gradient reads V_s = 2 q r r' E
         - q^2 Delta_s / 2 + H0 Sigma_s, V_theta = -a^2 sin cos (E^2 + 2 H0),
         V_E = q (r^2 + a^2) + a L - a^2 E sin^2 theta, V_L = a (E - q): differentiated
@@ -176,7 +182,6 @@ class KerrBoyerLindquist(Hamiltonian):
                 "sL": -a * q_s,
                 "tt": -a * a * (ct * ct - st * st) * (E * E + 2.0 * H0),
                 "tE": -2.0 * a * a * E * st * ct,
-                "EE": q_E * ra2 - a * a * st * st,
                 "EL": a * (1.0 - ra2 / delta),
                 "LL": a * a / delta,
             }
@@ -294,22 +299,26 @@ class SqrtSplit(SplitSystem):
         sphere_geodesic(Q, P, c)
 
     def _drift_tangents(self, Q: DualRows, P: Any, t) -> tuple[np.ndarray, np.ndarray]:
-        """The drift's moves of t and s with their tangent map, written out (R = sqrt(T
-        + c0 E^2), c = t / R, dc = -c dR / R, dR = (dT + 2 c0 E dE) / (2 R)); -> (c, dc),
-        for the sphere's turn (sphere_geodesic_tangents)."""
+        """The drift's move of s with its tangent map, written out (R = sqrt(T + c0 E^2),
+        c = t / R, dc = -c dR / R, dR = (dT + 2 c0 E dE) / (2 R)), and t's move (its
+        derivative not carried: see the module); -> (c, dc), for the sphere's turn
+        (sphere_geodesic_tangents)."""
         q, p, dq, dp = Q.value, P.value, Q.tangent, P.tangent
-        E, L, p_s, p_t = -p[0], p[3], p[1], p[2]
+        E, L, p_s, p_theta = -p[0], p[3], p[1], p[2]
         st, ct = np.sin(q[2]), np.cos(q[2])
         with np.errstate(divide="ignore", invalid="ignore"):
             spin = L / (st * st)
             l2 = spin * L
-            root = np.sqrt(0.5 * (p_s * p_s + p_t * p_t + l2) + self.c0 * E * E)
-            dE = -dp[:, 0]
-            dT = p_s * dp[:, 1] + p_t * dp[:, 2] + spin * dp[:, 3] - (l2 * ct / st) * dq[:, 2]
+            root = np.sqrt(0.5 * (p_s * p_s + p_theta * p_theta + l2) + self.c0 * E * E)
             c = t / root
-            dc = (-0.5 * c / (root * root)) * (dT + 2.0 * self.c0 * E * dE)
-        dq[:, 0] -= 2.0 * self.c0 * (dc * E + c * dE)
-        dq[:, 1] += dc * p_s + c * dp[:, 1]
+            rate = -0.5 * c / (root * root)
+            dc = (rate * p_s) * dp[:, 1]
+            dc += (rate * p_theta) * dp[:, 2]
+            dc += (rate * spin) * dp[:, 3]
+            dc -= (rate * l2 * ct / st) * dq[:, 2]
+            dc -= (rate * 2.0 * self.c0 * E) * dp[:, 0]  # dE = -dp_t
+        dq[:, 1] += p_s * dc
+        dq[:, 1] += c * dp[:, 1]
         q[0] -= c * (2.0 * self.c0 * E)
         q[1] += c * p_s
         return c, dc
@@ -331,26 +340,34 @@ class SqrtSplit(SplitSystem):
         """The kick and its tangent map: its increments depend on (s, theta, E, L) alone,
         so with c = t w, w = (V + c0 E^2)^(-1/2) and the gradient and Hessian of V
         (KerrBoyerLindquist.curvature), each increment's derivative is dc x + c dx, with
-        dw = -w^3 (dV + 2 c0 E dE) / 2. The same numbers as the generic rows (core.dual)
-        to rounding, a few times fewer array operations."""
+        dc = -t w^3 (dV + 2 c0 E dE) / 2; the per-ray coefficients are formed first, so each
+        direction costs one product and one sum per term. t's derivative is not carried
+        (see the module). The same numbers as the generic rows (core.dual) to rounding."""
         q, p, dq, dp = Q.value, P.value, Q.tangent, P.tangent
         V, (V_s, V_t, V_E, V_L), H = self.model.curvature(q, p, self.H0)
         E = -p[0]
-        ds, dt, dE, dL = dq[:, 1], dq[:, 2], -dp[:, 0], dp[:, 3]  # (k, N) each
         with np.errstate(invalid="ignore", divide="ignore"):
             w = 1.0 / np.sqrt(V + self.c0 * E * E)
         c = t * w
-        dV = V_s * ds + V_t * dt + V_E * dE + V_L * dL
-        dc = (-0.5 * t * w**3) * (dV + 2.0 * self.c0 * E * dE)
-        d_s = H["ss"] * ds + H["sE"] * dE + H["sL"] * dL
-        d_t = H["tt"] * dt + H["tE"] * dE
-        d_E = H["sE"] * ds + H["tE"] * dt + H["EE"] * dE + H["EL"] * dL
-        d_L = H["sL"] * ds + H["EL"] * dE + H["LL"] * dL
         clock = V_E + 2.0 * self.c0 * E
-        dp[:, 1] += dc * V_s + c * d_s
-        dp[:, 2] += dc * V_t + c * d_t
-        dq[:, 0] += dc * clock + c * (d_E + 2.0 * self.c0 * dE)
-        dq[:, 3] -= dc * V_L + c * d_L
+        rate = 0.5 * t * w**3  # dc = -rate (dV + 2 c0 E dE), with dE = -dp_t
+        ds, d_theta, dp_t, dL = dq[:, 1], dq[:, 2], dp[:, 0], dp[:, 3]  # (k, N) each
+        dc = (-rate * V_s) * ds
+        dc -= (rate * V_t) * d_theta
+        dc += (rate * clock) * dp_t
+        dc -= (rate * V_L) * dL
+        c_sL, c_tE, c_EL = c * H["sL"], c * H["tE"], c * H["EL"]
+        dp[:, 1] += V_s * dc
+        dp[:, 1] += (c * H["ss"]) * ds
+        dp[:, 1] -= (c * H["sE"]) * dp_t
+        dp[:, 1] += c_sL * dL
+        dp[:, 2] += V_t * dc
+        dp[:, 2] += (c * H["tt"]) * d_theta
+        dp[:, 2] -= c_tE * dp_t
+        dq[:, 3] -= V_L * dc
+        dq[:, 3] -= c_sL * ds
+        dq[:, 3] += c_EL * dp_t
+        dq[:, 3] -= (c * H["LL"]) * dL
         p[1] += c * V_s
         p[2] += c * V_t
         q[0] += c * clock
@@ -407,44 +424,59 @@ def sphere_geodesic(Q: np.ndarray, P: np.ndarray, c) -> None:
 
 def sphere_geodesic_tangents(Q: DualRows, P: Any, c: np.ndarray, dc: np.ndarray) -> None:
     """sphere_geodesic on rows with derivatives (core.dual.DualRows), its tangent map
-    written out line by line (each quantity x beside its derivatives dx, (k, N)), for a
-    turn c with derivatives dc: the same numbers as sphere_geodesic on Duals, with a few
-    times fewer array operations."""
+    written out line by line (each quantity x beside its derivatives dx, (k, N), as sums of
+    per-ray coefficients times derivatives), for a turn c with derivatives dc: the same
+    numbers as sphere_geodesic on Duals, with a few times fewer array operations. The new
+    direction is a unit vector, so with rho = sin theta' and down = cos theta',
+    d theta' = -d(down) / rho and d rho = down d theta'."""
     q, p, dq, dp = Q.value, P.value, Q.tangent, P.tangent
     theta, p_theta, L = q[2], p[2], p[3]
     d_theta, d_p_theta, dL = dq[:, 2], dp[:, 2], dp[:, 3]
     st, ct = np.sin(theta), np.cos(theta)
     with np.errstate(divide="ignore", invalid="ignore"):
         spin = L / st
-        d_spin = (dL - (spin * ct) * d_theta) / st
+        d_spin = (1.0 / st) * dL
+        d_spin -= (spin * ct / st) * d_theta
         size = np.sqrt(p_theta * p_theta + spin * spin)
         inverse_size = np.where(size > 0, 1.0 / size, 0.0)
-        d_size = (p_theta * d_p_theta + spin * d_spin) / size
+        d_size = (p_theta / size) * d_p_theta
+        d_size += (spin / size) * d_spin
         omega = c * size
-        d_omega = dc * size + c * d_size
+        d_omega = size * dc
+        d_omega += c * d_size
         cw, sin_w = np.cos(omega), np.sin(omega)
         sw = sin_w * inverse_size
-        d_sw = (cw * d_omega - sw * d_size) * inverse_size
-        d_cw = -sin_w * d_omega
+        d_sw = (cw * inverse_size) * d_omega
+        d_sw -= (sw * inverse_size) * d_size
     along_rho = cw * st + sw * p_theta * ct
     down = cw * ct - sw * p_theta * st
-    # d(along_rho), d(down) with d(sin θ) = cos θ dθ, d(cos θ) = -sin θ dθ gathered
-    d_rho_part = st * d_cw + (p_theta * ct) * d_sw + (sw * ct) * d_p_theta + down * d_theta
-    d_down = ct * d_cw - (p_theta * st) * d_sw - (sw * st) * d_p_theta - along_rho * d_theta
     along_phi = sw * spin
-    d_phi_part = spin * d_sw + sw * d_spin
+    # d(along_rho), d(down): d(cos w) = -sin w d omega, d(sin θ) = cos θ dθ, d(cos θ) = -sin θ dθ
+    d_rho_part = (-st * sin_w) * d_omega
+    d_rho_part += (p_theta * ct) * d_sw
+    d_rho_part += (sw * ct) * d_p_theta
+    d_rho_part += down * d_theta
+    d_down = (-ct * sin_w) * d_omega
+    d_down -= (p_theta * st) * d_sw
+    d_down -= (sw * st) * d_p_theta
+    d_down -= along_rho * d_theta
+    d_phi_part = spin * d_sw
+    d_phi_part += sw * d_spin
     rho2 = along_rho * along_rho + along_phi * along_phi
     rho = np.sqrt(rho2)
-    d_rho = (along_rho * d_rho_part + along_phi * d_phi_part) / rho
     with np.errstate(divide="ignore", invalid="ignore"):
         new_p_theta = (p_theta * along_rho + spin * ct * along_phi) / rho
-        d_top = (
-            along_rho * d_p_theta + p_theta * d_rho_part + (along_phi * ct) * d_spin
-            - (along_phi * spin * st) * d_theta + (spin * ct) * d_phi_part
-        )  # fmt: skip
-        dq[:, 2] = (down * d_rho - rho * d_down) / (rho2 + down * down)
-        dq[:, 3] += (along_rho * d_phi_part - along_phi * d_rho_part) / rho2
-        dp[:, 2] = (d_top - new_p_theta * d_rho) / rho
+        d_new_theta = (-1.0 / rho) * d_down
+        d_top = along_rho * d_p_theta
+        d_top += p_theta * d_rho_part
+        d_top += (along_phi * ct) * d_spin
+        d_top -= (along_phi * spin * st) * d_theta
+        d_top += (spin * ct) * d_phi_part
+        dq[:, 3] += (along_rho / rho2) * d_phi_part
+        dq[:, 3] -= (along_phi / rho2) * d_rho_part
+        np.multiply(1.0 / rho, d_top, out=dp[:, 2])
+        dp[:, 2] -= (new_p_theta * down / rho) * d_new_theta  # d rho = down d theta'
+        dq[:, 2] = d_new_theta
     q[2] = np.arctan2(rho, down)
     q[3] += np.arctan2(along_phi, along_rho)
     p[2] = new_p_theta

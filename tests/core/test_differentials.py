@@ -192,7 +192,9 @@ def test_written_out_tangent_maps_are_forward_mode_ad(form, name):
     (SqrtSplit._kick_tangents with V's Hessian, _drift_tangents and
     sphere_geodesic_tangents; LogarithmicSplit's), equal dual numbers carried through
     their own plain code (an independent derivation) to 1e-12 relative, on random states in
-    both hemispheres with per-ray steps and energies, rays with L = 0 among them."""
+    both hemispheres with per-ray steps and energies, rays with L = 0 among them. Kerr's
+    flows leave t's derivative as it was (t is cyclic and read by nothing the derivatives
+    give: core/models/kerr_split.py), so that row is checked to be untouched instead."""
     from core.dual import DualRows
     from core.models.kerr_split import KerrBoyerLindquist
     from core.models.schwarzschild_optical import SchwarzschildOptical
@@ -214,6 +216,9 @@ def test_written_out_tangent_maps_are_forward_mode_ad(form, name):
     getattr(split, name)(*(_PlainRows(rows) for rows in generic), t)
     written = DualRows(q.copy(), dq.copy()), DualRows(p.copy(), dp.copy())
     getattr(split, name)(*written, t)
+    if form == "kerr_bl_split":
+        np.testing.assert_array_equal(written[0].tangent[:, 0], dq[:, 0])
+        written[0].tangent[:, 0] = generic[0].tangent[:, 0]
     for ours, theirs in zip(written, generic, strict=True):
         for field in ("value", "tangent"):
             got, want = getattr(ours, field), getattr(theirs, field)
