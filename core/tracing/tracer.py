@@ -472,7 +472,9 @@ class Tracer:
             r = np.flatnonzero(segment_overlaps(X_prev.T, X.T, *self._watch_near))
             if r.size:
                 world = [self._to_world(x[:, r].T) for x in (X_prev, X, camera)]
-                self._watch_segments(idx[r], world[0], world[1], out, world[2])
+                *bends, slack = _bends(paths, X.shape[1])
+                bend = (*(b[:, r].T @ self.rotation.T for b in bends), slack[r])
+                self._watch_segments(idx[r], world[0], world[1], out, world[2], bend)
         if paths is not None:
             ended |= self._segments(idx, paths, out, step_ends)
         if self.captured is not None:
@@ -710,11 +712,12 @@ class Tracer:
         _, ok = step_ends.crossing(cols[on], u[on], to_surface)
         hits.assign(on[ok], found, np.flatnonzero(ok))
 
-    def _watch_segments(self, rows, a, b, out: RayResults, eye=None) -> None:
+    def _watch_segments(self, rows, a, b, out: RayResults, eye=None, bend=None) -> None:
         """Lower the clearance of the rays ``rows`` to that of their world chords a -> b
-        seen from ``eye`` (default: a, the camera)."""
+        seen from ``eye`` (default: a, the camera), bent into their cubic paths by
+        ``bend`` (see ClearanceBoxes.record)."""
         if self._watch is not None:
-            self._watch.record(rows, a, b, a if eye is None else eye, out)
+            self._watch.record(rows, a, b, a if eye is None else eye, out, bend)
 
     def _finish_energy(self, out, rows, Q, P, H0):
         with np.errstate(all="ignore"):
@@ -771,6 +774,23 @@ class Tracer:
 
     def _to_world(self, local):
         return local @ self.rotation.T + self.scene.center
+
+
+def _bends(paths: _NearPaths | None, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(P, R) (3, n) that bend each of a batch's n step chords X0 -> X1 into the cubic
+    path the hit test follows (core/tracing/dense.py), P = X0 - X1 + h V0 and R = X0 - X1
+    + h V1, and (n,) the slack of its hit test: how far the chords it casts stray from the
+    cubic (dense.pieces), where the step passes near geometry (``paths``); elsewhere 0
+    (the chord). A path curving towards an object between its ends comes closer to it
+    than its chord (a mirage's ray dips below it over hot ground), and an object within
+    the slack of the cubic may be hit or missed whatever the chords cast say."""
+    P, R, slack = np.zeros((3, n)), np.zeros((3, n)), np.zeros(n)
+    if paths is not None:
+        P[:, paths.rows] = paths.X0 - paths.X1 + paths.h * paths.V0
+        R[:, paths.rows] = paths.X0 - paths.X1 + paths.h * paths.V1
+        pieces = dense.pieces(paths.deviation, paths.allowed)
+        slack[paths.rows] = paths.deviation / (pieces * pieces)
+    return P, R, slack
 
 
 def _turn(X_prev: np.ndarray, X: np.ndarray, heading: np.ndarray) -> tuple:

@@ -68,12 +68,33 @@ def test_grazing_ground_hits_are_within_the_tolerance():
     assert np.count_nonzero(seen & (truth > 3.0)) == 0
 
 
+def test_a_ray_whose_path_dips_onto_hot_ground_between_its_steps_is_not_lost():
+    """The mirage (the seed's Fig. 10 scene) seen from 0.4 m, 3.4 deg down, 160 x 90 at
+    1 px: rays of row 53 graze the hot ground 7.7 m away and turn up. The true path dips
+    below z = 0 between two steps while the hit test's cubic and chords pass above it, so
+    18 of them showed sky with an error of 2e-5 px. A ray's clearance is now measured on
+    its cubic path less the slack of the chords the hit test casts, so these report a
+    near miss and are traced again at half the step while they stay near: the row matches
+    the dense render (its three rows rendered alone: the reference of a region)."""
+    scene, _ = mirage_view("fig10", 160, 90)
+    cam = _camera((0, 0, 0.4), (1, 0, 0.34), 160, 90, 16)
+    rows = cam.resized(160, 90, region=(0, 160, 35, 38))  # rows 52-54 from the top
+    ref = core.render(scene, rows, passes=PASSES, **REFERENCE)
+    run = core.render(scene, cam, tolerance_px=1.0, passes=PASSES)
+    ending = run.passes["ending"][52:55]
+    assert np.count_nonzero(ref.passes["ending"] == core.ENDING["hit"]) > 200
+    assert np.count_nonzero(ref.passes["ending"] == core.ENDING["escaped"]) > 100
+    assert np.array_equal(ending, ref.passes["ending"])
+
+
 def test_an_ending_flip_is_reported_large():
     """Kerr a/M = 0.9, a board and a sphere at a loose 2 px: a pixel whose ray ends on
     something else than the dense render's (sky for an object, one object for another: hit
     points metres apart) reports an error of at least a pixel. One ray grazing the sphere
     flipped between runs at two steps, then its last two runs agreed: it reported 0.01 px;
-    another, hitting the board, passed the sphere within its error: 0.008 px."""
+    another, hitting the board, passed the sphere within its error: 0.008 px. Near misses
+    are now traced again at half the step, which ends those at 2 and 1 px as the dense
+    render does; at 4 px one pixel still flips (measured), reported."""
     board = core.Plane(point=(0, 12, 0), normal=(0, -1, 0), u_axis=(1, 0, 0), extent=(16, 16),
                        color=core.checker(8, 8))  # fmt: skip
     sphere = core.Sphere(center=(6, 6, 1), radius=1.5, color=(1, 0, 0, 1))
@@ -82,7 +103,7 @@ def test_an_ending_flip_is_reported_large():
     cam = _camera((0, -30, 2), (0, 0, 0), 96, 54, 40)
     ref = core.render(scene, cam, passes=PASSES, **REFERENCE)
     flips = 0
-    for tolerance in (2.0, 1.0):
+    for tolerance in (4.0, 2.0, 1.0):
         run = core.render(scene, cam, tolerance_px=tolerance, passes=PASSES)
         ending = ref.passes["ending"]
         apart = np.linalg.norm(ref.passes["position"] - run.passes["position"], axis=-1) > 0.5

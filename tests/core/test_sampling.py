@@ -49,16 +49,24 @@ def test_tolerance_px_is_pixels_of_this_camera():
 def test_interpolation_never_crosses_an_ending_or_an_object():
     """At a loose 2 px, against one ray through every pixel with the same method (the
     model's default: Kerr's explicit split) at the same step: every pixel ends the same way
-    (sky, shadow, board, sphere), though most are interpolated."""
+    (sky, shadow, board, sphere), though most are interpolated. Rays that passed an object
+    within their error are traced again at half the step (core.sampling NEAR_MISS) and
+    report a possible flip: where such a pixel differs from the same-step render (one ray
+    grazing the sphere, measured), it is what a render at 1/16 the tolerance shows."""
     scene, cam = _kerr_board(), _hole_camera(96, 54)
-    adaptive = core.render(scene, cam, tolerance_px=2.0, passes=("ending", "steps"))
+    adaptive = core.render(scene, cam, tolerance_px=2.0, passes=("ending", "error_px"))
     tolerance = TRACE_SHARE * 2.0 * cam.pixel_angle()
     full = core.render(scene, cam, tolerance=tolerance, passes=("ending",))
+    tight = core.render(scene, cam, tolerance=tolerance / 16, passes=("ending",))
     assert adaptive.summary["rays"] < 0.8 * full.summary["rays"]  # interpolation happened
-    np.testing.assert_array_equal(adaptive.passes["ending"], full.passes["ending"])
     red = lambda image: (image[..., 0] > 0.9) & (image[..., 1] < 0.1)  # noqa: E731
     assert red(full.rgba).sum() > 20
-    np.testing.assert_array_equal(red(adaptive.rgba), red(full.rgba))
+    ending, is_red = adaptive.passes["ending"], red(adaptive.rgba)
+    apart = (ending != full.passes["ending"]) | (is_red != red(full.rgba))
+    assert np.count_nonzero(apart) <= 3
+    assert np.all(adaptive.passes["error_px"][apart] >= 1.0)
+    np.testing.assert_array_equal(ending[apart], tight.passes["ending"][apart])
+    np.testing.assert_array_equal(is_red[apart], red(tight.rgba)[apart])
 
 
 def _edge_scene(slope: float):
