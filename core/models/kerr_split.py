@@ -188,9 +188,10 @@ class KerrBoyerLindquist(Hamiltonian):
         return V, gradient, hessian
 
     @staticmethod
-    def kinetic(Q: np.ndarray, P: np.ndarray):
-        """T = (p_s^2 + p_theta^2 + p_phi^2 / sin^2 theta) / 2 and dT/dtheta, (N,)."""
-        st, ct = dual.sin(Q[2]), dual.cos(Q[2])
+    def kinetic(Q: np.ndarray, P: np.ndarray, sines=None):
+        """T = (p_s^2 + p_theta^2 + p_phi^2 / sin^2 theta) / 2 and dT/dtheta, (N,)
+        (``sines``: (sin theta, cos theta) where the caller has them)."""
+        st, ct = (dual.sin(Q[2]), dual.cos(Q[2])) if sines is None else sines
         with np.errstate(divide="ignore", invalid="ignore"):
             l2 = P[3] * P[3] / (st * st)
             T = 0.5 * (P[1] * P[1] + P[2] * P[2] + l2)
@@ -272,9 +273,9 @@ class SqrtSplit(SplitSystem):
         """The split for the rays keep (per-ray H0)."""
         return SqrtSplit(self.model, self.H0 if self.H0.ndim == 0 else self.H0[keep])
 
-    def _root_T(self, Q: np.ndarray, P: np.ndarray):
-        """sqrt(T + c), dT/dtheta and E."""
-        T, dT_t = self.model.kinetic(Q, P)
+    def _root_T(self, Q: np.ndarray, P: np.ndarray, sines=None):
+        """sqrt(T + c), dT/dtheta and E (``sines`` as ``kinetic``'s)."""
+        T, dT_t = self.model.kinetic(Q, P, sines)
         E = -P[0]
         return dual.sqrt(T + self.c0 * E * E), dT_t, E
 
@@ -289,23 +290,25 @@ class SqrtSplit(SplitSystem):
         """Exact flow of 2 sqrt(T + c) over t: s moves at p_s / sqrt(T + c), the direction
         n on the unit sphere turns about the angular momentum J at |J| / sqrt(T + c)."""
         if isinstance(Q, DualRows):
-            c, dc = self._drift_tangents(Q, P, t)
-            sphere_geodesic_tangents(Q, P, c, dc)
+            sines = np.sin(Q.value[2]), np.cos(Q.value[2])
+            c, dc = self._drift_tangents(Q, P, t, sines)
+            sphere_geodesic_tangents(Q, P, c, dc, sines)
             return
-        root, _, E = self._root_T(Q, P)
+        sines = dual.sin(Q[2]), dual.cos(Q[2])  # theta's, shared (sin and cos cost most)
+        root, _, E = self._root_T(Q, P, sines)
         c = t / root
         Q[0] -= c * (2.0 * self.c0 * E)
         Q[1] += c * P[1]
-        sphere_geodesic(Q, P, c)
+        sphere_geodesic(Q, P, c, sines)
 
-    def _drift_tangents(self, Q: DualRows, P: Any, t) -> tuple[np.ndarray, np.ndarray]:
+    def _drift_tangents(self, Q: DualRows, P: Any, t, sines) -> tuple[np.ndarray, np.ndarray]:
         """The drift's move of s with its tangent map, written out (R = sqrt(T + c0 E^2),
         c = t / R, dc = -c dR / R, dR = (dT + 2 c0 E dE) / (2 R)), and t's move (its
         derivative not carried: see the module); -> (c, dc), for the sphere's turn
-        (sphere_geodesic_tangents)."""
+        (sphere_geodesic_tangents); ``sines``: (sin theta, cos theta)."""
         q, p, dq, dp = Q.value, P.value, Q.tangent, P.tangent
         E, L, p_s, p_theta = -p[0], p[3], p[1], p[2]
-        st, ct = np.sin(q[2]), np.cos(q[2])
+        st, ct = sines
         with np.errstate(divide="ignore", invalid="ignore"):
             spin = L / (st * st)
             l2 = spin * L
@@ -398,13 +401,14 @@ class SqrtSplit(SplitSystem):
         return dq, dp
 
 
-def sphere_geodesic(Q: np.ndarray, P: np.ndarray, c) -> None:
+def sphere_geodesic(Q: np.ndarray, P: np.ndarray, c, sines=None) -> None:
     """The flow of c (p_theta^2 + p_phi^2 / sin^2 theta) / 2 over unit time, in place on
     (theta, phi, p_theta, p_phi) = (Q[2], Q[3], P[2], P[3]): the unit vector n turns about
     J = p_theta e_phi - (p_phi / sin theta) e_theta by c |J| (a great circle, through the
     poles as well: no coordinate singularity in the flow; J_z = p_phi is kept). Written in
-    the frame (e_rho, e_phi, z) at the old phi: n' = cos w n + sin w (J x n) / |J|."""
-    st, ct = dual.sin(Q[2]), dual.cos(Q[2])
+    the frame (e_rho, e_phi, z) at the old phi: n' = cos w n + sin w (J x n) / |J|
+    (``sines``: (sin theta, cos theta) where the caller has them)."""
+    st, ct = (dual.sin(Q[2]), dual.cos(Q[2])) if sines is None else sines
     p_theta = P[2]
     with np.errstate(divide="ignore", invalid="ignore"):
         spin = P[3] / st  # (J x n) . e_phi
@@ -422,7 +426,9 @@ def sphere_geodesic(Q: np.ndarray, P: np.ndarray, c) -> None:
         P[2] = (p_theta * along_rho + spin * ct * along_phi) / rho
 
 
-def sphere_geodesic_tangents(Q: DualRows, P: Any, c: np.ndarray, dc: np.ndarray) -> None:
+def sphere_geodesic_tangents(
+    Q: DualRows, P: Any, c: np.ndarray, dc: np.ndarray, sines=None
+) -> None:
     """sphere_geodesic on rows with derivatives (core.dual.DualRows), its tangent map
     written out line by line (each quantity x beside its derivatives dx, (k, N), as sums of
     per-ray coefficients times derivatives), for a turn c with derivatives dc: the same
@@ -432,7 +438,7 @@ def sphere_geodesic_tangents(Q: DualRows, P: Any, c: np.ndarray, dc: np.ndarray)
     q, p, dq, dp = Q.value, P.value, Q.tangent, P.tangent
     theta, p_theta, L = q[2], p[2], p[3]
     d_theta, d_p_theta, dL = dq[:, 2], dp[:, 2], dp[:, 3]
-    st, ct = np.sin(theta), np.cos(theta)
+    st, ct = (np.sin(theta), np.cos(theta)) if sines is None else sines
     with np.errstate(divide="ignore", invalid="ignore"):
         spin = L / st
         d_spin = (1.0 / st) * dL
