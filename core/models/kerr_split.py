@@ -119,19 +119,22 @@ class KerrBoyerLindquist(Hamiltonian):
         """Λ's steps scale with the distance from the hole (see the module)."""
         return True
 
-    def parts(self, Q: np.ndarray, P: np.ndarray, H0=0.0, derivatives: bool = True):
+    def parts(
+        self, Q: np.ndarray, P: np.ndarray, H0=0.0, derivatives: bool = True, sines=None
+    ):  # fmt: skip
         """The potential V and its derivatives (dV/ds, dV/dtheta, dV/dE, dV/dL), with Sigma
         and (dSigma/ds, dSigma/dtheta); each (N,). V = P^2 / (2 Delta) + a E L
-        - a^2 E^2 sin^2(theta) / 2 + H0 Sigma (the module's U plus L^2 / (2 sin^2 theta))."""
-        return self._parts(self._terms(Q, P), H0, derivatives)
+        - a^2 E^2 sin^2(theta) / 2 + H0 Sigma (the module's U plus L^2 / (2 sin^2 theta))
+        (``sines``: (sin theta, cos theta) where the caller has them)."""
+        return self._parts(self._terms(Q, P, sines), H0, derivatives)
 
-    def _terms(self, Q: np.ndarray, P: np.ndarray) -> _Terms:
+    def _terms(self, Q: np.ndarray, P: np.ndarray, sines=None) -> _Terms:
         """What V and its derivatives are made of at (Q, P) (arrays or Duals)."""
         s, theta = Q[1], Q[2]
         E, L, a, b = -P[0], P[3], self.a, self.b
         sh, ch = dual.sinh(s), dual.cosh(s)
         r = self.mass + b * ch
-        st, ct = dual.sin(theta), dual.cos(theta)
+        st, ct = (dual.sin(theta), dual.cos(theta)) if sines is None else sines
         ra2 = r * r + a * a
         return _Terms(E, L, sh, ch, r, (b * sh) ** 2, st, ct, ra2, ra2 * E - a * L)
 
@@ -152,7 +155,7 @@ class KerrBoyerLindquist(Hamiltonian):
             dV_L = -a * pr / t.delta + a * E
         return V, sigma, (dV_s, dV_t, dV_E, dV_L), dsig
 
-    def curvature(self, Q: np.ndarray, P: np.ndarray, H0=0.0):
+    def curvature(self, Q: np.ndarray, P: np.ndarray, H0=0.0, sines=None):
         """V, its gradient (dV/ds, dV/dtheta, dV/dE, dV/dL) (``parts``) and its Hessian in
         (s, theta, E, L), for the kick's tangent map (SqrtSplit.kick on rows with
         derivatives): (V, gradient, H) with H the dict of second derivatives by pairs ("ss",
@@ -162,7 +165,7 @@ class KerrBoyerLindquist(Hamiltonian):
         - q^2 Delta_s / 2 + H0 Sigma_s, V_theta = -a^2 sin cos (E^2 + 2 H0),
         V_E = q (r^2 + a^2) + a L - a^2 E sin^2 theta, V_L = a (E - q): differentiated
         once more here."""
-        terms = self._terms(Q, P)
+        terms = self._terms(Q, P, sines)
         V, _, gradient, _ = self._parts(terms, H0, True)
         E, a, b = terms.E, self.a, self.b
         r, r1, r2 = terms.r, b * terms.sh, b * terms.ch
@@ -268,6 +271,7 @@ class SqrtSplit(SplitSystem):
         self.H0 = np.asarray(H0, dtype=np.float64)
         self.dim = 4
         self.c0 = C0 * model.mass**2
+        self._kept: tuple | None = None  # (rows, theta, its sines): _sines
 
     def subset(self, keep) -> SqrtSplit:
         """The split for the rays keep (per-ray H0)."""
@@ -281,7 +285,7 @@ class SqrtSplit(SplitSystem):
 
     def _root_V(self, Q: np.ndarray, P: np.ndarray):
         """1 / sqrt(V + c) and dV."""
-        V, _, dV, _ = self.model.parts(Q, P, self.H0)
+        V, _, dV, _ = self.model.parts(Q, P, self.H0, sines=self._sines(Q))
         E = -P[0]
         with np.errstate(invalid="ignore", divide="ignore"):
             return 1.0 / dual.sqrt(V + self.c0 * E * E), dV
@@ -289,17 +293,38 @@ class SqrtSplit(SplitSystem):
     def drift(self, Q: np.ndarray, P: np.ndarray, t) -> None:
         """Exact flow of 2 sqrt(T + c) over t: s moves at p_s / sqrt(T + c), the direction
         n on the unit sphere turns about the angular momentum J at |J| / sqrt(T + c)."""
+        sines = self._sines(Q)  # theta's, shared: sin and cos cost the most here
         if isinstance(Q, DualRows):
-            sines = np.sin(Q.value[2]), np.cos(Q.value[2])
             c, dc = self._drift_tangents(Q, P, t, sines)
-            sphere_geodesic_tangents(Q, P, c, dc, sines)
+            self._keep_sines(Q, sphere_geodesic_tangents(Q, P, c, dc, sines))
             return
-        sines = dual.sin(Q[2]), dual.cos(Q[2])  # theta's, shared (sin and cos cost most)
         root, _, E = self._root_T(Q, P, sines)
         c = t / root
         Q[0] -= c * (2.0 * self.c0 * E)
         Q[1] += c * P[1]
-        sphere_geodesic(Q, P, c, sines)
+        self._keep_sines(Q, sphere_geodesic(Q, P, c, sines))
+
+    def _sines(self, Q: Any):
+        """(sin theta, cos theta) of the rows Q: as the last drift on Q left them (its turn
+        computes them: rho and down, to rounding), else computed (for Duals: None)."""
+        if isinstance(Q, DualRows):
+            theta = Q.value[2]
+        elif isinstance(Q, np.ndarray):
+            theta = Q[2]
+        else:
+            return None  # rows of Duals (tests): the plain code takes its own
+        kept = self._kept
+        if kept is not None and kept[0] is Q and np.array_equal(kept[1], theta):
+            return kept[2]
+        sines = np.sin(theta), np.cos(theta)
+        self._kept = (Q, theta.copy(), sines)
+        return sines
+
+    def _keep_sines(self, Q: Any, sines) -> None:
+        """Keep (sin theta, cos theta) of the rows Q as a drift left them (``_sines``)."""
+        if sines is not None and isinstance(Q, DualRows | np.ndarray):
+            theta = Q.value[2] if isinstance(Q, DualRows) else Q[2]
+            self._kept = (Q, theta.copy(), sines)
 
     def _drift_tangents(self, Q: DualRows, P: Any, t, sines) -> tuple[np.ndarray, np.ndarray]:
         """The drift's move of s with its tangent map, written out (R = sqrt(T + c0 E^2),
@@ -347,7 +372,7 @@ class SqrtSplit(SplitSystem):
         direction costs one product and one sum per term. t's derivative is not carried
         (see the module). The same numbers as the generic rows (core.dual) to rounding."""
         q, p, dq, dp = Q.value, P.value, Q.tangent, P.tangent
-        V, (V_s, V_t, V_E, V_L), H = self.model.curvature(q, p, self.H0)
+        V, (V_s, V_t, V_E, V_L), H = self.model.curvature(q, p, self.H0, self._sines(Q))
         E = -p[0]
         with np.errstate(invalid="ignore", divide="ignore"):
             w = 1.0 / np.sqrt(V + self.c0 * E * E)
@@ -401,13 +426,14 @@ class SqrtSplit(SplitSystem):
         return dq, dp
 
 
-def sphere_geodesic(Q: np.ndarray, P: np.ndarray, c, sines=None) -> None:
+def sphere_geodesic(Q: np.ndarray, P: np.ndarray, c, sines=None):
     """The flow of c (p_theta^2 + p_phi^2 / sin^2 theta) / 2 over unit time, in place on
     (theta, phi, p_theta, p_phi) = (Q[2], Q[3], P[2], P[3]): the unit vector n turns about
     J = p_theta e_phi - (p_phi / sin theta) e_theta by c |J| (a great circle, through the
     poles as well: no coordinate singularity in the flow; J_z = p_phi is kept). Written in
     the frame (e_rho, e_phi, z) at the old phi: n' = cos w n + sin w (J x n) / |J|
-    (``sines``: (sin theta, cos theta) where the caller has them)."""
+    (``sines``: (sin theta, cos theta) where the caller has them). -> (sin theta', cos
+    theta') as it found them (rho and down; None on Duals)."""
     st, ct = (dual.sin(Q[2]), dual.cos(Q[2])) if sines is None else sines
     p_theta = P[2]
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -419,22 +445,24 @@ def sphere_geodesic(Q: np.ndarray, P: np.ndarray, c, sines=None) -> None:
     along_rho = cw * st + sw * p_theta * ct  # n' . e_rho(phi)
     along_phi = sw * spin  # n' . e_phi(phi)
     rho = dual.sqrt(along_rho * along_rho + along_phi * along_phi)
-    Q[2] = dual.arctan2(rho, cw * ct - sw * p_theta * st)
+    down = cw * ct - sw * p_theta * st
+    Q[2] = dual.arctan2(rho, down)
     Q[3] += dual.arctan2(along_phi, along_rho)
     with np.errstate(divide="ignore", invalid="ignore"):
         # J . e_phi(phi'), with e_phi(phi') = cos d e_phi(phi) - sin d e_rho(phi)
         P[2] = (p_theta * along_rho + spin * ct * along_phi) / rho
+    return (rho, down) if isinstance(rho, np.ndarray) else None
 
 
 def sphere_geodesic_tangents(
     Q: DualRows, P: Any, c: np.ndarray, dc: np.ndarray, sines=None
-) -> None:
+) -> tuple[np.ndarray, np.ndarray]:
     """sphere_geodesic on rows with derivatives (core.dual.DualRows), its tangent map
     written out line by line (each quantity x beside its derivatives dx, (k, N), as sums of
     per-ray coefficients times derivatives), for a turn c with derivatives dc: the same
     numbers as sphere_geodesic on Duals, with a few times fewer array operations. The new
     direction is a unit vector, so with rho = sin theta' and down = cos theta',
-    d theta' = -d(down) / rho and d rho = down d theta'."""
+    d theta' = -d(down) / rho and d rho = down d theta'. -> (rho, down)."""
     q, p, dq, dp = Q.value, P.value, Q.tangent, P.tangent
     theta, p_theta, L = q[2], p[2], p[3]
     d_theta, d_p_theta, dL = dq[:, 2], dp[:, 2], dp[:, 3]
@@ -486,3 +514,4 @@ def sphere_geodesic_tangents(
     q[2] = np.arctan2(rho, down)
     q[3] += np.arctan2(along_phi, along_rho)
     p[2] = new_p_theta
+    return rho, down
