@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -571,7 +572,7 @@ class Tracer:
         if c.size == 0:
             return hit_rows
         landed: list[tuple[np.ndarray, np.ndarray]] = []  # (batch rows, u) on an opaque disk
-        k = dense.pieces(deviation, allowed)
+        k = paths.pieces
         for n in np.unique(k):
             g = np.flatnonzero(k == n)
             hg = h if np.ndim(h) == 0 else h[g]
@@ -830,8 +831,7 @@ def _bends(paths: _NearPaths | None, n: int) -> tuple[np.ndarray, np.ndarray, np
     if paths is not None:
         P[:, paths.rows] = paths.X0 - paths.X1 + paths.h * paths.V0
         R[:, paths.rows] = paths.X0 - paths.X1 + paths.h * paths.V1
-        pieces = dense.pieces(paths.deviation, paths.allowed)
-        slack[paths.rows] = paths.deviation / (pieces * pieces)
+        slack[paths.rows] = paths.deviation / (paths.pieces * paths.pieces)
     return P, R, slack
 
 
@@ -875,6 +875,12 @@ class _NearPaths:
             self.rows[keep], self.X0[:, keep], self.X1[:, keep], self.V0[:, keep],
             self.V1[:, keep], h, self.deviation[keep], self.allowed[keep],
         )  # fmt: skip
+
+    @cached_property
+    def pieces(self) -> np.ndarray:
+        """(K,) chords the hit test casts per step (dense.pieces), shared by the hit test
+        (Tracer._segments) and the clearance's slack (_bends)."""
+        return dense.pieces(self.deviation, self.allowed)
 
 
 class _StepEnds:
