@@ -138,7 +138,9 @@ def test_an_ending_flip_is_reported_large():
     flipped between runs at two steps, then its last two runs agreed: it reported 0.01 px;
     another, hitting the board, passed the sphere within its error: 0.008 px. Near misses
     are now traced again at half the step, which ends those at 2 and 1 px as the dense
-    render does; at 4 px one pixel still flips (measured), reported."""
+    render does, and a hit the method's own path does not confirm is undone, which ended
+    the last one at 4 px: the default method flips nowhere at 4, 2 or 1 px (measured).
+    Leapfrog (order 2) at 2 px still flips 3 pixels (measured), each reported."""
     board = core.Plane(point=(0, 12, 0), normal=(0, -1, 0), u_axis=(1, 0, 0), extent=(16, 16),
                        color=core.checker(8, 8))  # fmt: skip
     sphere = core.Sphere(center=(6, 6, 1), radius=1.5, color=(1, 0, 0, 1))
@@ -147,15 +149,16 @@ def test_an_ending_flip_is_reported_large():
     cam = _camera((0, -30, 2), (0, 0, 0), 96, 54, 40)
     ref = core.render(scene, cam, passes=PASSES, **REFERENCE)
     flips = 0
-    for tolerance in (4.0, 2.0, 1.0):
-        run = core.render(scene, cam, tolerance_px=tolerance, passes=PASSES)
+    for tolerance, method in ((4.0, None), (2.0, None), (1.0, None), (2.0, "leapfrog")):
+        run = core.render(scene, cam, tolerance_px=tolerance, passes=PASSES, method=method)
         ending = ref.passes["ending"]
         apart = np.linalg.norm(ref.passes["position"] - run.passes["position"], axis=-1) > 0.5
         flipped = (ending != run.passes["ending"]) | ((ending == core.ENDING["hit"]) & apart)
         assert np.all(run.passes["error_px"][flipped] >= 1.0), run.passes["error_px"][flipped]
         flips += np.count_nonzero(flipped)
         flagged = run.passes["error_px"] >= 100.0  # flips (pi radians), not just loose pixels
-        assert np.count_nonzero(flagged) <= 0.02 * flagged.size  # not every pixel
+        if method is None:  # leapfrog flags 25 % (true errors: median 0.025 px), as before
+            assert np.count_nonzero(flagged) <= 0.02 * flagged.size  # not every pixel
     assert flips >= 1  # the scene does flip some
 
 
@@ -176,17 +179,17 @@ def test_a_hit_near_its_objects_edge_reports_a_possible_flip():
     have missed it; every pixel whose ray ends elsewhere than the dense render's reports at
     least a pixel, at 1 and 0.25 px (before: 2 of the 4 at 1 px reported 0.015 px;
     TileSampler._near_edge moves each hit across and along its surface by the error and
-    casts again)."""
+    casts again). Since a disk hit the method's own crossing does not confirm is undone
+    (Tracer._land_on_disk: the cubic's hit lay within its slack of the rim), no pixel ends
+    elsewhere at 1 or 0.25 px (before: 3 and 1, reported; measured); the rims' rays that
+    may still flip are flagged (measured 28 and 24 pixels)."""
     scene, cam, ref = _high_spin_disk()
-    flips = 0
     for tolerance in (1.0, 0.25):
         run = core.render(scene, cam, tolerance_px=tolerance, passes=PASSES)
         flipped = ref.passes["ending"] != run.passes["ending"]
         assert np.all(run.passes["error_px"][flipped] >= 1.0), run.passes["error_px"][flipped]
-        flips += np.count_nonzero(flipped)
         flagged = run.passes["error_px"] >= 100.0  # possible flips (pi radians)
-        assert np.count_nonzero(flagged) <= 0.02 * flagged.size  # not every pixel
-    assert flips >= 2  # the scene does flip some (measured 5)
+        assert 10 <= np.count_nonzero(flagged) <= 0.02 * flagged.size  # the rims, not all
 
 
 def test_runs_that_shared_their_steps_are_traced_again():
@@ -244,3 +247,70 @@ def test_an_opaque_disk_is_interpolated_within_the_tolerance():
     # measured: 6603 rays traced, 6172 with the opaque disk's blocks interpolated (its
     # 4 px blocks at this size; at 1080p its larger ones too)
     assert traced.summary["rays"] - run.summary["rays"] > 0.1 * both.sum()
+
+
+def _thin_front() -> tuple:
+    """(scene, camera) of benchmarks/honesty.py's thin_front, 160 x 90: Schwarzschild from
+    30 rg with strips 0.06-0.1 rg wide, an edge-on disk and small spheres near the hole."""
+    cam = _camera((0, -30, 2), (0, 0, 0), 160, 90, 40)
+    strip = dict(normal=(0, -1, 0), color=(0.9, 0.9, 0.2, 1))
+    objects = [
+        core.Plane((-5.0, -8, 0.5), u_axis=(0, 0, 1), extent=(9.0, 0.08), **strip),
+        core.Plane((0.5, -12, -2.6), u_axis=(1, 0, 0), extent=(11.0, 0.06), **strip),
+        core.Plane((6.0, -6, 1.5), u_axis=(1, 0, 1), extent=(7.0, 0.07), **strip),
+        core.Plane((3.5, 2, 0), normal=(0, -1, 0), u_axis=(0, 0, 1), extent=(10, 0.1)),
+        core.Plane((3.5, 2, 0), normal=(1, 0, 0), u_axis=(0, 0, 1), extent=(10, 0.1)),
+        core.Disk((-3.0, -4, -1.5), (1, 0.1, 0.15), 0.0, 1.5, (0.2, 0.9, 1.0, 1)),
+        core.Sphere((7.5, -3, -3.0), 0.25, (1, 0.2, 0.2, 1)),
+        core.Sphere((-8.0, 3, 3.5), 0.35, (0.2, 1, 0.2, 1)),
+        core.Sphere((-2.0, -15, 2.8), 0.12, (1, 1, 1, 1)),
+        core.Sphere((2.6, 0, 0.8), 0.2, (1, 0.5, 0, 1)),
+        core.Sphere((-6.5, -10, -3.0), 0.15, (0.8, 0.3, 1, 1)),
+    ]
+    return core.Scene(model=hm.schwarzschild(rg=1.0), objects=objects), cam
+
+
+def _pixel_rays(scene, cam, pixels, step_share: float = 1.0):
+    """(rays at step_share x the rule's step of a 1 px render, the dense reference's) of
+    the pixel centres ``pixels`` [(row, column)]."""
+    from core.render import TRACE_SHARE, _scene_extent
+    from core.trace import TraceOptions, Tracer
+
+    xy = np.array([[i + 0.5, j + 0.5] for j, i in pixels])
+    origins, directions = cam.rays_at(xy)
+    extent = _scene_extent(scene, cam)
+    tracer = Tracer(scene, TraceOptions(tolerance=TRACE_SHARE * cam.pixel_angle()), extent)
+    rays = tracer.trace(origins, directions, step=step_share * tracer.step)
+    exact = Tracer(scene, TraceOptions(**REFERENCE), extent).trace(origins, directions)
+    return rays, exact
+
+
+def test_a_hit_the_methods_own_path_does_not_confirm_is_undone():
+    """Hits are found on chords of a step's cubic, then moved to where the method's own
+    path meets the surface; where that path passes beside the object, the cubic's hit
+    stood (a strip 0.07 rg wide hit 0.002 rg inside its edge while the path passes 0.001
+    outside; an edge-on disk's rim grazed within 1e-4 rg; the high-spin disk hit at r 8.01,
+    past its rim at 8): quiet flips (0.00003-0.0003 px) or flagged ones, in
+    benchmarks/honesty.py thin_front and disk_high_spin at 1 px. Such a hit is undone and
+    the ray goes on: each of these rays escapes at the rule's step, as the dense render's."""
+    for (scene, cam), pixels in (
+        (_thin_front(), [(52, 117), (60, 54)]),
+        (_high_spin_disk()[:2], [(18, 37), (31, 17)]),
+    ):
+        rays, exact = _pixel_rays(scene, cam, pixels)
+        assert np.all(exact.ending == core.ENDING["escaped"])
+        assert np.array_equal(rays.ending, exact.ending), rays.ending
+
+
+def test_a_retraced_near_miss_has_its_hit_tests_slack_fall_with_its_step():
+    """A near miss is traced again at half the step, up to three times; the chords of its
+    hit test kept the rule's allowance whatever the step, so rays passing within that of a
+    thin strip's edge stayed near, and wrong, at 1/8 of the step (thin_front at 1 px: two
+    pixels that hit a strip in the dense render showed sky, reported as flips). A run below
+    the rule's step has the allowance scaled as its error, (h / h_rule)^order: at 1/8 of
+    the step both rays hit the strip, as the dense render's."""
+    scene, cam = _thin_front()
+    rays, exact = _pixel_rays(scene, cam, [(27, 142), (54, 114)], step_share=0.125)
+    assert np.all(exact.ending == core.ENDING["hit"])
+    assert np.array_equal(rays.ending, exact.ending), rays.ending
+    assert np.array_equal(rays.object_id, exact.object_id)
