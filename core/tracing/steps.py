@@ -175,14 +175,25 @@ def default_step(
     """
     tol = min(max(float(tolerance), 1e-14), 1e-1)
     order = max(int(method.order if order is None else order), 1)
+    constant, largest = rule_bounds(method, scaled, constant, largest)
+    if constant is None:
+        return length * min(MAX_STEP, 0.5 * tol ** (1.0 / order))
+    return float(min(largest, (0.5 * tol / constant) ** (1.0 / order)))
+
+
+def rule_bounds(
+    method: Any, scaled: bool, constant: float | None = None, largest: float | None = None
+) -> tuple[float | None, float]:
+    """(error constant C, largest step) default_step takes for ``method`` (``constant`` and
+    ``largest`` as there): C None where the rule uses none (not ``scaled``, or no constant
+    measured), the largest step MAX_STEP, or for the splittings ``largest`` or
+    MAX_SPLIT_STEP."""
     if constant is None:
         constant = method.error_constant
     if not scaled:
         constant = None
-    if constant is None:
-        return length * min(MAX_STEP, 0.5 * tol ** (1.0 / order))
     if not isinstance(method, Splitting):
         largest = MAX_STEP
     elif largest is None:
         largest = MAX_SPLIT_STEP
-    return float(min(largest, (0.5 * tol / constant) ** (1.0 / order)))
+    return constant, float(largest)

@@ -38,6 +38,7 @@ from .steps import (
     default_step,
     error_constant,
     form_calibration,
+    rule_bounds,
     solver_tolerance,
 )
 
@@ -114,6 +115,10 @@ class TracePlan:
     step: float | None = None
     capture_test: RayCapture | None = None
     """(Q, P) -> (N,) bool: rays that cannot come back out of a horizon (None: no horizon)."""
+    error_constant: float | None = None
+    """C of the step rule's err = C h^order (radians; None where the rule uses none)."""
+    largest_step: float = math.inf
+    """The rule's largest step: the constant was measured at steps up to it."""
 
 
 def plan_trace(scene: Scene, options: TraceOptions, extent: float = 1.0) -> TracePlan:
@@ -135,18 +140,23 @@ def plan_trace(scene: Scene, options: TraceOptions, extent: float = 1.0) -> Trac
     if scene.disk is not None:  # the disk's hits need the rays' momenta: inside
         extent = max(extent, scene.disk.cartesian_radii()[1])
     region = region_for(model, options.tolerance, extent, radius)
+    constant, largest = rule_bounds(
+        method, region.scaled(model), error_constant(method, model, system),
+        form_calibration(model).largest_step,
+    )  # fmt: skip
     step = options.step or default_step(
         method,
         options.tolerance,
         region.length_scale(model),
         scaled=region.scaled(model),
-        constant=error_constant(method, model, system),
-        largest=form_calibration(model).largest_step,
+        constant=constant,
+        largest=largest,
         order=order,
     )
     return TracePlan(
         curved=True, model=model, method=method, order=order, chart=chart_for(model),
         region=region, step=step, capture_test=ray_capture_test(model),
+        error_constant=constant, largest_step=largest,
     )  # fmt: skip
 
 
@@ -522,6 +532,14 @@ class Tracer:
         allowed = CHORD_SHARE * self.options.tolerance * np.linalg.norm(X0 - camera[:, c], axis=0)
         allowed = allowed * self._allowance_scale(h0[c])
         return _NearPaths(c, X0, X1, V0, V1, h, dense.chord_deviation(V0, V1, h), allowed)
+
+    def error_bound(self, step: float) -> float:
+        """The step rule's bound C step^order (radians) on a run at ``step``, where it has a
+        constant and ``step`` is within the steps it was measured at (0 elsewhere)."""
+        constant = self.plan.error_constant
+        if constant is None or self.order is None or step > self.plan.largest_step:
+            return 0.0
+        return constant * step**self.order
 
     def _allowance_scale(self, h0: np.ndarray) -> np.ndarray | float:
         """(K,) what the chords' allowance is scaled by on a run at a step below the rule's
