@@ -112,6 +112,15 @@ and 0.05 px; benchmarks/honesty.py) estimate / truth is 0.95-1.1 at the 1st perc
 up where they partly cancel. 2.0 (the centre-only rule's margin) kept the 3 sub-pixel star
 images of 561 that 1.0 loses at 1 px (moved by less than the tolerance, between pixel
 centres; point stars are issue 26's), for 8-20 % more rays (Kerr board, 1080p Preview)."""
+LOOSE_SHARE = 0.3
+"""A traced ray whose companion ran past the rule's largest step (Richardson outside its
+asymptotic range; TileSampler._bound) and whose estimate exceeds LOOSE_SHARE x the retrace
+budget is traced again at half the step, its first run the companion (RETRACE's first
+round): escaped rays of Schwarzschild and Kerr at the cap had errors at 2 h 40-50x those
+at h, read as ~3x the truth, so an estimate above 0.3 of the tolerance may stand for a
+truth above a tenth of it, where the error pass promises 3x (benchmarks/honesty.py
+point_stars and disk_high_spin at 0.05 px: 88 % and 87 % within 3x -> 100 %). At 0.1 the
+Kerr board took 1.4x as long (1080p Preview), at 0.3 1.02x."""
 REACH = 4.0
 """An interpolated hit point is cast again along its interpolated chord direction, REACH
 block widths (at its distance from the camera) either side: the surface is found even where
@@ -267,6 +276,7 @@ class _Nodes:
         self.radius = np.full(shape, np.nan)  # Boyer–Lindquist r of a hit on the disk
         self.flipped = np.zeros(shape, dtype=bool)  # two of its runs ended on different things
         self.near = np.zeros(shape, dtype=bool)  # missed an object by under NEAR_MISS x its error
+        self.loose = np.zeros(shape, dtype=bool)  # its companion ran past the rule's range
         self.magnification = np.full(shape, np.nan)  # |μ| where it sees the sky (with tangents)
         self.transmittance = np.ones(shape)  # through volumes and a translucent disk
         # d(direction) / d(image x, y) where it sees the sky (RayResults.sky_jacobian)
@@ -363,9 +373,11 @@ class TileSampler:
         estimate read 0.03-0.3 of the truth on 2.6-2.8 % of benchmarks/honesty.py
         schwarzschild's pixels at every tolerance), and the rule's bound C h^order at h
         stands in; within the rule's range, none (Richardson's own)."""
-        if COMPANION_RATIO * step <= self.tracer.plan.largest_step:
-            return 0.0
-        return self.tracer.error_bound(step)
+        return self.tracer.error_bound(step) if self._bound_applies(step) else 0.0
+
+    def _bound_applies(self, step: float | None) -> bool:
+        """Whether a run at ``step``'s companion runs past the rule's largest step."""
+        return step is not None and COMPANION_RATIO * step > self.tracer.plan.largest_step
 
     def _doubted(self, error: np.ndarray, steps: np.ndarray, other_steps: np.ndarray):
         """``error`` raised above the retrace budget where the two runs it compares took
@@ -386,6 +398,7 @@ class TileSampler:
             return
         rays, seen, error = self._trace_points(self._image_xy(jj, ii), cancel)
         self._store(nodes, jj, ii, rays, seen, error)
+        nodes.loose[jj, ii] = error is not None and self._bound_applies(self.tracer.step)
 
     def _store(self, nodes: _Nodes, jj, ii, rays: RayResults, seen, error) -> None:
         """Record traced rays at the nodes (jj, ii); ``error`` is the integration's."""
@@ -476,7 +489,9 @@ class TileSampler:
         step = self.tracer.step
         for _ in range(RETRACE if self.with_error else 0):
             err = nodes.integration
-            again = (np.isfinite(err) & (err > self.budget)) | nodes.near
+            budget = np.where(nodes.loose, LOOSE_SHARE * self.budget, self.budget)
+            again = (np.isfinite(err) & (err > budget)) | nodes.near
+            nodes.loose[:] = False  # a later round's step is not half the first run's
             jj, ii = np.nonzero(nodes.traced & again)
             if jj.size == 0 or (cancel is not None and cancel()):
                 return
