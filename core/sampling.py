@@ -33,11 +33,12 @@ measures the map's second derivative along that edge, the centre's alone only th
 field). For a quadratic map, at block coordinates (u, v) in [0, 1]^2 the bilinear error is
 4 u (1 - u) d_x + 4 v (1 - v) d_y, d_x a midpoint's deviation along x (the top and bottom
 edges' blended by v), d_y along y (left and right, blended by u); what the centre deviates
-beyond that is a higher order, added as 16 u (1 - u) v (1 - v) d_c (_error_shape). The
-error pass reports that estimate; a block is accepted when its largest value, times
-INTERPOLATION_SAFETY, is within the tolerance. Interpolation never crosses an ending
-change: a block is accepted only when all nine rays end the same way (the same object, for
-hits).
+beyond that is a higher order, added as 16 u (1 - u) v (1 - v) d_c (_error_shape). A
+block is accepted when that estimate's largest value, times INTERPOLATION_SAFETY, is within
+the tolerance; the error pass reports the same sum taken over the deviations as vectors
+(its length, _deviation_vectors: a lens map's curvatures along x and y partly cancel).
+Interpolation never crosses an ending change: a block is accepted only when all nine rays
+end the same way (the same object, for hits).
 
 Anti-aliasing (``samples`` > 1): a pixel whose colour differs from a neighbour's by more
 than ``AA_CONTRAST`` (or whose ending does) gets up to ``samples`` points spread over its
@@ -104,14 +105,15 @@ of its nine traced rays, so an object cannot reach an untraced ray there without
 within that of a traced one."""
 INTERPOLATION_SAFETY = 1.0
 """A block is interpolated only where its estimated interpolation error (_worst) is at most
-the tolerance over this. The estimate is measured along both directions and reported
-as it is: on the interpolated pixels of the honesty benchmark's eight scenes (at 1, 0.25
-and 0.05 px; benchmarks/honesty.py) estimate / truth is 0.95-1.1 at the 1st percentile
-(0.37 on the high-spin disk, whose r and g stand in for the hit point) and 1.1-4.1 at the
-99th, the excess being the traced corners' own error and the two directions' parts added
-up where they partly cancel. 2.0 (the centre-only rule's margin) kept the 3 sub-pixel star
-images of 561 that 1.0 loses at 1 px (moved by less than the tolerance, between pixel
-centres; point stars are issue 26's), for 8-20 % more rays (Kerr board, 1080p Preview)."""
+the tolerance over this. The estimate is measured along both directions; summed as
+lengths it bounds the error (on the interpolated pixels of the honesty benchmark's scenes
+at 1, 0.25 and 0.05 px, benchmarks/honesty.py, estimate / truth was 0.95-1.1 at the 1st
+percentile, 0.37 on the high-spin disk, whose r and g stand in for the hit point, and
+1.1-4.1 at the 99th, the two directions' parts added up where they partly cancel: the
+error pass reports their vector sum instead, _deviation_vectors). 2.0 (the centre-only
+rule's margin) kept the 3 sub-pixel star images of 561 that 1.0 loses at 1 px (moved by
+less than the tolerance, between pixel centres; point stars are issue 26's), for 8-20 %
+more rays (Kerr board, 1080p Preview)."""
 LOOSE_SHARE = 0.3
 """A traced ray whose companion ran past the rule's largest step (Richardson outside its
 asymptotic range; TileSampler._bound) and whose estimate exceeds LOOSE_SHARE x the retrace
@@ -550,8 +552,8 @@ class TileSampler:
             self._trace_nodes(nodes, jj, ii, origin, cancel)
             if cancel is not None and cancel():
                 return
-            accepted, deviation = self._accept(nodes, bj, bi, s)
-            blocks.add(bj[accepted], bi[accepted], s, deviation[accepted])
+            accepted, deviation, vectors = self._accept(nodes, bj, bi, s)
+            blocks.add(bj[accepted], bi[accepted], s, deviation[accepted], vectors[accepted])
             sj, si = bj[~accepted], bi[~accepted]
             if s <= FINEST:
                 dj, di = (a.ravel() for a in np.mgrid[0 : s + 1, 0 : s + 1])
@@ -564,9 +566,10 @@ class TileSampler:
             reach = (bj <= last[0]) & (bi <= last[1])
             bj, bi, s = bj[reach], bi[reach], half
 
-    def _accept(self, nodes: _Nodes, bj, bi, s: int) -> tuple[np.ndarray, np.ndarray]:
-        """Which blocks (size s) are interpolated, and their deviations (B, 5) (radians: its
-        edges' midpoints' and the centre's excess; _edge_deviations): every one of a block's
+    def _accept(self, nodes: _Nodes, bj, bi, s: int) -> tuple[np.ndarray, ...]:
+        """Which blocks (size s) are interpolated, their deviations (B, 5) (radians: its
+        edges' midpoints' and the centre's excess; _edge_deviations) and those as vectors
+        (B, 5, 3) (_deviation_vectors): every one of a block's
         nine traced rays ends alike (escaped, captured, or on one object)."""
         nine = _block_points(bj, bi, s)
         corners, (cj, ci) = nine[:4], nine[8]
@@ -579,15 +582,41 @@ class TileSampler:
             alike &= nodes.plain[j, i] & (nodes.ending[j, i] == ending)
             alike &= (nodes.object_id[j, i] == object_id) & (nodes.clearance[j, i] > clear)
         deviation = self._deviations(nodes, nine, ending)
+        vectors = self._deviation_vectors(nodes, nine, ending)
         disk = np.flatnonzero(alike & (object_id == DISK_ID))
         if disk.size:  # what the disk interpolates is its radius (and g): no texture
             on_disk = [(j[disk], i[disk]) for j, i in nine]
             deviation[disk] = self._radius_deviations(nodes, on_disk, width)
+            vectors[disk] = np.nan  # r and g: their magnitudes stand
         worst = _worst(deviation)
         accepted = alike & (INTERPOLATION_SAFETY * worst <= self.interpolation)
         if self.with_magnification:
             accepted &= _smooth_magnification(nodes, nine, ending)
-        return accepted, deviation
+        return accepted, deviation, vectors
+
+    def _deviation_vectors(self, nodes: _Nodes, nine, ending) -> np.ndarray:
+        """(B, 5, 3) the deviations of _deviations as vectors (radians: a direction's
+        difference, or a hit point's over its distance from the camera), the centre's excess
+        being the centre's deviation less half the edges' sum (0 for a quadratic map): the
+        bilinear interpolation's error at (u, v) is their sum weighted by _error_shape, whose
+        length the error pass reports (the sum of their lengths, what acceptance bounds,
+        adds up parts that cancel: a lens map's x and y curvatures, opposite where its
+        deflection is harmonic, made it 3-3.5x the truth)."""
+        hit = (ending == ENDING["hit"])[:, None]
+        j8, i8 = nine[8]
+        origins, _ = self.camera.rays_at(self._image_xy(j8, i8))
+        scale = np.linalg.norm(nodes.position[j8, i8] - origins, axis=1, keepdims=True)
+        with np.errstate(all="ignore"):
+            seen = [np.where(hit, nodes.position[j, i] / scale, nodes.direction[j, i])
+                    for j, i in nine]  # fmt: skip
+
+        def apart(k, ends):
+            return seen[k] - sum(seen[e] for e in ends) / len(ends)
+
+        edges = [apart(k, ends) for k, ends in EDGES]
+        beyond = apart(8, (0, 1, 2, 3)) - 0.5 * sum(edges)
+        vectors = np.stack([*edges, beyond], axis=1)
+        return np.where((ending == ENDING["captured"])[:, None, None], 0.0, vectors)
 
     def _deviations(self, nodes: _Nodes, nine, ending) -> np.ndarray:
         """(B, 5) radians: how far the edges' midpoints lie from their ends' mean and the
@@ -856,7 +885,11 @@ class TileSampler:
             colour[shifted, :3] = doppler_shift(colour[shifted, :3], moving.colour_shift(seen))
         out.rgba[rows] = colour
         out.ending[rows] = ending
-        interpolation = np.einsum("mk,mk->m", blocks.deviation[b], _error_shape(u, v))
+        shape = _error_shape(u, v)
+        interpolation = np.einsum("mk,mk->m", blocks.deviation[b], shape)
+        with np.errstate(invalid="ignore"):
+            as_vector = np.linalg.norm(np.einsum("mkc,mk->mc", blocks.vectors[b], shape), axis=1)
+        interpolation = np.where(np.isfinite(as_vector), as_vector, interpolation)
         out.error[rows] = blend(nodes.error[..., None])[:, 0] + interpolation
 
     def _recast(self, position, tangent, reach, object_id) -> Hits:
@@ -1023,15 +1056,19 @@ class _Blocks:
         self.i = np.zeros(0, dtype=np.int64)
         self.size = np.zeros(0, dtype=np.int64)
         self.deviation = np.zeros((0, 5))
+        self.vectors = np.zeros((0, 5, 3))
 
-    def add(self, bj: np.ndarray, bi: np.ndarray, s: int, deviation: np.ndarray) -> None:
-        """Record accepted blocks of size s at (bj, bi) with their deviations (B, 5) and
-        mark their cells."""
+    def add(
+        self, bj: np.ndarray, bi: np.ndarray, s: int, deviation: np.ndarray, vectors: np.ndarray
+    ) -> None:
+        """Record accepted blocks of size s at (bj, bi) with their deviations (B, 5), as
+        vectors (B, 5, 3) (NaN: none), and mark their cells."""
         first = self.j.size
         self.j = np.concatenate([self.j, bj])
         self.i = np.concatenate([self.i, bi])
         self.size = np.concatenate([self.size, np.full(bj.size, s)])
         self.deviation = np.concatenate([self.deviation, deviation])
+        self.vectors = np.concatenate([self.vectors, vectors])
         dj, di = (a.ravel() for a in np.mgrid[0:s, 0:s])
         ids = np.arange(first, first + bj.size)
         self.block[(bj[:, None] + dj).ravel(), (bi[:, None] + di).ravel()] = np.repeat(ids, s * s)

@@ -10,6 +10,7 @@ import numpy as np
 import core
 from core import hamiltonians as hm
 from core.presets import mirage_view
+from core.sky import procedural_sky
 from tests.core.test_sampling import true_error_px
 
 REFERENCE = dict(method="dopri5", tolerance=1e-10, max_steps=10**6)
@@ -353,3 +354,31 @@ def test_a_ray_whose_companion_ran_past_the_rules_range_is_traced_again():
     big = np.isfinite(truth) & (truth > 0.005)
     within = big & (est >= truth / 3) & (est <= 3 * truth)
     assert big.sum() > 100 and within.sum() >= 0.9 * big.sum(), (within.sum(), big.sum())
+
+
+def test_an_interpolated_pixels_estimate_adds_its_deviations_as_vectors():
+    """benchmarks/honesty.py's stars (the procedural stars behind Schwarzschild seen from
+    20 rg, 50 deg): a block's bilinear error is its edges' midpoint deviations weighted by
+    where the pixel lies, plus the centre's excess; added as lengths, a lens map's x and y
+    curvatures (opposite where its deflection is harmonic) made the estimate 3-3.9x the
+    truth on interpolated pixels (88 % within 3x at 1 px, 91.7 % at 0.25). Added as vectors
+    (_deviation_vectors): >= 95 % of the pixels with a true error above a tenth of the
+    tolerance are estimated within 3x (measured 100 %), and under a third of the truth on
+    at most 1 % of all pixels (measured 0)."""
+    cam = _camera((0, -20, 1), (0, 0, 0), 160, 90, 50)
+
+    def stars(directions):
+        return procedural_sky(directions, galaxy=False, star_size=2.5)
+
+    scene = core.Scene(model=hm.schwarzschild(rg=1.0), background=stars)
+    ref = core.render(scene, cam, passes=PASSES, **REFERENCE)
+    for tolerance in (1.0, 0.25):
+        run = core.render(scene, cam, tolerance_px=tolerance, passes=PASSES)
+        truth = true_error_px(ref, run, cam.frame.position)
+        est = run.passes["error_px"]
+        finite = np.isfinite(truth)
+        big = finite & (truth > tolerance / 10)
+        within = big & (est >= truth / 3) & (est <= 3 * truth)
+        assert big.sum() > 500 and within.sum() >= 0.95 * big.sum(), (within.sum(), big.sum())
+        under = finite & (truth > 1e-3) & (est < truth / 3)
+        assert np.count_nonzero(under) <= 0.01 * truth.size
