@@ -187,6 +187,17 @@ class SceneGeometry:
                 boxes.append((lo, hi, shape_distance(obj), oid))
         return boxes
 
+    def local_boxes(self, to_local: Any) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(lo, hi) in local coordinates of each object's and volume's box (boxes)."""
+        out = []
+        for lo, hi, _, _ in self.boxes():
+            if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+                out.append((np.full(3, -np.inf), np.full(3, np.inf)))
+                continue
+            local = to_local(box_corners(lo, hi))
+            out.append((local.min(axis=0), local.max(axis=0)))
+        return out
+
     def local_box(self, to_local: Any) -> tuple[np.ndarray, np.ndarray] | None:
         """(lo, hi) in local coordinates (``to_local``: world (N, 3) -> local) around every
         object and volume; None: nothing."""

@@ -56,6 +56,9 @@ method may miss the plane by). At 0.1 (before) 88 % of crossings took a second p
 step; at 1, ~40 % (the first step's move, over sqrt(share) |X|: median 0.56, p90 3.4,
 the Kerr-with-disk preset)."""
 _FAR = 1e12  # length of the straight segment cast after a ray leaves the model's region
+NEAR_BOXES = 16
+"""Up to this many objects and volumes, steps are near geometry by each one's own box
+(Tracer._near_boxes); more, by their union's (one test per step)."""
 BEND_LIMIT = 64.0
 """A step near geometry whose cubic path deviates from its chord by more than BEND_LIMIT
 chord allowances is taken again at half the step (Tracer._bent_steps): hits are found on
@@ -176,6 +179,9 @@ class Tracer:
     inside a disk's inner edge (rays captured or winding in the photon ring) the
     honesty family showed no loss (disk_high_spin: under-reported 3.71 -> 3.60 %)."""
     _watch_near: tuple[np.ndarray, np.ndarray] = (np.full(3, -np.inf), np.full(3, np.inf))
+    _near_boxes: list[tuple[np.ndarray, np.ndarray]] | None = None
+    """Each object's (and volume's) local box, where there are 2 to NEAR_BOXES: a step is
+    near geometry where its path may pass one of them, not only their union's box."""
 
     def __init__(self, scene: Scene, options: TraceOptions, extent: float = 1.0):
         self.scene = scene
@@ -196,6 +202,9 @@ class Tracer:
             self.disk = self._disk_light(scene)
         self.stepper = Stepper(self.method, self.model, self.captured)
         self._near = self.geometry.local_box(self._to_local)
+        boxes = self.geometry.local_boxes(self._to_local)
+        if self._near is not None and 1 < len(boxes) <= NEAR_BOXES:
+            self._near_boxes = boxes
         if scene.disk is not None:  # the disk's inner edge, or a nearer object
             self._clear = clear_radius(self.geometry.boxes(), np.asarray(scene.center, float))
 
@@ -506,9 +515,10 @@ class Tracer:
         return ended
 
     def _near_paths(self, X_prev, X, ok, step_ends: _StepEnds, camera, turn, h0) -> _NearPaths:
-        """The steps whose path X_prev -> X may pass the geometry's box (their chord's
-        bounds widened by how far a path turning by ``turn`` from its heading can stray
-        from it) and may leave the ball around the hole that holds no geometry (with an
+        """The steps whose path X_prev -> X may pass the geometry's box, and one object's
+        own box where there are few (``_near_boxes``) (their chord's bounds widened by how
+        far a path turning by ``turn`` from its heading can stray from it) and may leave
+        the ball around the hole that holds no geometry (with an
         accretion disk: ``_clear``; a path from X_prev to X stays within the larger |X|
         plus its stray; a camera inside that ball keeps its rays' steps checked: halved
         where they turn, which near the camera keeps the error pass's estimate honest:
@@ -517,15 +527,20 @@ class Tracer:
         velocities, their cubics' deviation from the chord and the deviation the chords may
         keep at their distance from the camera (core/tracing/dense.py)."""
         assert self._near is not None
-        lo, hi = self._near
         stray = np.linalg.norm(X - X_prev, axis=0) * np.sin(np.minimum(turn, 0.5 * np.pi))
         near = ok.copy()
         if self._clear > 0.0:
             out = np.maximum(np.linalg.norm(X_prev, axis=0), np.linalg.norm(X, axis=0)) + stray
             near &= (out >= self._clear) | (np.linalg.norm(camera, axis=0) <= self._clear)
-        for i in range(3):
-            near &= np.minimum(X_prev[i], X[i]) - stray <= hi[i]
-            near &= np.maximum(X_prev[i], X[i]) + stray >= lo[i]
+        low = np.minimum(X_prev, X) - stray
+        high = np.maximum(X_prev, X) + stray
+        near &= _overlaps(low, high, *self._near)
+        if self._near_boxes is not None and near.any():  # each object's own box
+            rows = np.flatnonzero(near)
+            any_box = np.zeros(rows.size, dtype=bool)
+            for lo, hi in self._near_boxes:
+                any_box |= _overlaps(low[:, rows], high[:, rows], lo, hi)
+            near[rows[~any_box]] = False
         c = np.flatnonzero(near)
         X0, X1 = X_prev[:, c], X[:, c]
         V0, V1, h = step_ends.velocities(c)
@@ -892,6 +907,11 @@ def _sphere_exit(X: np.ndarray, V: np.ndarray, radius: float) -> np.ndarray:
     b = np.einsum("im,im->m", X, V)
     c = np.einsum("im,im->m", X, X) - radius * radius
     return (-b + np.sqrt(b * b - a * c)) / a
+
+
+def _overlaps(low: np.ndarray, high: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """(M,) whether the boxes [low, high] (3, M) overlap the box [lo, hi] (3,)."""
+    return np.all((low <= hi[:, None]) & (high >= lo[:, None]), axis=0)
 
 
 def _turn(X_prev: np.ndarray, X: np.ndarray, heading: np.ndarray) -> tuple:
