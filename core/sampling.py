@@ -21,8 +21,9 @@ block is *accepted* when
   segment misses the object (an edge) is traced. On an opaque accretion disk (no texture)
   what is interpolated is its radius r and redshift g, each tested like a direction: a
   point's deviation from the interpolation, as the angle the block's own gradient of r
-  (of g) needs to make it, within the tolerance; each point shows the disk's light at its
-  interpolated r and g (off the disk's radii: traced); or
+  (of g, of the azimuth) needs to make it, within the tolerance; each point shows the
+  disk's light at its interpolated r and g (off the disk's radii: traced), its hit point
+  at the interpolated r and azimuth; or
 - all nine were captured, kept clear of geometry as above (the shadow's inside, black).
 
 Otherwise it splits into four, down to ``FINEST``, where every pixel of a refused block is
@@ -636,12 +637,18 @@ class TileSampler:
         return np.where((ending == ENDING["captured"])[:, None], 0.0, deviation)
 
     def _radius_deviations(self, nodes: _Nodes, nine, width: float) -> np.ndarray:
-        """_deviations for blocks on the disk: of its radius r and redshift g, each as the
-        angle the block's own gradient of it (its corners' spread over ``width``) takes to
-        make that much (the disk pixel shows what a ray that far off shows; NaN: refused)."""
+        """_deviations for blocks on the disk: of its radius r, redshift g and azimuth
+        (the hit point pass's place on it), each as the angle the block's own gradient of
+        it (its corners' spread over ``width``) takes to make that much (the disk pixel
+        shows what a ray that far off shows; NaN: refused)."""
         worst = np.zeros(nine[0][0].shape + (5,))
-        for field in (nodes.radius, nodes.redshift):
-            values = [field[j, i] for j, i in nine]
+        azimuth = [self._disk_azimuth(nodes.position[j, i]) for j, i in nine]
+        azimuth = [azimuth[8] + _wrapped(a - azimuth[8]) for a in azimuth]
+        for values in (
+            [nodes.radius[j, i] for j, i in nine],
+            [nodes.redshift[j, i] for j, i in nine],
+            azimuth,
+        ):
             corners = np.stack(values[:4])
             spread = corners.max(axis=0) - corners.min(axis=0)
 
@@ -670,8 +677,11 @@ class TileSampler:
         pairs = list(zip(weights, corners, strict=True))
         radius = sum(wk * nodes.radius[j, i] for wk, (j, i) in pairs)
         g = sum(wk * nodes.redshift[j, i] for wk, (j, i) in pairs)
-        position = self._on_disk_at(sum(wk[:, None] * nodes.position[j, i] for wk, (j, i)
-                                        in pairs), radius)  # fmt: skip
+        first = self._disk_azimuth(nodes.position[corners[0]])
+        azimuth = first + sum(
+            wk * _wrapped(self._disk_azimuth(nodes.position[j, i]) - first) for wk, (j, i) in pairs
+        )
+        position = self._on_disk_at(radius, azimuth)
         on = (radius >= light.disk.r_in) & (radius <= light.disk.r_out)
         rgb = light.disk.colour(np.where(on, g, 0.0), radius)
         origins, _ = self.camera.rays_at(self._image_xy(y, x))
@@ -679,19 +689,24 @@ class TileSampler:
         seen /= np.linalg.norm(seen, axis=1, keepdims=True)
         return rgb, on, g, position, seen
 
-    def _on_disk_at(self, position: np.ndarray, radius: np.ndarray) -> np.ndarray:
-        """World points (M, 3) on the disk's plane at BL ``radius`` (Cartesian √(r² + a²))
-        in the direction of the blended hit points ``position``: the hit point pass then
-        holds the radius the pixel is shaded at (a blend of the nodes' points lies inside
-        the circle their radii span)."""
+    def _disk_azimuth(self, position: np.ndarray) -> np.ndarray:
+        """(M,) the azimuth on the disk's plane (its local frame) of world points (M, 3)."""
         light = self.tracer.disk
         assert light is not None
         local = light.to_local(position)
-        across = np.linalg.norm(local[:, :2], axis=1)
-        with np.errstate(all="ignore"):
-            scale = np.hypot(radius, light.disk.spin) / across
-        local[:, :2] *= np.where(np.isfinite(scale), scale, 1.0)[:, None]
-        local[:, 2] = 0.0
+        return np.arctan2(local[:, 1], local[:, 0])
+
+    def _on_disk_at(self, radius: np.ndarray, azimuth: np.ndarray) -> np.ndarray:
+        """World points (M, 3) on the disk's plane at BL ``radius`` (Cartesian √(r² + a²))
+        and ``azimuth``: the hit point pass holds the interpolated place the pixel is shaded
+        at (before, the blended hit points' direction stood for the azimuth: a lensed
+        block's points moved 2-7 px, on the Kerr disk frame at 1 px, under an estimate of
+        less than one)."""
+        light = self.tracer.disk
+        assert light is not None
+        across = np.hypot(radius, light.disk.spin)
+        local = np.stack([across * np.cos(azimuth), across * np.sin(azimuth),
+                          np.zeros_like(across)], axis=1)  # fmt: skip
         return self.tracer._to_world(local)
 
     # --- pixels ------------------------------------------------------------------------
@@ -956,6 +971,11 @@ class TileSampler:
             rays, _, _ = self._trace_points(xy, cancel, False, node=False)
             points.rgba[todo] = self.shade(rays, self.background)
         return points.rgba.reshape(pj.size, -1, 4), weight
+
+
+def _wrapped(angle: np.ndarray) -> np.ndarray:
+    """Angles (radians) brought into [-pi, pi)."""
+    return (angle + np.pi) % (2 * np.pi) - np.pi
 
 
 def _block_points(bj: np.ndarray, bi: np.ndarray, s: int) -> list[tuple[np.ndarray, np.ndarray]]:
