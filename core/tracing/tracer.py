@@ -534,12 +534,12 @@ class Tracer:
             near &= (out >= self._clear) | (np.linalg.norm(camera, axis=0) <= self._clear)
         low = np.minimum(X_prev, X) - stray
         high = np.maximum(X_prev, X) + stray
-        near &= _overlaps(low, high, *self._near)
+        near &= segment_overlaps(low.T, high.T, *self._near)  # their bounds, as boxes
         if self._near_boxes is not None and near.any():  # each object's own box
             rows = np.flatnonzero(near)
             any_box = np.zeros(rows.size, dtype=bool)
             for lo, hi in self._near_boxes:
-                any_box |= _overlaps(low[:, rows], high[:, rows], lo, hi)
+                any_box |= segment_overlaps(low[:, rows].T, high[:, rows].T, lo, hi)
             near[rows[~any_box]] = False
         c = np.flatnonzero(near)
         X0, X1 = X_prev[:, c], X[:, c]
@@ -907,11 +907,6 @@ def _sphere_exit(X: np.ndarray, V: np.ndarray, radius: float) -> np.ndarray:
     b = np.einsum("im,im->m", X, V)
     c = np.einsum("im,im->m", X, X) - radius * radius
     return (-b + np.sqrt(b * b - a * c)) / a
-
-
-def _overlaps(low: np.ndarray, high: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """(M,) whether the boxes [low, high] (3, M) overlap the box [lo, hi] (3,)."""
-    return np.all((low <= hi[:, None]) & (high >= lo[:, None]), axis=0)
 
 
 def _turn(X_prev: np.ndarray, X: np.ndarray, heading: np.ndarray) -> tuple:
