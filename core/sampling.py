@@ -124,6 +124,19 @@ at h, read as ~3x the truth, so an estimate above 0.3 of the tolerance may stand
 truth above a tenth of it, where the error pass promises 3x (benchmarks/honesty.py
 point_stars and disk_high_spin at 0.05 px: 88 % and 87 % within 3x -> 100 %). At 0.1 the
 Kerr board took 1.4x as long (1080p Preview), at 0.3 1.02x."""
+COLOUR_STEP = 0.05
+"""An interpolated pixel centre is traced where its colour could change by more than
+COLOUR_STEP in a channel over its own error estimate: where the largest difference from
+its four neighbours' colours (a pixel apart), times its error in pixels, exceeds it
+(TileSampler._shaky). A checker's edge moved by ~0.2 px, under the 1 px tolerance, changes
+the colour of the centres it passes by more than 0.1 (benchmarks/honesty.py: 1.5 % of
+near_tangent's pixels at 1 px, 0.3 % of schwarzschild's; 3 sub-pixel star images of 561
+lost on stars). Half the 0.1 the benchmark counts: an estimate within 3x of the truth, on
+a filtered edge (change in proportion to the move), rarely under-reads a change of 0.1 by
+more. Where the sky's detail is finer than a pixel (Background.detail), which neighbours
+do not show (a star between centres), the sky is looked up moved by the error across x and
+y, both ways, too (TileSampler._shaky_sky: 3 sub-pixel star images of 561 lost at 1 px on
+the honesty benchmark's stars scene, none now)."""
 REACH = 4.0
 """An interpolated hit point is cast again along its interpolated chord direction, REACH
 block widths (at its distance from the camera) either side: the surface is found even where
@@ -717,14 +730,9 @@ class TileSampler:
         jj, ii = (a.ravel() for a in np.mgrid[0 : h + 2, 0 : w + 2])
         centre = self._evaluate(nodes, blocks, jj.astype(float), ii.astype(float))
         missed = np.flatnonzero(centre.ending < 0)  # interpolated hits that missed: trace
-        if missed.size:
-            self._trace_nodes(nodes, jj[missed], ii[missed], origin, cancel)
-            again = self._evaluate(nodes, blocks, jj[missed] * 1.0, ii[missed] * 1.0)
-            for name in (
-                "rgba", "ending", "error", "direction", "redshift", "position", "magnification",
-                "transmittance", "object_id", "tangent", "surface",
-            ):  # fmt: skip
-                getattr(centre, name)[missed] = getattr(again, name)
+        self._trace_centres(nodes, blocks, centre, missed, jj, ii, cancel)
+        shaky = self._shaky(nodes, centre, (h + 2, w + 2), jj, ii)
+        self._trace_centres(nodes, blocks, centre, shaky, jj, ii, cancel)
         if self.background.filters and not self.with_tangents:
             self._filter_sky(centre, (h + 2, w + 2), jj, ii)
         if self.tracer.geometry.filters:
@@ -756,6 +764,61 @@ class TileSampler:
             {name: data.astype(BY_NAME[name].dtype, copy=False) for name, data in passes.items()},
             energy, self.rays, self.error_rays,
         )  # fmt: skip
+
+    def _trace_centres(self, nodes: _Nodes, blocks: _Blocks, centre: _Points, rows, jj, ii, cancel):
+        """In place: the pixel centres ``rows`` (of the lattice points jj, ii) traced, and
+        ``centre``'s values there replaced by their rays'."""
+        if rows.size == 0:
+            return
+        self._trace_nodes(nodes, jj[rows], ii[rows], self._origin, cancel)
+        again = self._evaluate(nodes, blocks, jj[rows] * 1.0, ii[rows] * 1.0)
+        for name in (
+            "rgba", "ending", "error", "direction", "redshift", "position", "magnification",
+            "transmittance", "object_id", "tangent", "surface",
+        ):  # fmt: skip
+            getattr(centre, name)[rows] = getattr(again, name)
+
+    def _shaky(self, nodes: _Nodes, centre: _Points, shape: tuple[int, int], jj, ii):
+        """Rows of the interpolated pixel centres (a grid ``shape`` of lattice points jj, ii)
+        whose colour could change by more than COLOUR_STEP over their error: the largest
+        difference in a channel from a neighbour a pixel away times their error in pixels."""
+        rgb = centre.rgba[:, :3].reshape(shape + (3,))
+        change = np.zeros(shape)
+        for axis in (0, 1):
+            step = np.max(np.abs(np.diff(rgb, axis=axis)), axis=-1)
+            before = (slice(None, -1), slice(None)) if axis == 0 else (slice(None), slice(None, -1))
+            after = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
+            np.maximum(change[before], step, out=change[before])
+            np.maximum(change[after], step, out=change[after])
+        interpolated = ~nodes.traced[jj, ii]
+        move = centre.error / self.pixel_angle
+        shaky = interpolated & (change.ravel() * move > COLOUR_STEP)
+        if self.background.detail < self.pixel_angle:
+            sky = interpolated & ~shaky & (centre.ending == ENDING["escaped"])
+            slope = map_footprint(centre.direction.reshape(shape + (3,)), sky.reshape(shape))
+            rows = np.flatnonzero(sky)
+            shaky[rows] = self._shaky_sky(
+                centre.direction[rows], slope.reshape(-1, 2, 3)[rows], move[rows]
+            )
+        return np.flatnonzero(shaky)
+
+    def _shaky_sky(self, d: np.ndarray, slope: np.ndarray, move: np.ndarray) -> np.ndarray:
+        """(M,) sky points (directions d (M, 3), their derivatives along image x and y
+        ``slope`` (M, 2, 3); NaN: none) whose colour changes by more than COLOUR_STEP in a
+        channel when their direction moves ``move`` (M,) pixels across x or y, either way."""
+        centre = self.background(d)[:, :3]
+        change = np.zeros(d.shape[0])
+        for k in (0, 1):
+            for sign in (1.0, -1.0):
+                probe = d + (sign * move)[:, None] * slope[:, k]
+                with np.errstate(invalid="ignore"):
+                    probe /= np.linalg.norm(probe, axis=1, keepdims=True)
+                seen = self.background(np.nan_to_num(probe), None)[:, :3]
+                moved = np.all(np.isfinite(probe), axis=1)
+                change = np.where(
+                    moved, np.maximum(change, np.max(np.abs(seen - centre), axis=1)), change
+                )
+        return change > COLOUR_STEP
 
     def _filter_sky(self, centre: _Points, shape: tuple[int, int], jj, ii) -> None:
         """The sky seen at the pixel centres (a grid ``shape``, rows jj, columns ii) averaged

@@ -12,6 +12,7 @@ Images here are (h, w, c) arrays with row 0 at the TOP (v = 1) and column 0 at u
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import Any
 
@@ -296,6 +297,7 @@ class Background:
         self.strength = float(strength)
         self.matrix = None if matrix is None else np.asarray(matrix, dtype=np.float64)
         self._fn, self._mipmap = self._make(spec, grid, star_size, interpolation)
+        self.detail = self._detail(spec, grid, star_size)
 
     @classmethod
     def of(cls, spec: Any) -> Background:
@@ -307,6 +309,22 @@ class Background:
         """Whether a footprint changes what this background shows (a bilinear equirect
         texture: core.mipmap), so a render looks its sky up over each pixel's footprint."""
         return self._mipmap is not None or (isinstance(self._fn, Background) and self._fn.filters)
+
+    @staticmethod
+    def _detail(spec: Any, grid: bool, star_size: float) -> float:
+        """The angle (radians) of the finest detail the background shows: the procedural
+        sky's smallest star's sigma (or a grid line's half width), an equirect texture's
+        texel, inf for a constant or the galaxy band alone, 0 for a callable (unknown)."""
+        if isinstance(spec, Background):
+            return spec.detail
+        if isinstance(spec, str):
+            finest = math.radians(min(layer[4] for layer in _STAR_LAYERS) * star_size)
+            stars = finest if spec == "procedural" else math.inf
+            return min(stars, math.radians(0.125)) if grid else stars
+        if callable(spec):
+            return 0.0
+        shape = np.shape(spec)
+        return math.pi / shape[0] if len(shape) == 3 else math.inf
 
     @staticmethod
     def _make(spec: Any, grid: bool, star_size: float, interp: str) -> tuple[Callable, Any]:

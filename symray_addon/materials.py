@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from ..core.mipmap import MipMap, bilinear, wrap_index
+from ..core.mipmap import MipMap, bilinear, extents, wrap_index
 
 DEFAULT_COLOR = (0.8, 0.8, 0.8, 1.0)
 """Colour of faces without a material (Blender's default surface)."""
@@ -69,12 +69,17 @@ class MaterialSampler:
 
     def _filtered(self, uv: np.ndarray, footprint: np.ndarray) -> np.ndarray:
         """The texture averaged over footprints (core.mipmap.MipMap on the image turned
-        top row first, as it takes them); zero outside [0, 1]² for CLIP."""
+        top row first, as it takes them; a footprint of at most a texel: the plain bilinear
+        lookup itself); zero outside [0, 1]² for CLIP."""
         if self._pyramid is None:
             wrap = EXTENSION_WRAP.get(self.extension, "repeat")
             assert self.image is not None
             self._pyramid = MipMap(self.image[::-1].astype(np.float64), (wrap, wrap))
-        out = self._pyramid.lookup(uv, self._pyramid.texels(footprint))
+        texels = self._pyramid.texels(footprint)
+        wide = extents(texels)[0] > 1.0  # NaN (no footprint) is not wide
+        out = np.empty((uv.shape[0], self.image.shape[2]))
+        out[~wide] = sample_image(self.image, uv[~wide], False, self.extension)  # bit for bit
+        out[wide] = self._pyramid.lookup(uv[wide], texels[wide])
         if self.extension == "CLIP":
             out[_outside(uv)] = 0.0
         return out
