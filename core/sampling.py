@@ -133,10 +133,12 @@ the colour of the centres it passes by more than 0.1 (benchmarks/honesty.py: 1.5
 near_tangent's pixels at 1 px, 0.3 % of schwarzschild's; 3 sub-pixel star images of 561
 lost on stars). Half the 0.1 the benchmark counts: an estimate within 3x of the truth, on
 a filtered edge (change in proportion to the move), rarely under-reads a change of 0.1 by
-more. Where the sky's detail is finer than a pixel (Background.detail), which neighbours
-do not show (a star between centres), the sky is looked up moved by the error across x and
-y, both ways, too (TileSampler._shaky_sky: 3 sub-pixel star images of 561 lost at 1 px on
-the honesty benchmark's stars scene, none now)."""
+more. Where the sky's detail is smaller than a pixel (Background.detail), which
+neighbours need not show (a star between centres), the sky is looked up moved by the error
+across x and y, both ways, too (TileSampler._shaky_sky: 3 sub-pixel star images of 561
+lost at 1 px on the honesty benchmark's stars scene, none now). A detail wider than a
+pixel spans a neighbour: the Kerr board at 960 x 540 (stars 2.4 px across) spent 9 % of
+its time on these lookups for 114 more rays of 120 000 when they were taken below 3 px."""
 REACH = 4.0
 """An interpolated hit point is cast again along its interpolated chord direction, REACH
 block widths (at its distance from the camera) either side: the surface is found even where

@@ -312,15 +312,16 @@ class Background:
 
     @staticmethod
     def _detail(spec: Any, grid: bool, star_size: float) -> float:
-        """The angle (radians) of the finest detail the background shows: the procedural
-        sky's smallest star's sigma (or a grid line's half width), an equirect texture's
-        texel, inf for a constant or the galaxy band alone, 0 for a callable (unknown)."""
+        """The angle (radians) across the smallest detail the background shows: the
+        procedural sky's faintest star's radius (its profile is cut at 3 sigma; a grid line
+        is 0.5 deg wide), an equirect texture's texel, inf for a constant or the galaxy
+        band alone (its noise spans degrees), 0 for a callable (unknown)."""
         if isinstance(spec, Background):
             return spec.detail
         if isinstance(spec, str):
-            finest = math.radians(min(layer[4] for layer in _STAR_LAYERS) * star_size)
-            stars = finest if spec == "procedural" else math.inf
-            return min(stars, math.radians(0.125)) if grid else stars
+            sigma = math.radians(min(layer[4] for layer in _STAR_LAYERS) * star_size)
+            stars = 3.0 * sigma if spec == "procedural" else math.inf
+            return min(stars, math.radians(0.5)) if grid else stars
         if callable(spec):
             return 0.0
         shape = np.shape(spec)
