@@ -62,7 +62,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .geometry import Hits
-from .mipmap import map_footprint
+from .mipmap import map_footprint, screen_differences
 from .motion import shift as doppler_shift
 from .passes import BY_NAME
 from .sky import Background
@@ -126,19 +126,21 @@ point_stars and disk_high_spin at 0.05 px: 88 % and 87 % within 3x -> 100 %). At
 Kerr board took 1.4x as long (1080p Preview), at 0.3 1.02x."""
 COLOUR_STEP = 0.05
 """An interpolated pixel centre is traced where its colour could change by more than
-COLOUR_STEP in a channel over its own error estimate: where the largest difference from
-its four neighbours' colours (a pixel apart), times its error in pixels, exceeds it
-(TileSampler._shaky). A checker's edge moved by ~0.2 px, under the 1 px tolerance, changes
-the colour of the centres it passes by more than 0.1 (benchmarks/honesty.py: 1.5 % of
-near_tangent's pixels at 1 px, 0.3 % of schwarzschild's; 3 sub-pixel star images of 561
-lost on stars). Half the 0.1 the benchmark counts: an estimate within 3x of the truth, on
-a filtered edge (change in proportion to the move), rarely under-reads a change of 0.1 by
-more. Where the sky's detail is smaller than a pixel (Background.detail), which
-neighbours need not show (a star between centres), the sky is looked up moved by the error
-across x and y, both ways, too (TileSampler._shaky_sky: 3 sub-pixel star images of 561
-lost at 1 px on the honesty benchmark's stars scene, none now). A detail wider than a
-pixel spans a neighbour: the Kerr board at 960 x 540 (stars 2.4 px across) spent 9 % of
-its time on these lookups for 114 more rays of 120 000 when they were taken below 3 px."""
+COLOUR_STEP in a channel over its own error estimate (TileSampler._shaky): where the
+largest difference from its four neighbours' colours (a pixel apart), times its error in
+pixels, exceeds it, and what it shows (the sky; a surface, cast again) changes by more when
+looked up moved by its error across x and y, either way. A checker's edge moved by ~0.2
+px, under the 1 px tolerance, changed the colour of the centres it passed by more than 0.1
+(benchmarks/honesty.py: 1.5 % of near_tangent's pixels at 1 px, 0.3 % of
+schwarzschild's). The neighbour test alone traced every centre beside a checker's edge
+(+21 % rays on the Kerr board at 960 x 540; +4 % with both). Half the 0.1 the benchmark
+counts: an estimate within 3x of the truth, on a filtered edge (change in proportion to
+the move), rarely under-reads a change of 0.1 by more. Where the sky's detail is smaller
+than a pixel (Background.detail), which neighbours need not show (a star between centres),
+every interpolated sky centre is looked up moved (3 sub-pixel star images of 561 were lost
+at 1 px on the benchmark's stars scene, none now). A detail wider than a pixel spans a
+neighbour: the Kerr board at 960 x 540 (stars 2.4 px across) spent 9 % of its time on
+these lookups for 114 more rays of 120 000 when they were taken below 3 px."""
 REACH = 4.0
 """An interpolated hit point is cast again along its interpolated chord direction, REACH
 block widths (at its distance from the camera) either side: the surface is found even where
@@ -782,8 +784,11 @@ class TileSampler:
 
     def _shaky(self, nodes: _Nodes, centre: _Points, shape: tuple[int, int], jj, ii):
         """Rows of the interpolated pixel centres (a grid ``shape`` of lattice points jj, ii)
-        whose colour could change by more than COLOUR_STEP over their error: the largest
-        difference in a channel from a neighbour a pixel away times their error in pixels."""
+        whose colour could change by more than COLOUR_STEP over their error: those whose
+        largest difference in a channel from a neighbour a pixel away, times their error in
+        pixels, exceeds it, where what they show, looked up moved by the error across x and
+        y, changes by more (the sky, surfaces; the rest, as the disk, kept); and sky centres
+        whose background has detail smaller than a pixel (Background.detail) that changes."""
         rgb = centre.rgba[:, :3].reshape(shape + (3,))
         change = np.zeros(shape)
         for axis in (0, 1):
@@ -795,19 +800,32 @@ class TileSampler:
         interpolated = ~nodes.traced[jj, ii]
         move = centre.error / self.pixel_angle
         shaky = interpolated & (change.ravel() * move > COLOUR_STEP)
-        if self.background.detail < self.pixel_angle:
-            sky = interpolated & ~shaky & (centre.ending == ENDING["escaped"])
-            slope = map_footprint(centre.direction.reshape(shape + (3,)), sky.reshape(shape))
+        sky = interpolated & (centre.ending == ENDING["escaped"])
+        if self.background.detail >= self.pixel_angle:
+            sky &= shaky
+        if sky.any():
+            seen = (centre.ending == ENDING["escaped"]).reshape(shape)
+            slope = map_footprint(centre.direction.reshape(shape + (3,)), seen)
             rows = np.flatnonzero(sky)
             shaky[rows] = self._shaky_sky(
                 centre.direction[rows], slope.reshape(-1, 2, 3)[rows], move[rows]
+            )
+        surface = shaky & (centre.ending == ENDING["hit"]) & (centre.object_id >= 0)
+        if surface.any():
+            hit = (centre.ending == ENDING["hit"]) & (centre.object_id >= 0)
+            label = np.where(hit, centre.object_id, -1).reshape(shape)
+            slope = screen_differences(centre.position.reshape(shape + (3,)), label, jumps=True)
+            rows = np.flatnonzero(surface)
+            shaky[rows] = self._shaky_surface(
+                centre, rows, slope.reshape(-1, 2, 3)[rows], move[rows], jj, ii
             )
         return np.flatnonzero(shaky)
 
     def _shaky_sky(self, d: np.ndarray, slope: np.ndarray, move: np.ndarray) -> np.ndarray:
         """(M,) sky points (directions d (M, 3), their derivatives along image x and y
-        ``slope`` (M, 2, 3); NaN: none) whose colour changes by more than COLOUR_STEP in a
-        channel when their direction moves ``move`` (M,) pixels across x or y, either way."""
+        ``slope`` (M, 2, 3); NaN: none, taken as shaky) whose colour changes by more than
+        COLOUR_STEP in a channel when their direction moves ``move`` (M,) pixels across x or
+        y, either way."""
         centre = self.background(d)[:, :3]
         change = np.zeros(d.shape[0])
         for k in (0, 1):
@@ -816,11 +834,31 @@ class TileSampler:
                 with np.errstate(invalid="ignore"):
                     probe /= np.linalg.norm(probe, axis=1, keepdims=True)
                 seen = self.background(np.nan_to_num(probe), None)[:, :3]
-                moved = np.all(np.isfinite(probe), axis=1)
-                change = np.where(
-                    moved, np.maximum(change, np.max(np.abs(seen - centre), axis=1)), change
-                )
+                change = np.maximum(change, np.max(np.abs(seen - centre), axis=1))
+                change[~np.all(np.isfinite(probe), axis=1)] = np.inf
         return change > COLOUR_STEP
+
+    def _shaky_surface(self, centre: _Points, rows, slope, move, jj, ii) -> np.ndarray:
+        """(M,) the hits ``rows`` of ``centre`` (at lattice points jj, ii) whose colour
+        changes by more than COLOUR_STEP, or whose object is not met, when their hit point
+        moves ``move`` (M,) pixels across image x or y along its derivatives ``slope`` (M, 2,
+        3; NaN: none, taken as shaky), either way: cast again along their chords (over the
+        footprint ``slope`` where the surfaces filter)."""
+        position, tangent = centre.position[rows], centre.tangent[rows]
+        origins, _ = self.camera.rays_at(self._image_xy(jj[rows] * 1.0, ii[rows] * 1.0))
+        far = np.linalg.norm(position - origins, axis=1)
+        reach = REACH * np.maximum(move, 1.0) * self.pixel_angle * far
+        footprint = slope if self.tracer.geometry.filters else None
+        object_id = centre.object_id[rows]
+        first = self._recast(position, tangent, reach, object_id, footprint)
+        shaky = ~first.hit | ~np.all(np.isfinite(slope), axis=(1, 2))
+        for k in (0, 1):
+            for sign in (1.0, -1.0):
+                moved = position + (sign * move)[:, None] * np.nan_to_num(slope[:, k])
+                probe = self._recast(moved, tangent, reach, object_id, footprint)
+                change = np.max(np.abs(probe.color[:, :3] - first.color[:, :3]), axis=1)
+                shaky |= ~probe.hit | (change > COLOUR_STEP)
+        return shaky
 
     def _filter_sky(self, centre: _Points, shape: tuple[int, int], jj, ii) -> None:
         """The sky seen at the pixel centres (a grid ``shape``, rows jj, columns ii) averaged
@@ -972,13 +1010,15 @@ class TileSampler:
         interpolation = np.where(np.isfinite(as_vector), as_vector, interpolation)
         out.error[rows] = blend(nodes.error[..., None])[:, 0] + interpolation
 
-    def _recast(self, position, tangent, reach, object_id) -> Hits:
+    def _recast(self, position, tangent, reach, object_id, footprint=None) -> Hits:
         """Hits of segments through interpolated hit points along their interpolated chord
         directions, ``reach`` (M,) world units either side; ``hit`` only where the first
-        thing met is the block's object ``object_id`` (M,)."""
+        thing met is the block's object ``object_id`` (M,); coloured over ``footprint``
+        (M, 2, 3) where given."""
         tangent = tangent / np.linalg.norm(tangent, axis=1, keepdims=True)
         reach = reach[:, None]
-        hits = self.tracer.geometry.cast(position - reach * tangent, position + reach * tangent)
+        a, b = position - reach * tangent, position + reach * tangent
+        hits = self.tracer.geometry.cast(a, b, footprint)
         hits.hit &= hits.object_id == object_id
         return hits
 

@@ -291,7 +291,7 @@ def test_a_surface_colour_change_is_reshaded_to_a_fresh_renders_pixels():
     # centre is traced where its colour could change over its error), and a re-shade traces
     # nothing: where the new colours' edges ask for a ray the old ones did not, a pixel
     # keeps its interpolated hit point, within its error; its colour then differs by what
-    # that error moves across an edge (measured: 22 of 5184 pixels, up to 0.03).
+    # that error moves across an edge (measured: 8 of 5184 pixels, up to 0.03).
     same = np.all(np.abs(shaded - fresh.rgba) <= 1e-5, axis=-1)
     assert same.mean() >= 0.99, same.mean()
     assert np.abs(shaded - fresh.rgba).max() <= 0.1
