@@ -789,17 +789,10 @@ class TileSampler:
         pixels, exceeds it, where what they show, looked up moved by the error across x and
         y, changes by more (the sky, surfaces; the rest, as the disk, kept); and sky centres
         whose background has detail smaller than a pixel (Background.detail) that changes."""
-        rgb = centre.rgba[:, :3].reshape(shape + (3,))
-        change = np.zeros(shape)
-        for axis in (0, 1):
-            step = np.max(np.abs(np.diff(rgb, axis=axis)), axis=-1)
-            before = (slice(None, -1), slice(None)) if axis == 0 else (slice(None), slice(None, -1))
-            after = (slice(1, None), slice(None)) if axis == 0 else (slice(None), slice(1, None))
-            np.maximum(change[before], step, out=change[before])
-            np.maximum(change[after], step, out=change[after])
+        change = _neighbour_change(centre.rgba[:, :3].reshape(shape + (3,))).ravel()
         interpolated = ~nodes.traced[jj, ii]
         move = centre.error / self.pixel_angle
-        shaky = interpolated & (change.ravel() * move > COLOUR_STEP)
+        shaky = interpolated & (change * move > COLOUR_STEP)
         sky = interpolated & (centre.ending == ENDING["escaped"])
         if self.background.detail >= self.pixel_angle:
             sky &= shaky
@@ -1200,6 +1193,20 @@ class _Blocks:
 
 
 _NEIGHBOURS = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0)]
+
+
+def _neighbour_change(rgb: np.ndarray) -> np.ndarray:
+    """(H, W) the largest difference in a channel between each pixel of ``rgb`` (H, W, 3)
+    and its four neighbours (those inside the grid)."""
+    change = np.zeros(rgb.shape[:2])
+    for axis in (0, 1):
+        step = np.max(np.abs(np.diff(rgb, axis=axis)), axis=-1)
+        first = [slice(None), slice(None)]
+        second = [slice(None), slice(None)]
+        first[axis], second[axis] = slice(None, -1), slice(1, None)
+        np.maximum(change[tuple(first)], step, out=change[tuple(first)])
+        np.maximum(change[tuple(second)], step, out=change[tuple(second)])
+    return change
 
 
 def _contrast(rgba: np.ndarray, ending: np.ndarray) -> list[np.ndarray]:

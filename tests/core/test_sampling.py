@@ -377,3 +377,16 @@ def test_the_companion_run_keeps_its_own_steps_near_geometry():
     measured = on_disk & np.isfinite(truth) & (truth > 1e-4)
     assert measured.sum() > 500  # the runs are really off the reference there
     assert np.count_nonzero(est[on_disk] == 0) <= 0.02 * on_disk.sum()  # 625 of 1803 were
+
+
+def test_a_pixels_neighbour_change_is_its_largest_step_to_its_four_neighbours():
+    """core.sampling._neighbour_change (the colour test's first stage, COLOUR_STEP): a lone
+    bright pixel and its four neighbours differ by its largest channel; diagonal
+    neighbours do not; a ramp's change is its slope."""
+    rgb = np.zeros((3, 4, 3))
+    rgb[1, 2] = [0.5, 0.0, 0.2]
+    expected = np.zeros((3, 4))
+    expected[1, 2] = expected[0, 2] = expected[2, 2] = expected[1, 1] = expected[1, 3] = 0.5
+    np.testing.assert_array_equal(sampling._neighbour_change(rgb), expected)
+    ramp = np.broadcast_to(np.arange(5.0)[None, :, None] * 0.1, (2, 5, 3))
+    np.testing.assert_allclose(sampling._neighbour_change(ramp), 0.1)
