@@ -28,6 +28,7 @@ level's texels sit up to half a texel off their span; lookups past a pole clamp 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -110,6 +111,23 @@ def extents(m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     long = np.sqrt(mean + spread)
     short = np.sqrt(np.maximum(mean - spread, 0.0))
     return long, short, np.stack([np.cos(angle), np.sin(angle)], axis=1)
+
+
+def point_or_filtered(
+    texels: np.ndarray,
+    point: Callable[[np.ndarray], np.ndarray],
+    filtered: Callable[[np.ndarray], np.ndarray],
+    channels: int,
+) -> np.ndarray:
+    """(N, channels): ``point(rows)`` at the rows whose footprint ``texels`` (N, 2, 2) spans
+    at most a texel (or is NaN: none), ``filtered(rows)`` at the rest: a resolved texture
+    is its plain lookup itself, bit for bit (the pyramid's level 0 computes its texel
+    coordinates another way: 6e-15 apart on one CPU)."""
+    wide = extents(texels)[0] > 1.0
+    out = np.empty((texels.shape[0], channels))
+    out[~wide] = point(np.flatnonzero(~wide))
+    out[wide] = filtered(np.flatnonzero(wide))
+    return out
 
 
 DEPTH_JUMP = 4.0

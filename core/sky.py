@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from .mipmap import MipMap, bilinear, extents, texel_footprint
+from .mipmap import MipMap, bilinear, point_or_filtered, texel_footprint
 
 __all__ = [
     "Background",
@@ -373,10 +373,11 @@ class Background:
             return self._fn(d)
         if self._mipmap is None:  # a Background wrapping a filtering one
             return self._fn(d, footprint)
-        texels = texel_footprint(d, footprint, self._mipmap.size)
-        wide = extents(texels)[0] > 1.0  # NaN (no footprint) is not wide
-        plain = self._fn(d[~wide])  # resolved: the plain lookup itself, bit for bit
-        out = np.empty((d.shape[0], plain.shape[1]))
-        out[~wide] = plain
-        out[wide] = self._mipmap.lookup(direction_to_equirect(d[wide]), texels[wide])
-        return out
+        pyramid = self._mipmap
+        texels = texel_footprint(d, footprint, pyramid.size)
+        return point_or_filtered(
+            texels,
+            lambda rows: self._fn(d[rows]),
+            lambda rows: pyramid.lookup(direction_to_equirect(d[rows]), texels[rows]),
+            pyramid.levels[0].shape[2],
+        )

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import bpy
 import numpy as np
 
-from ..core.mipmap import MipMap, bilinear, extents, wrap_index
+from ..core.mipmap import MipMap, bilinear, point_or_filtered, wrap_index
 
 DEFAULT_COLOR = (0.8, 0.8, 0.8, 1.0)
 """Colour of faces without a material (Blender's default surface)."""
@@ -75,11 +75,14 @@ class MaterialSampler:
             wrap = EXTENSION_WRAP.get(self.extension, "repeat")
             assert self.image is not None
             self._pyramid = MipMap(self.image[::-1].astype(np.float64), (wrap, wrap))
-        texels = self._pyramid.texels(footprint)
-        wide = extents(texels)[0] > 1.0  # NaN (no footprint) is not wide
-        out = np.empty((uv.shape[0], self.image.shape[2]))
-        out[~wide] = sample_image(self.image, uv[~wide], False, self.extension)  # bit for bit
-        out[wide] = self._pyramid.lookup(uv[wide], texels[wide])
+        image, pyramid = self.image, self._pyramid
+        texels = pyramid.texels(footprint)
+        out = point_or_filtered(
+            texels,
+            lambda rows: sample_image(image, uv[rows], False, self.extension),
+            lambda rows: pyramid.lookup(uv[rows], texels[rows]),
+            image.shape[2],
+        )
         if self.extension == "CLIP":
             out[_outside(uv)] = 0.0
         return out
