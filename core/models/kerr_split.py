@@ -120,13 +120,16 @@ class KerrBoyerLindquist(Hamiltonian):
         return True
 
     def parts(
-        self, Q: np.ndarray, P: np.ndarray, H0=0.0, derivatives: bool = True, sines=None
+        self, Q: np.ndarray, P: np.ndarray, H0=0.0, derivatives: bool = True, sines=None,
+        with_sigma: bool = True,
     ):  # fmt: skip
         """The potential V and its derivatives (dV/ds, dV/dtheta, dV/dE, dV/dL), with Sigma
         and (dSigma/ds, dSigma/dtheta); each (N,). V = P^2 / (2 Delta) + a E L
         - a^2 E^2 sin^2(theta) / 2 + H0 Sigma (the module's U plus L^2 / (2 sin^2 theta))
-        (``sines``: (sin theta, cos theta) where the caller has them)."""
-        return self._parts(self._terms(Q, P, sines), H0, derivatives)
+        (``sines``: (sin theta, cos theta) where the caller has them; without
+        ``with_sigma``, Sigma and its derivatives are None where H0 is 0: the split's
+        flows need V alone)."""
+        return self._parts(self._terms(Q, P, sines), H0, derivatives, with_sigma)
 
     def _terms(self, Q: np.ndarray, P: np.ndarray, sines=None) -> _Terms:
         """What V and its derivatives are made of at (Q, P) (arrays or Duals)."""
@@ -138,19 +141,28 @@ class KerrBoyerLindquist(Hamiltonian):
         ra2 = r * r + a * a
         return _Terms(E, L, sh, ch, r, (b * sh) ** 2, st, ct, ra2, ra2 * E - a * L)
 
-    def _parts(self, t: _Terms, H0, derivatives: bool):
+    def _parts(self, t: _Terms, H0, derivatives: bool, with_sigma: bool = True):
         """``parts`` from its terms."""
         a, b = self.a, self.b
-        sigma = t.r * t.r + a * a * t.ct * t.ct
+        level = isinstance(H0, dual.Dual) or np.ndim(H0) > 0 or H0 != 0.0  # H0 Sigma in V
+        sigma = dsig = None
+        if level or with_sigma:
+            sigma = t.r * t.r + a * a * t.ct * t.ct
         with np.errstate(divide="ignore", invalid="ignore"):
             pr, E, L, st, ct = t.pr, t.E, t.L, t.st, t.ct
-            V = pr * pr / (2.0 * t.delta) + a * E * L - 0.5 * (a * E * st) ** 2 + H0 * sigma
+            V = pr * pr / (2.0 * t.delta) + a * E * L - 0.5 * (a * E * st) ** 2
+            if level:
+                V = V + H0 * sigma
             if not derivatives:
                 return V, sigma
-            dsig = (2.0 * t.r * b * t.sh, -2.0 * a * a * ct * st)
+            if level or with_sigma:
+                dsig = (2.0 * t.r * b * t.sh, -2.0 * a * a * ct * st)
             # d/ds of P^2/(2 Delta) = (P 2 r E / Delta - P^2 (r - M) / Delta^2) dr/ds, dr/ds = b sh
-            dV_s = (pr * 2.0 * t.r * E - pr * pr * b * t.ch / t.delta) / (b * t.sh) + H0 * dsig[0]
-            dV_t = -a * a * E * E * st * ct + H0 * dsig[1]
+            dV_s = (pr * 2.0 * t.r * E - pr * pr * b * t.ch / t.delta) / (b * t.sh)
+            dV_t = -a * a * E * E * st * ct
+            if level and dsig is not None:
+                dV_s = dV_s + H0 * dsig[0]
+                dV_t = dV_t + H0 * dsig[1]
             dV_E = pr * t.ra2 / t.delta + a * L - a * a * E * st * st
             dV_L = -a * pr / t.delta + a * E
         return V, sigma, (dV_s, dV_t, dV_E, dV_L), dsig
@@ -166,7 +178,7 @@ class KerrBoyerLindquist(Hamiltonian):
         V_E = q (r^2 + a^2) + a L - a^2 E sin^2 theta, V_L = a (E - q): differentiated
         once more here."""
         terms = self._terms(Q, P, sines)
-        V, _, gradient, _ = self._parts(terms, H0, True)
+        V, _, gradient, _ = self._parts(terms, H0, True, with_sigma=False)
         E, a, b = terms.E, self.a, self.b
         r, r1, r2 = terms.r, b * terms.sh, b * terms.ch
         st, ct, delta, ra2 = terms.st, terms.ct, terms.delta, terms.ra2
@@ -285,7 +297,7 @@ class SqrtSplit(SplitSystem):
 
     def _root_V(self, Q: np.ndarray, P: np.ndarray):
         """1 / sqrt(V + c) and dV."""
-        V, _, dV, _ = self.model.parts(Q, P, self.H0, sines=self._sines(Q))
+        V, _, dV, _ = self.model.parts(Q, P, self.H0, sines=self._sines(Q), with_sigma=False)
         E = -P[0]
         with np.errstate(invalid="ignore", divide="ignore"):
             return 1.0 / dual.sqrt(V + self.c0 * E * E), dV
@@ -403,7 +415,7 @@ class SqrtSplit(SplitSystem):
 
     def value_soa(self, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
         """Λ(q, p), (N,)."""
-        V, _ = self.model.parts(Q, P, self.H0, derivatives=False)
+        V, _ = self.model.parts(Q, P, self.H0, derivatives=False, with_sigma=False)
         root, _, E = self._root_T(Q, P)
         with np.errstate(invalid="ignore"):
             return 2.0 * root - 2.0 * np.sqrt(V + self.c0 * E * E)
