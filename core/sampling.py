@@ -941,10 +941,10 @@ class TileSampler:
         weights = [(1 - u) * (1 - v), u * (1 - v), (1 - u) * v, u * v]
         corners = [(bj, bi), (bj, bi + s), (bj + s, bi), (bj + s, bi + s)]
 
-        def blend(field):
+        def blend(field, at=slice(None)):
             spread = (-1,) + (1,) * (field.ndim - 2)  # a weight per point, over its values
             return sum(
-                (wk if field.ndim == 2 else wk.reshape(spread)) * field[j, i]
+                (wk[at] if field.ndim == 2 else wk[at].reshape(spread)) * field[j[at], i[at]]
                 for wk, (j, i) in zip(weights, corners, strict=True)
             )
 
@@ -954,7 +954,7 @@ class TileSampler:
         colour = np.zeros((b.size, 4))
         colour[:, 3] = 1.0
         sky = ending == ENDING["escaped"]
-        jacobian = blend(nodes.jacobian)[sky] if self.with_tangents and sky.any() else None
+        jacobian = blend(nodes.jacobian, sky) if self.with_tangents and sky.any() else None
         if sky.any():  # over the footprint of the nodes' ray differentials, blended
             colour[sky] = self.background(d[sky], jacobian)
         out.direction[rows] = np.where(sky[:, None], d, np.nan)
@@ -974,18 +974,16 @@ class TileSampler:
         hit = np.flatnonzero((ending == ENDING["hit"]) & (nodes.object_id[bj, bi] != DISK_ID))
         if hit.size:
             origins, _ = self.camera.rays_at(self._image_xy(y[hit], x[hit]))
-            position = blend(nodes.position)[hit]
+            position, tangent = blend(nodes.position, hit), blend(nodes.tangent, hit)
             reach = REACH * s[hit] * self.pixel_angle * np.linalg.norm(position - origins, axis=1)
-            found = self._recast(
-                position, blend(nodes.tangent)[hit], reach, nodes.object_id[bj[hit], bi[hit]]
-            )
+            found = self._recast(position, tangent, reach, nodes.object_id[bj[hit], bi[hit]])
             ok = found.hit
             colour[hit[ok]] = found.color[ok]
             ending[hit[~ok]] = -1  # missed its object (an edge): trace this point
             at = rows[hit[ok]]
             out.position[at] = found.position[ok]
             out.object_id[at], out.surface[at] = found.object_id[ok], found.color[ok]
-            out.tangent[at] = blend(nodes.tangent)[hit[ok]]
+            out.tangent[at] = tangent[ok]
             seen = found.position[ok] - origins[ok]
             out.direction[rows[hit[ok]]] = seen / np.linalg.norm(seen, axis=1, keepdims=True)
         moving = self.tracer.motion
