@@ -112,9 +112,9 @@ at 1, 0.25 and 0.05 px, benchmarks/honesty.py, estimate / truth was 0.95-1.1 at 
 percentile, 0.37 on the high-spin disk, whose r and g stand in for the hit point, and
 1.1-4.1 at the 99th, the two directions' parts added up where they partly cancel: the
 error pass reports their vector sum instead, _deviation_vectors). 2.0 (the centre-only
-rule's margin) kept the 3 sub-pixel star images of 561 that 1.0 loses at 1 px (moved by
-less than the tolerance, between pixel centres; point stars are issue 26's), for 8-20 %
-more rays (Kerr board, 1080p Preview)."""
+rule's margin) kept the 3 sub-pixel star images of 561 that 1.0 lost at 1 px, for 8-20 %
+more rays (Kerr board, 1080p Preview); the colour test (COLOUR_STEP) keeps them now, at
+1.0, tracing only the centres near them."""
 LOOSE_SHARE = 0.3
 """A traced ray whose companion ran past the rule's largest step (Richardson outside its
 asymptotic range; TileSampler._bound) and whose estimate exceeds LOOSE_SHARE x the retrace
@@ -793,19 +793,19 @@ class TileSampler:
         interpolated = ~nodes.traced[jj, ii]
         move = centre.error / self.pixel_angle
         shaky = interpolated & (change * move > COLOUR_STEP)
-        sky = interpolated & (centre.ending == ENDING["escaped"])
+        escaped = centre.ending == ENDING["escaped"]
+        hit = (centre.ending == ENDING["hit"]) & (centre.object_id >= 0)
+        sky = interpolated & escaped
         if self.background.detail >= self.pixel_angle:
             sky &= shaky
         if sky.any():
-            seen = (centre.ending == ENDING["escaped"]).reshape(shape)
-            slope = map_footprint(centre.direction.reshape(shape + (3,)), seen)
+            slope = map_footprint(centre.direction.reshape(shape + (3,)), escaped.reshape(shape))
             rows = np.flatnonzero(sky)
             shaky[rows] = self._shaky_sky(
                 centre.direction[rows], slope.reshape(-1, 2, 3)[rows], move[rows]
             )
-        surface = shaky & (centre.ending == ENDING["hit"]) & (centre.object_id >= 0)
+        surface = shaky & hit
         if surface.any():
-            hit = (centre.ending == ENDING["hit"]) & (centre.object_id >= 0)
             label = np.where(hit, centre.object_id, -1).reshape(shape)
             slope = screen_differences(centre.position.reshape(shape + (3,)), label, jumps=True)
             rows = np.flatnonzero(surface)
@@ -821,14 +821,13 @@ class TileSampler:
         y, either way."""
         centre = self.background(d)[:, :3]
         change = np.zeros(d.shape[0])
-        for k in (0, 1):
-            for sign in (1.0, -1.0):
-                probe = d + (sign * move)[:, None] * slope[:, k]
-                with np.errstate(invalid="ignore"):
-                    probe /= np.linalg.norm(probe, axis=1, keepdims=True)
-                seen = self.background(np.nan_to_num(probe), None)[:, :3]
-                change = np.maximum(change, np.max(np.abs(seen - centre), axis=1))
-                change[~np.all(np.isfinite(probe), axis=1)] = np.inf
+        for offset in _moves(slope, move):
+            probe = d + offset
+            with np.errstate(invalid="ignore"):
+                probe /= np.linalg.norm(probe, axis=1, keepdims=True)
+            seen = self.background(np.nan_to_num(probe), None)[:, :3]
+            change = np.maximum(change, np.max(np.abs(seen - centre), axis=1))
+            change[~np.all(np.isfinite(probe), axis=1)] = np.inf
         return change > COLOUR_STEP
 
     def _shaky_surface(self, centre: _Points, rows, slope, move, jj, ii) -> np.ndarray:
@@ -845,12 +844,10 @@ class TileSampler:
         object_id = centre.object_id[rows]
         first = self._recast(position, tangent, reach, object_id, footprint)
         shaky = ~first.hit | ~np.all(np.isfinite(slope), axis=(1, 2))
-        for k in (0, 1):
-            for sign in (1.0, -1.0):
-                moved = position + (sign * move)[:, None] * np.nan_to_num(slope[:, k])
-                probe = self._recast(moved, tangent, reach, object_id, footprint)
-                change = np.max(np.abs(probe.color[:, :3] - first.color[:, :3]), axis=1)
-                shaky |= ~probe.hit | (change > COLOUR_STEP)
+        for offset in _moves(np.nan_to_num(slope), move):
+            probe = self._recast(position + offset, tangent, reach, object_id, footprint)
+            change = np.max(np.abs(probe.color[:, :3] - first.color[:, :3]), axis=1)
+            shaky |= ~probe.hit | (change > COLOUR_STEP)
         return shaky
 
     def _filter_sky(self, centre: _Points, shape: tuple[int, int], jj, ii) -> None:
@@ -1191,6 +1188,14 @@ class _Blocks:
 
 
 _NEIGHBOURS = [(dy, dx) for dy in (-1, 0, 1) for dx in (-1, 0, 1) if (dy, dx) != (0, 0)]
+
+
+def _moves(slope: np.ndarray, move: np.ndarray):
+    """The four offsets (M, 3) of points moved ``move`` (M,) pixels along +x, -x, +y and -y
+    of the image, by their derivatives ``slope`` (M, 2, 3) along x and y (TileSampler._shaky)."""
+    for k in (0, 1):
+        for sign in (1.0, -1.0):
+            yield (sign * move)[:, None] * slope[:, k]
 
 
 def _neighbour_change(rgb: np.ndarray) -> np.ndarray:
