@@ -1,0 +1,22 @@
+"""Shared by every test: each test draws the same random numbers wherever it runs."""
+
+import copy
+
+import numpy as np
+import pytest
+
+_SEEDED: dict[str, dict] = {}
+
+
+@pytest.fixture(autouse=True)
+def _module_rng_restarts_at_its_seed(request: pytest.FixtureRequest) -> None:
+    """A test module's ``RNG`` (a numpy Generator) is put back to its seeded state before
+    each of its tests: under pytest-xdist the tests that ran earlier on a worker (so the
+    numbers left to draw) depend on how the run was split, and a test must not pass or fail
+    with that (a checker-filter bound once failed on CI this way)."""
+    module = request.module
+    rng = getattr(module, "RNG", None)
+    if not isinstance(rng, np.random.Generator):
+        return
+    state = _SEEDED.setdefault(module.__name__, copy.deepcopy(rng.bit_generator.state))
+    rng.bit_generator.state = copy.deepcopy(state)
