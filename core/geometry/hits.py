@@ -43,6 +43,11 @@ class Hits:
             np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2)), np.zeros((n, 4)),
         )  # fmt: skip
 
+    @classmethod
+    def concatenate(cls, parts: list[Hits]) -> Hits:
+        """The hits of several sets of segments, one set after another."""
+        return cls(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)))
+
     def __len__(self) -> int:
         return self.hit.shape[0]
 

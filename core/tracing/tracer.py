@@ -609,72 +609,103 @@ class Tracer:
         The path between X_prev and X is followed on chords through its cubic Hermite
         interpolant (core/tracing/dense.py), as many per ray as keep the chords within
         the tolerance at the ray's distance from the camera (one where the path is
-        straight enough). An opaque disk's hits are placed on it and lit once for the
-        whole step (_land_on_disk). -> (M,) bool: the rays that hit a surface (recorded in
-        ``out``).
+        straight enough). All rays' chords are cast at once and each ray's first hit is
+        refined and moved onto the method's path together (one partial-step Newton for the
+        whole step: each partial step costs a whole step's per-call overhead); the chords
+        are then recorded in order up to the hit. A ray whose hit the method's path misses,
+        or that goes on through a translucent disk, is cast again from the next chord. An
+        opaque disk's hits are placed on it and lit once for the whole step
+        (_land_on_disk). -> (M,) bool: the rays that hit a surface (recorded in ``out``).
         """
         hit_rows = np.zeros(idx.shape[0], dtype=bool)
         c, X0, X1, V0, V1, h = paths.rows, paths.X0, paths.X1, paths.V0, paths.V1, paths.h
-        deviation, allowed = paths.deviation, paths.allowed
         if c.size == 0:
             return hit_rows
         landed: list[tuple[np.ndarray, np.ndarray]] = []  # (batch rows, u) on an opaque disk
-        k = paths.pieces
-        for n in np.unique(k):
-            g = np.flatnonzero(k == n)
+        groups = []
+        for n in np.unique(paths.pieces):
+            g = np.flatnonzero(paths.pieces == n)
             hg = h if np.ndim(h) == 0 else h[g]
             path = dense.CubicPath(X0[:, g], V0[:, g], X1[:, g], V1[:, g], hg)
-            limits = (deviation[g] / (n * n), allowed[g])
-            cols = c[g]
-            hit_rows[cols] = self._path_hits(
-                idx, cols, path, int(n), limits, out, step_ends, landed
-            )
+            limits = (paths.deviation[g] / (n * n), paths.allowed[g])
+            groups.append(_ChordGroup(c[g], path, int(n), limits, np.zeros(g.size, np.int64),
+                                      np.arange(g.size)))  # fmt: skip
+        while groups := [group for group in groups if group.going.size]:
+            firsts = [self._first_hits(group) for group in groups]
+            hits = Hits.concatenate([first.hits for first in firsts])
+            cols = np.concatenate([group.cols[group.going] for group in groups])
+            self._surface_crossing(cols, np.concatenate([f.guess for f in firsts]), hits,
+                                   step_ends)  # fmt: skip
+            offset = 0
+            for group, first in zip(groups, firsts, strict=True):
+                first.hits = hits.take(slice(offset, offset + group.going.size))
+                offset += group.going.size
+                ended, again = self._record_chords(idx, group, first, out, step_ends, landed)
+                hit_rows[group.cols[group.going[ended]]] = True
+                group.start[group.going[again]] = first.stop[again] + 1
+                group.going = group.going[again]
         if landed:
             cols, u = (np.concatenate([x[i] for x in landed]) for i in (0, 1))
             off = self._land_on_disk(idx, cols, u, out, step_ends)
             hit_rows[cols[off]] = False
         return hit_rows
 
-    def _path_hits(
-        self, idx, cols, path: dense.CubicPath, n: int, limits, out: RayResults,
+    def _record_chords(
+        self, idx, group: _ChordGroup, first: _FirstHits, out: RayResults,
         step_ends: _StepEnds, landed: list,
-    ) -> np.ndarray:  # fmt: skip
-        """Cast the n chords of each ray's cubic path in order (the batch rows ``cols``,
-        rays ``idx[cols]``), refine the chords that hit on the cubic, record hits and volume
-        light. Hits on an opaque disk are recorded where the cubic meets it and left in
-        ``landed`` as (batch rows, fraction of the step); a translucent disk's are found by
-        the method itself at once (_StepEnds.plane_crossing) and lit. -> (M,) bool: hit."""
-        rows = idx[cols]
-        hit = np.zeros(path.size, dtype=bool)
-        alive = np.ones(path.size, dtype=bool)
-        for j in range(n):
-            live = np.flatnonzero(alive)
-            a = self._to_world(path.at(j / n, live).T)
-            b = self._to_world(path.at((j + 1) / n, live).T)
-            hits = self.geometry.cast(a, b)
-            guess = (j + np.where(hits.hit, hits.t, 0.0)) / n  # the hit's t on the cubic
-            if hits.hit.any():
-                limit = [x[live] for x in limits]
-                guess = self._refine(path, live, hits, guess, j / n, 1.0 / n, limit)
-                self._surface_crossing(cols[live], guess, hits, step_ends)
+    ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+        """Record the chords of ``group``'s going rays in order, from each one's start to
+        its first hit (``first``; its last chord where none), with the volumes' light up to
+        the hit. Hits on an opaque disk are left in ``landed`` as (batch rows, fraction of
+        the step); a translucent disk's are found by the method itself at once
+        (_StepEnds.plane_crossing) and lit. -> (ended, again) (K,) bool: the rays that hit
+        a surface; those to cast again from the chord after their hit (it did not end them).
+        """
+        rays = group.going
+        start, cols = group.start[rays], group.cols[rays]
+        ended = np.zeros(rays.size, dtype=bool)
+        for j in range(int(start.min()), group.n):
+            live = np.flatnonzero((start <= j) & (first.stop >= j))
+            if live.size == 0:
+                break
+            a, b = first.ends[j, live], first.ends[j + 1, live]
+            hits = Hits.miss(live.size)
+            at = np.flatnonzero(first.stop[live] == j)
+            hits.assign(at, first.hits, live[at])
             if self.disk is None or self.disk.opaque:
-                got = self.geometry.record_hits(rows[live], a, b, hits, out)
+                got = self.geometry.record_hits(idx[cols[live]], a, b, hits, out)
                 on = np.flatnonzero(got & (hits.object_id == DISK_ID))
                 if on.size:
-                    landed.append((cols[live[on]], guess[on]))
+                    landed.append((cols[live[on]], first.guess[live[on]]))
             else:
                 on = np.flatnonzero(hits.hit & (hits.object_id == DISK_ID))
                 if on.size:
-                    X, ok = step_ends.plane_crossing(cols[live[on]], guess[on])
+                    X, ok = step_ends.plane_crossing(cols[live[on]], first.guess[live[on]])
                     hits.position[on[ok]] = self._to_world(X[:, ok].T)
                 got = self.disk.record_hits(
-                    rows[live], a, b, hits, step_ends.state(cols[live]), out
+                    idx[cols[live]], a, b, hits, step_ends.state(cols[live]), out
                 )
-            hit[live[got]] = True
-            alive[live[got]] = False
-            if not alive.any():
-                break
-        return hit
+            ended[live[got]] = True
+        again = first.found & ~ended & (first.stop + 1 < group.n)
+        return ended, again
+
+    def _first_hits(self, group: _ChordGroup) -> _FirstHits:
+        """Cast the chords of ``group``'s going rays all at once, each ray's from its start;
+        each ray's first hit refined on the cubic (_refine)."""
+        rays = group.going
+        n, k = group.n, rays.size
+        t = np.repeat(np.arange(n + 1) / n, k)
+        ends = self._to_world(group.path.at(t, np.tile(rays, n + 1)).T).reshape(n + 1, k, 3)
+        cast = self.geometry.cast(ends[:-1].reshape(-1, 3), ends[1:].reshape(-1, 3))
+        got = cast.hit.reshape(n, k) & (np.arange(n)[:, None] >= group.start[rays])
+        found = got.any(axis=0)
+        stop = np.where(found, got.argmax(axis=0), n - 1)
+        hits = cast.take(stop * k + np.arange(k))
+        guess = (stop + np.where(found, hits.t, 0.0)) / n
+        if found.any():
+            limits = [x[rays] for x in group.limits]
+            guess = self._refine(group.path, rays, hits, guess, stop / n, 1.0 / n, limits)
+        return _FirstHits(ends, stop, found, hits, guess)
 
     def _land_on_disk(self, idx, cols, u, out: RayResults, step_ends: _StepEnds) -> np.ndarray:
         """The rays of the batch rows ``cols`` ended on an opaque disk at the fraction ``u``
@@ -700,16 +731,17 @@ class Tracer:
         self.disk.shade(rows[on], out.position[rows[on]], step_ends.state(cols[on]), out)
         return off
 
-    def _refine(self, path: dense.CubicPath, live, hits, guess, t0: float, width: float, limits):
-        """Where the chord [t0, t0 + width] of the rays ``live`` hit, find the hit again on
-        REFINE_PIECES finer chords of the cubic, all cast at once (REFINE_LEVELS times at
-        most, while they deviate more than allowed); ``hits`` takes the refined hits, in
-        place. A ray whose finer chords all miss (a grazing edge) keeps its chord's hit.
+    def _refine(self, path: dense.CubicPath, live, hits, guess, t0, width: float, limits):
+        """Where the chord [t0, t0 + width] (t0 a float or per ray) of the rays ``live`` hit,
+        find the hit again on REFINE_PIECES finer chords of the cubic, all cast at once
+        (REFINE_LEVELS times at most, while they deviate more than allowed); ``hits`` takes
+        the refined hits, in place. A ray whose finer chords all miss (a grazing edge) keeps
+        its chord's hit.
         -> ``guess`` (the hits' fractions of the step on the cubic) refined."""
         deviation, allowed = limits
         allowed = allowed * dense.HIT_SHARE
         todo = np.flatnonzero(hits.hit & (deviation > allowed))
-        lo = np.full(todo.size, t0)
+        lo = np.broadcast_to(np.asarray(t0, dtype=np.float64), live.shape)[todo]
         guess = guess.copy()
         m = dense.REFINE_PIECES
         for _ in range(dense.REFINE_LEVELS):
@@ -916,6 +948,29 @@ def _turn(X_prev: np.ndarray, X: np.ndarray, heading: np.ndarray) -> tuple:
         chord = (X - X_prev) / np.linalg.norm(X - X_prev, axis=0)
         turn = np.arccos(np.clip(np.einsum("im,im->m", chord, heading), -1.0, 1.0))
     return chord, np.where(np.isfinite(turn), turn, 0.0)
+
+
+@dataclass
+class _ChordGroup:
+    """The rays of a step that follow their cubic paths on n chords (Tracer._segments)."""
+
+    cols: np.ndarray  # (M,) batch rows
+    path: dense.CubicPath
+    n: int
+    limits: tuple  # (a chord's deviation (M,), allowed (M,))
+    start: np.ndarray  # (M,) the first chord each ray casts
+    going: np.ndarray  # the rays (indices into cols) still to cast
+
+
+@dataclass
+class _FirstHits:
+    """Each ray's first hit on its chords from its start (Tracer._first_hits)."""
+
+    ends: np.ndarray  # (n + 1, K, 3) the chords' ends, world
+    stop: np.ndarray  # (K,) the chord of the first hit (n - 1 where none)
+    found: np.ndarray  # (K,) bool: a hit was found there (the method's path may miss it)
+    hits: Hits  # (K,) the hit, refined on the cubic
+    guess: np.ndarray  # (K,) the hit's fraction of the step on the cubic
 
 
 @dataclass
