@@ -62,6 +62,14 @@ class CubicPath:
         return hermite(self.X0[:, rays], self.V0[:, rays], self.X1[:, rays],
                        self.V1[:, rays], self.h[rays], t)  # fmt: skip
 
+    def points(self, ts: np.ndarray, rays: np.ndarray) -> np.ndarray:
+        """Points (3, T, len(rays)) of the rays ``rays`` at T parameters each: ``ts`` (T,)
+        shared, or (T, len(rays)) per ray (each ray's ends gathered once)."""
+        ts = np.asarray(ts, dtype=np.float64)
+        return hermite(self.X0[:, None, rays], self.V0[:, None, rays], self.X1[:, None, rays],
+                       self.V1[:, None, rays], self.h[rays],
+                       ts[:, None] if ts.ndim == 1 else ts)  # fmt: skip
+
 
 def chord_deviation(V0: np.ndarray, V1: np.ndarray, h) -> np.ndarray:
     """(M,) largest distance between the cubic and the chord X0 -> X1: |h (V0 − V1)| / 8."""

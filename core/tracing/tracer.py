@@ -694,8 +694,8 @@ class Tracer:
         each ray's first hit refined on the cubic (_refine)."""
         rays = group.going
         n, k = group.n, rays.size
-        t = np.repeat(np.arange(n + 1) / n, k)
-        ends = self._to_world(group.path.at(t, np.tile(rays, n + 1)).T).reshape(n + 1, k, 3)
+        points = group.path.points(np.arange(n + 1) / n, rays).reshape(3, -1)
+        ends = self._to_world(points.T).reshape(n + 1, k, 3)
         cast = self.geometry.cast(ends[:-1].reshape(-1, 3), ends[1:].reshape(-1, 3))
         got = cast.hit.reshape(n, k) & (np.arange(n)[:, None] >= group.start[rays])
         found = got.any(axis=0)
@@ -748,10 +748,12 @@ class Tracer:
             if todo.size == 0:
                 break
             width /= m
-            rays = np.tile(live[todo], m)  # sub-chord i of every ray, i = 0..m-1
-            ta = np.repeat(np.arange(m) * width, todo.size) + np.tile(lo, m)
-            sub = self.geometry.cast(self._to_world(path.at(ta, rays).T),
-                                     self._to_world(path.at(ta + width, rays).T))  # fmt: skip
+            ta = (np.arange(m) * width)[:, None] + lo  # (m, R): sub-chord i of every ray
+            sub = self.geometry.cast(
+                *(self._to_world(path.points(t, live[todo]).reshape(3, -1).T)
+                  for t in (ta, ta + width))
+            )  # fmt: skip
+            ta = ta.ravel()
             got = sub.hit.reshape(m, todo.size)
             ok = got.any(axis=0)
             first = got.argmax(axis=0)[ok] * todo.size + np.flatnonzero(ok)
