@@ -942,12 +942,15 @@ class TileSampler:
         u, v = (x - bi) / s, (y - bj) / s
         weights = [(1 - u) * (1 - v), u * (1 - v), (1 - u) * v, u * v]
         corners = [(bj, bi), (bj, bi + s), (bj + s, bi), (bj + s, bi + s)]
+        width = nodes.traced.shape[1]
+        flat = [j * width + i for j, i in corners]  # a node's index in a flattened field
 
         def blend(field, at=slice(None)):
             spread = (-1,) + (1,) * (field.ndim - 2)  # a weight per point, over its values
+            rows = field.reshape(-1, *field.shape[2:])
             return sum(
-                (wk[at] if field.ndim == 2 else wk[at].reshape(spread)) * field[j[at], i[at]]
-                for wk, (j, i) in zip(weights, corners, strict=True)
+                (wk[at] if field.ndim == 2 else wk[at].reshape(spread)) * rows[k[at]]
+                for wk, k in zip(weights, flat, strict=True)
             )
 
         d = blend(nodes.direction)

@@ -49,10 +49,17 @@ class Group:
         out = Hits.miss(a.shape[0])
         for obj, oid in zip(self.objects, self.ids, strict=True):
             rows = np.flatnonzero(segment_overlaps(a, b, *obj.bounds))
-            if rows.size:
-                if footprint is not None and filters(obj):
-                    hits = obj.intersect(a[rows], b[rows], footprint[rows])
-                else:
-                    hits = obj.intersect(a[rows], b[rows])
-                out.merge(rows, hits, oid)
+            if rows.size == 0:
+                continue
+            seen = None if footprint is None or not filters(obj) else footprint[rows]
+            whole = len(self.objects) == 1 and rows.size == a.shape[0]
+            if whole:  # one member near every segment: its hits are the group's
+                rows = slice(None)
+            hits = obj.intersect(a[rows], b[rows]) if seen is None else (
+                obj.intersect(a[rows], b[rows], seen))  # fmt: skip
+            if whole:
+                if oid is not None:
+                    hits.object_id[hits.hit] = oid
+                return hits
+            out.merge(rows, hits, oid)
         return out
