@@ -114,14 +114,16 @@ def _value_noise(p: np.ndarray, salt: int) -> np.ndarray:
     i = np.floor(p)
     f = p - i
     f = f * f * (3 - 2 * f)
-    i = i.astype(np.int64)
+    i = i.astype(np.int64).astype(np.uint64)
+    weights = [(1 - f[:, k], f[:, k]) for k in range(3)]  # per axis: the cell's two sides
+    with np.errstate(over="ignore"):  # wrapping: (i + 1) P = i P + P
+        parts = [(i[:, k] * prime, i[:, k] * prime + prime)
+                 for k, prime in enumerate((_P1, _P2, _P3))]  # fmt: skip
     out = np.zeros(p.shape[0])
     for corner in range(8):
         o = [(corner >> k) & 1 for k in range(3)]
-        wgt = np.prod([f[:, k] if o[k] else 1 - f[:, k] for k in range(3)], axis=0)
-        c = (i + o).astype(np.uint64)
-        with np.errstate(over="ignore"):
-            key = (c[:, 0] * _P1) ^ (c[:, 1] * _P2) ^ (c[:, 2] * _P3)
+        wgt = weights[0][o[0]] * weights[1][o[1]] * weights[2][o[2]]
+        key = parts[0][o[0]] ^ parts[1][o[1]] ^ parts[2][o[2]]
         out += wgt * _uniform(key, salt)
     return out
 

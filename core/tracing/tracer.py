@@ -1022,10 +1022,12 @@ class _StepEnds:
 
     def velocities(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, Any]:
         """(V at the start, V at the end, h) of the rays ``rows``, each V (3, M)."""
-        K = self.K.subset(rows)
-        ends = [self._velocity(K, Q[:, rows], P[:, rows]) for Q, P in (self.start, self.end)]
+        both = np.concatenate([rows, rows])  # one call for both ends: one call's overhead
+        Q, P = (np.concatenate([a[:, rows], b[:, rows]], axis=1)
+                for a, b in zip(self.start, self.end, strict=True))  # fmt: skip
+        V = self._velocity(self.K.subset(both), Q, P)
         h = self.h if np.ndim(self.h) == 0 else self.h[rows]
-        return ends[0], ends[1], h
+        return V[:, : rows.size], V[:, rows.size :], h
 
     def plane_crossing(self, rows: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Where the rays ``rows`` cross the local plane z = 0 within this step (``crossing``
