@@ -325,6 +325,7 @@ class TileSampler:
         magnification: bool = False,
     ) -> None:
         self.tracer, self.camera, self.background, self.shade = tracer, camera, background, shade
+        self._colour_tracer = tracer.without_clearance()  # for sub-pixel samples (_sample)
         self.interpolation = float(interpolation)  # radians; 0: trace every pixel
         self.samples = int(samples)
         self.unit = stratified_points(self.samples)  # (S, 2), jittered per pixel
@@ -354,13 +355,15 @@ class TileSampler:
         tracer's) -> (rays, seen directions, and with the error pass (and ``companion``)
         their Richardson error in radians from a companion run at COMPANION_RATIO x the
         step; sub-pixel samples need none: the pass reports pixel centres). Nodes (``node``)
-        carry ray differentials where the sampler takes them."""
+        carry ray differentials where the sampler takes them; other points (samples) no
+        clearance (Tracer.without_clearance: their colour is all the sampler takes)."""
         origins, directions = self.camera.rays_at(xy)
         n = xy.shape[0]
         self.rays += n if step is None else 0
         seen = self.camera.direction_tangents(xy) if self.with_tangents and node else None
         if not (self.with_error and companion):
-            rays = self.tracer.trace(origins, directions, step=step, cancel=cancel, tangents=seen)
+            tracer = self.tracer if node else self._colour_tracer  # a sample's colour alone
+            rays = tracer.trace(origins, directions, step=step, cancel=cancel, tangents=seen)
             return rays, seen_direction(rays, origins), None
         step = step or self.tracer.step
         assert step is not None

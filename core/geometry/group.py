@@ -53,10 +53,9 @@ class Group:
                 continue
             seen = None if footprint is None or not filters(obj) else footprint[rows]
             whole = len(self.objects) == 1 and rows.size == a.shape[0]
-            if whole:  # one member near every segment: its hits are the group's
-                rows = slice(None)
-            hits = obj.intersect(a[rows], b[rows]) if seen is None else (
-                obj.intersect(a[rows], b[rows], seen))  # fmt: skip
+            near: Any = slice(None) if whole else rows  # one member near all: its hits
+            hits = obj.intersect(a[near], b[near]) if seen is None else (
+                obj.intersect(a[near], b[near], seen))  # fmt: skip
             if whole:
                 if oid is not None:
                     hits.object_id[hits.hit] = oid

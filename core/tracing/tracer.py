@@ -11,6 +11,7 @@ the batch, so the work per step shrinks as the image resolves.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -233,6 +234,13 @@ class Tracer:
             local = self.geometry.local_box(self._to_local)
             if local is not None:
                 self._watch_near = (local[0] - margin, local[1] + margin)
+
+    def without_clearance(self) -> Tracer:
+        """This tracer, sharing all it holds, but recording no clearance (rays whose
+        colour alone is wanted: sub-pixel samples; their ``clearance`` stays inf)."""
+        plain = copy.copy(self)
+        plain._watch = None
+        return plain
 
     def set_motion(self, motion: Motion | None) -> None:
         """Trace for a camera moving with ``motion`` (core.motion; None: the static / ZAMO
