@@ -756,12 +756,11 @@ class Tracer:
             if todo.size == 0:
                 break
             width /= m
-            ta = (np.arange(m) * width)[:, None] + lo  # (m, R): sub-chord i of every ray
-            sub = self.geometry.cast(
-                *(self._to_world(path.points(t, live[todo]).reshape(3, -1).T)
-                  for t in (ta, ta + width))
-            )  # fmt: skip
-            ta = ta.ravel()
+            ta = (np.arange(m + 1) * width)[:, None] + lo  # (m + 1, R): sub-chords' ends
+            ends = self._to_world(path.points(ta, live[todo]).reshape(3, -1).T)
+            ends = ends.reshape(m + 1, todo.size, 3)  # sub-chord i of ray k: i -> i + 1
+            sub = self.geometry.cast(ends[:-1].reshape(-1, 3), ends[1:].reshape(-1, 3))
+            ta = ta[:-1].ravel()
             got = sub.hit.reshape(m, todo.size)
             ok = got.any(axis=0)
             first = got.argmax(axis=0)[ok] * todo.size + np.flatnonzero(ok)
