@@ -16,6 +16,8 @@ above a symplectic method's, and varies with where in the step the surface falls
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 MAX_PIECES = 16
@@ -71,9 +73,52 @@ class CubicPath:
                        ts[:, None] if ts.ndim == 1 else ts)  # fmt: skip
 
 
-def chord_deviation(V0: np.ndarray, V1: np.ndarray, h) -> np.ndarray:
-    """(M,) largest distance between the cubic and the chord X0 -> X1: |h (V0 − V1)| / 8."""
-    d = np.linalg.norm(V0 - V1, axis=0) * (np.abs(h) / 8.0)
+def on_cubic(path: CubicPath, rays: np.ndarray, t0, width: float, fraction) -> np.ndarray:
+    """(K,) the cubic's parameters in [t0, t0 + width] (t0 per ray or shared) at which the
+    rays' paths reach ``fraction`` of the chord X(t0) -> X(t0 + width), measured along it
+    (bisection, BISECTIONS times): where a chord's hit lies on the cubic, which runs along
+    its chord at another pace (a ray's speed in the fictitious time changes as r does)."""
+    lo = np.broadcast_to(np.asarray(t0, dtype=np.float64), rays.shape).copy()
+    a, b = path.at(lo, rays), path.at(lo + width, rays)
+    chord = b - a
+    with np.errstate(divide="ignore", invalid="ignore"):
+        inverse = 1.0 / np.einsum("im,im->m", chord, chord)
+    low, high = np.zeros(rays.shape), np.ones(rays.shape)
+    for _ in range(BISECTIONS):
+        middle = 0.5 * (low + high)
+        along = np.einsum("im,im->m", path.at(lo + middle * width, rays) - a, chord) * inverse
+        short = along < fraction
+        low, high = np.where(short, middle, low), np.where(short, high, middle)
+    found = 0.5 * (low + high)
+    return lo + np.where(np.isfinite(inverse), found, fraction) * width
+
+
+BISECTIONS = 30
+"""on_cubic's bisection steps (the parameter to 1e-9 of the chord)."""
+
+
+def chord_deviation(
+    X0: np.ndarray, X1: np.ndarray, V0: np.ndarray, V1: np.ndarray, h
+) -> np.ndarray:
+    """(M,) a bound on the distance between the cubic and the line of its chord X0 -> X1.
+    With p0, p1 the parts of h V0, h V1 across the chord, the cubic is off that line by
+    t (1 - t) ((1 - t) p0 - t p1): at most |p0 - p1| / 8 (|h (V0 - V1)| / 8 where the
+    velocities turn symmetrically, a circle's arc) + |p0 + p1| / (12 sqrt 3). Along the
+    chord the cubic only moves at another pace, which no chord cut from it misses (a ray's
+    speed in the fictitious time changes over a step as r does: |h (V0 - V1)| / 8, which
+    counted that too, was a median 70x this bound on the Kerr board's steps near its board,
+    and chose chords, halved steps and widened slacks by it). A chord of length 0 (or not
+    finite) keeps |h (V0 - V1)| / 8."""
+    chord = X1 - X0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        unit = chord / np.linalg.norm(chord, axis=0)
+        hv0, hv1 = h * V0, h * V1
+        p0 = hv0 - np.einsum("im,im->m", hv0, unit) * unit
+        p1 = hv1 - np.einsum("im,im->m", hv1, unit) * unit
+        d = np.linalg.norm(p0 - p1, axis=0) / 8.0
+        d += np.linalg.norm(p0 + p1, axis=0) / (12.0 * math.sqrt(3.0))
+        whole = np.linalg.norm(V0 - V1, axis=0) * (np.abs(h) / 8.0)
+    d = np.where(np.isfinite(d), d, whole)
     return np.where(np.isfinite(d), d, 0.0)
 
 

@@ -30,13 +30,42 @@ def test_hermite_follows_a_circle_to_fourth_order():
         mid = np.array([math.cos(s0 + h / 2), math.sin(s0 + h / 2), 0.0])
         errs.append(np.linalg.norm(dense.hermite(X0, V0, X1, V1, h, 0.5)[:, 0] - mid))
         chord_errs.append(np.linalg.norm(0.5 * (X0 + X1)[:, 0] - mid))
-        assert dense.chord_deviation(V0, V1, h)[0] == pytest.approx(chord_errs[-1], rel=0.05)
+        deviation = dense.chord_deviation(X0, X1, V0, V1, h)[0]
+        assert deviation == pytest.approx(chord_errs[-1], rel=0.05)
     order = np.polyfit(np.log(hs), np.log(errs), 1)[0]
     chord_order = np.polyfit(np.log(hs), np.log(chord_errs), 1)[0]
     assert order == pytest.approx(4.0, abs=0.3) and chord_order == pytest.approx(2.0, abs=0.1)
     # the ends are reproduced exactly
     np.testing.assert_array_equal(dense.hermite(X0, V0, X1, V1, h, 0.0), X0)
     np.testing.assert_allclose(dense.hermite(X0, V0, X1, V1, h, 1.0), X1, atol=1e-15)
+
+
+def test_a_straight_path_at_a_changing_pace_lies_on_its_chord():
+    """A ray's speed in the fictitious time changes over a step (as r does): along a
+    straight line at speeds 1 and 3 the cubic runs along its chord, so its deviation is 0
+    (|h (V0 - V1)| / 8 read 0.25 of the step's length); a chord's hit at a fraction of it
+    is where the cubic reaches that fraction (on_cubic), not at that fraction of the
+    step. Bent, the bound holds the cubic's largest distance from the chord's line on a
+    fine grid of t, within a factor 2 of it, for random end velocities (its two terms peak
+    at different t: 1.0-1.64x over 5000 such steps)."""
+    X0, X1 = np.zeros((3, 1)), np.array([[0.0], [2.0], [0.0]])
+    V0, V1 = np.array([[0.0], [1.0], [0.0]]), np.array([[0.0], [3.0], [0.0]])
+    assert dense.chord_deviation(X0, X1, V0, V1, 1.0)[0] == 0.0
+    path = dense.CubicPath(X0, V0, X1, V1, 1.0)
+    t = dense.on_cubic(path, np.array([0]), 0.0, 1.0, np.array([0.5]))
+    assert path.at(t, np.array([0]))[1, 0] == pytest.approx(1.0, abs=1e-8)
+    assert abs(t[0] - 0.5) > 0.05  # the pace differs from the chord's
+    rng = np.random.default_rng(3)
+    X0, X1 = rng.normal(size=(3, 200)), rng.normal(size=(3, 200))
+    V0, V1 = rng.normal(size=(3, 200)), rng.normal(size=(3, 200))
+    bound = dense.chord_deviation(X0, X1, V0, V1, 0.7)
+    ts = np.linspace(0.0, 1.0, 2001)[:, None, None]
+    points = dense.hermite(X0, V0, X1, V1, 0.7, ts)  # (T, 3, M)
+    unit = (X1 - X0) / np.linalg.norm(X1 - X0, axis=0)
+    off = points - X0
+    across = off - np.einsum("tim,im->tm", off, unit)[:, None, :] * unit
+    largest = np.linalg.norm(across, axis=1).max(axis=0)
+    assert np.all(largest <= bound * (1 + 1e-12)) and np.all(bound <= 2.0 * largest)
 
 
 def test_pieces_are_powers_of_two_within_the_allowance():

@@ -203,7 +203,9 @@ def test_runs_that_shared_their_steps_are_traced_again():
     (the companion taking >= 3/4 of the steps, agreeing within 1e-5 of the budget) are traced
     again at half the step: under-reported 3x on at most 1 % of the pixels (before: 3.5 %;
     measured 0.01 %), the true error above a tenth of the tolerance estimated within 3x on
-    >= 85 % (measured 91 %)."""
+    >= 85 % (measured 91 %; 100 % of 714 since a disk block's deviations count the move on
+    the disk, TileSampler._radius_deviations: fewer of its pixels are interpolated and far
+    off, 714 above a tenth of the tolerance where 1877 were, hence > 500 now, not 1000)."""
     scene, cam, ref = _high_spin_disk()
     run = core.render(scene, cam, tolerance_px=0.25, passes=PASSES)
     truth = true_error_px(ref, run, cam.frame.position)
@@ -213,15 +215,16 @@ def test_runs_that_shared_their_steps_are_traced_again():
     assert np.count_nonzero(under) <= 0.01 * truth.size
     big = finite & (truth > 0.025)
     within = big & (est >= truth / 3) & (est <= 3 * truth)
-    assert big.sum() > 1000 and within.sum() >= 0.85 * big.sum()
+    assert big.sum() > 500 and within.sum() >= 0.85 * big.sum()
 
 
-def _disk_view(opacity: float = 1.0):
-    """A Kerr a/M 0.9 hole with a disk to 12 horizon radii, seen 10 deg above its plane
-    across ~70 % of a 128 x 72 frame (the disk preset's framing), on a black sky."""
+def _disk_view(opacity: float = 1.0, inclination: float = 80.0):
+    """A Kerr a/M 0.9 hole with a disk to 12 horizon radii, seen ``inclination`` from its
+    axis (80 deg: 10 deg above its plane across ~70 % of a 128 x 72 frame, the disk
+    preset's framing), on a black sky."""
     spin, size = 0.9, 1.0
     rg = 2 * size / (1 + math.sqrt(1 - spin**2))
-    inc, distance = math.radians(80.0), 48.6
+    inc, distance = math.radians(inclination), 48.6
     camera = core.Camera.perspective(
         position=(0.0, -distance * math.sin(inc), distance * math.cos(inc)),
         look_at=(0, 0, 0), up=(0, 0, 1), fov_deg=39.6, width=128, height=72,
@@ -234,8 +237,11 @@ def _disk_view(opacity: float = 1.0):
 def test_an_opaque_disk_is_interpolated_within_the_tolerance():
     """Blocks on an opaque disk interpolate its radius and g (tested like directions, as
     the angle the block's gradient needs): colours as the dense render's, g within what
-    a pixel's offset makes, and fewer rays than the same disk traced pixel by pixel."""
-    scene, camera = _disk_view()
+    a pixel's offset makes, and fewer rays than the same disk traced pixel by pixel. Seen
+    30 deg above its plane: at the preset's 10 deg a block's move on the disk,
+    foreshortened ~6x on screen, exceeds the 1 px tolerance almost everywhere at this size
+    (80 rays saved), since the deviations count it (TileSampler._radius_deviations)."""
+    scene, camera = _disk_view(inclination=60.0)
     passes = ("redshift", "ending")
     dense = core.render(scene, camera, tolerance=1e-7, passes=passes)  # every centre traced
     run = core.render(scene, camera, tolerance_px=1.0, samples=1, passes=passes)
@@ -246,10 +252,10 @@ def test_an_opaque_disk_is_interpolated_within_the_tolerance():
     assert both.sum() > 0.15 * g.size  # the disk fills a good part of the frame
     # g changes by ~1 % a pixel across the disk here: within the 1 px tolerance
     assert np.percentile(np.abs(g[both] / g_dense[both] - 1), 99) < 0.03
-    scene_traced, _ = _disk_view(opacity=0.999)  # translucent: traced pixel by pixel
+    scene_traced, _ = _disk_view(opacity=0.999, inclination=60.0)  # translucent: traced
     traced = core.render(scene_traced, camera, tolerance_px=1.0, samples=1, passes=passes)
-    # measured: 6603 rays traced, 6172 with the opaque disk's blocks interpolated (its
-    # 4 px blocks at this size; at 1080p its larger ones too)
+    # measured: 2187 rays fewer with the opaque disk's blocks interpolated, of 4043 disk
+    # pixels (its 4 px blocks at this size; at 1080p its larger ones too)
     assert traced.summary["rays"] - run.summary["rays"] > 0.1 * both.sum()
 
 
@@ -412,7 +418,11 @@ def test_an_interpolated_disk_pixels_hit_point_is_within_the_tolerance():
     the interpolated r along the blended hit points' direction, which a lensed block's
     azimuth does not follow: 98 pixels over the tolerance, 13 over 3x, under-read 3x on
     1.9 %. The azimuth is tested as r and g are and the point placed at the interpolated
-    (r, azimuth): 10 over the tolerance, none over 3x, 0.47 % under-read (measured)."""
+    (r, azimuth): 10 over the tolerance, none over 3x, 0.47 % under-read (measured). The
+    disk, seen from 2 rg above its plane, moves a hit point far for a small move on
+    screen: r's and the azimuth's deviations count that move too (over the distance from
+    the camera, as a hit's error is measured): none over the tolerance, none under-read
+    (interpolated disk pixels estimated at 1.0x their error, median; 0.47x before)."""
     board = core.Plane(point=(0, 12, 0), normal=(0, -1, 0), u_axis=(1, 0, 0), extent=(16, 16),
                        color=core.checker(8, 8))  # fmt: skip
     scene = core.Scene(model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"), objects=[board],
@@ -462,3 +472,22 @@ def test_a_sub_pixel_star_moved_by_less_than_the_tolerance_is_not_lost():
         honesty._luminance(ref.rgba) > level, honesty._luminance(run.rgba) > level / 2
     )
     assert count > 500 and lost == 0, (count, lost)
+
+
+def test_hits_far_behind_a_hole_at_long_steps_are_within_the_tolerance():
+    """benchmarks/honesty.py's far_small at 0.05 px: spheres 400 rg behind Schwarzschild,
+    reached in steps at the rule's cap (1.0) that each span a stretch of r. Against dopri5
+    at 1e-10 rad, no pixel is off by more than 3x the tolerance and none above a tenth of
+    it is estimated below a third of its error. A step near geometry whose pace (speed in
+    the fictitious time, ~ r) changes more than PACE_LIMIT (2x) over it is halved; at 3x,
+    4 hit pixels were 0.3-0.5 px off, estimated 0.002 px: the runs at h and 2 h (steps
+    spanning r 2-3x) missed the hit point alike, and Richardson saw nothing."""
+    scene, cam = _honesty().far_small(160, 90)
+    ref = core.render(scene, cam, passes=PASSES, **REFERENCE)
+    run = core.render(scene, cam, tolerance_px=0.05, passes=PASSES)
+    truth = true_error_px(ref, run, cam.frame.position)
+    est = run.passes["error_px"]
+    hit = (run.passes["ending"] == core.ENDING["hit"]) & np.isfinite(truth)
+    assert hit.sum() > 100
+    assert np.nanmax(truth[np.isfinite(truth)]) <= 3 * 0.05
+    assert not np.any(hit & (truth > 0.005) & (est < truth / 3))
