@@ -6,7 +6,10 @@ its two ends. The cubic Hermite interpolant through them,
     X(t) = (2t³ − 3t² + 1) X0 + (t³ − 2t² + t) h V0 + (3t² − 2t³) X1 + (t³ − t²) h V1,
 
 follows the ray to O(h⁴) (the order of the 4th-order methods), where the straight chord
-X0 → X1 is off by up to |h (V0 − V1)| / 8 (second order). Surfaces are found on k chords
+X0 → X1 is off by second order: by the velocities' parts across it (chord_deviation;
+along it the cubic only runs at another pace, as the ray's speed in the fictitious time
+changes with r, and a chord's hit is placed where the cubic reaches it: on_cubic).
+Surfaces are found on k chords
 through points of the cubic, k chosen per ray so that each chord's own deviation, about
 that over k², stays below what the tolerance allows at the ray's distance from the camera.
 The hit found there is then moved to where the method's own partial step meets the surface
@@ -73,28 +76,31 @@ class CubicPath:
                        ts[:, None] if ts.ndim == 1 else ts)  # fmt: skip
 
 
+BISECTIONS = 30
+"""on_cubic's bisection steps (the parameter to 1e-9 of the chord)."""
+
+
 def on_cubic(path: CubicPath, rays: np.ndarray, t0, width: float, fraction) -> np.ndarray:
     """(K,) the cubic's parameters in [t0, t0 + width] (t0 per ray or shared) at which the
     rays' paths reach ``fraction`` of the chord X(t0) -> X(t0 + width), measured along it
     (bisection, BISECTIONS times): where a chord's hit lies on the cubic, which runs along
     its chord at another pace (a ray's speed in the fictitious time changes as r does)."""
+    own = CubicPath(path.X0[:, rays], path.V0[:, rays], path.X1[:, rays], path.V1[:, rays],
+                    path.h[rays])  # fmt: skip
+    every = np.arange(rays.size)
     lo = np.broadcast_to(np.asarray(t0, dtype=np.float64), rays.shape).copy()
-    a, b = path.at(lo, rays), path.at(lo + width, rays)
-    chord = b - a
+    a = own.at(lo, every)
+    chord = own.at(lo + width, every) - a
     with np.errstate(divide="ignore", invalid="ignore"):
         inverse = 1.0 / np.einsum("im,im->m", chord, chord)
     low, high = np.zeros(rays.shape), np.ones(rays.shape)
     for _ in range(BISECTIONS):
         middle = 0.5 * (low + high)
-        along = np.einsum("im,im->m", path.at(lo + middle * width, rays) - a, chord) * inverse
+        along = np.einsum("im,im->m", own.at(lo + middle * width, every) - a, chord) * inverse
         short = along < fraction
         low, high = np.where(short, middle, low), np.where(short, high, middle)
     found = 0.5 * (low + high)
     return lo + np.where(np.isfinite(inverse), found, fraction) * width
-
-
-BISECTIONS = 30
-"""on_cubic's bisection steps (the parameter to 1e-9 of the chord)."""
 
 
 def chord_deviation(
