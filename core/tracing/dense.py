@@ -76,31 +76,36 @@ class CubicPath:
                        ts[:, None] if ts.ndim == 1 else ts)  # fmt: skip
 
 
-BISECTIONS = 30
-"""on_cubic's bisection steps (the parameter to 1e-9 of the chord)."""
+NEWTON_STEPS = 8
+"""on_cubic's Newton steps on its cubic polynomial (from the chord's own fraction)."""
 
 
 def on_cubic(path: CubicPath, rays: np.ndarray, t0, width: float, fraction) -> np.ndarray:
     """(K,) the cubic's parameters in [t0, t0 + width] (t0 per ray or shared) at which the
-    rays' paths reach ``fraction`` of the chord X(t0) -> X(t0 + width), measured along it
-    (bisection, BISECTIONS times): where a chord's hit lies on the cubic, which runs along
-    its chord at another pace (a ray's speed in the fictitious time changes as r does)."""
-    own = CubicPath(path.X0[:, rays], path.V0[:, rays], path.X1[:, rays], path.V1[:, rays],
-                    path.h[rays])  # fmt: skip
-    every = np.arange(rays.size)
-    lo = np.broadcast_to(np.asarray(t0, dtype=np.float64), rays.shape).copy()
-    a = own.at(lo, every)
-    chord = own.at(lo + width, every) - a
+    rays' paths reach ``fraction`` of the chord X(t0) -> X(t0 + width), measured along it:
+    where a chord's hit lies on the cubic, which runs along its chord at another pace (a
+    ray's speed in the fictitious time changes as r does). Newton's method (NEWTON_STEPS)
+    on that measure, a cubic polynomial in t, from the chord's own fraction, kept inside
+    the chord's stretch; where the cubic turns back along its chord, the chord's fraction."""
+    X0, X1 = path.X0[:, rays], path.X1[:, rays]
+    hV0, hV1 = path.h[rays] * path.V0[:, rays], path.h[rays] * path.V1[:, rays]
+    # X(t) = X0 + B t + C t^2 + D t^3 (the Hermite basis of the module's docstring)
+    B, C, D = hV0, 3.0 * (X1 - X0) - 2.0 * hV0 - hV1, 2.0 * (X0 - X1) + hV0 + hV1
+    lo = np.broadcast_to(np.asarray(t0, dtype=np.float64), rays.shape)
+    hi = lo + width
+    a = hermite(X0, hV0, X1, hV1, 1.0, lo)
+    chord = hermite(X0, hV0, X1, hV1, 1.0, hi) - a
     with np.errstate(divide="ignore", invalid="ignore"):
-        inverse = 1.0 / np.einsum("im,im->m", chord, chord)
-    low, high = np.zeros(rays.shape), np.ones(rays.shape)
-    for _ in range(BISECTIONS):
-        middle = 0.5 * (low + high)
-        along = np.einsum("im,im->m", own.at(lo + middle * width, every) - a, chord) * inverse
-        short = along < fraction
-        low, high = np.where(short, middle, low), np.where(short, high, middle)
-    found = 0.5 * (low + high)
-    return lo + np.where(np.isfinite(inverse), found, fraction) * width
+        d = chord / np.einsum("im,im->m", chord, chord)  # along(t) = (X(t) - a) . d
+        b, c, e = (np.einsum("im,im->m", v, d) for v in (B, C, D))
+        start = lo + np.asarray(fraction) * width
+        t = start.copy()
+        target = np.asarray(fraction) + np.einsum("im,im->m", a - X0, d)
+        for _ in range(NEWTON_STEPS):
+            slope = b + t * (2.0 * c + 3.0 * e * t)
+            t = np.clip(t - (t * (b + t * (c + e * t)) - target) / slope, lo, hi)
+        forward = (b + lo * (2.0 * c + 3.0 * e * lo) > 0) & (b + hi * (2.0 * c + 3.0 * e * hi) > 0)
+    return np.where(forward & np.isfinite(t), t, start)
 
 
 def chord_deviation(
