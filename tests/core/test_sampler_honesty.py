@@ -422,7 +422,8 @@ def test_an_interpolated_disk_pixels_hit_point_is_within_the_tolerance():
     disk, seen from 2 rg above its plane, moves a hit point far for a small move on
     screen: r's and the azimuth's deviations count that move too (over the distance from
     the camera, as a hit's error is measured): none over the tolerance, none under-read
-    (interpolated disk pixels estimated at 1.0x their error, median; 0.47x before)."""
+    (interpolated disk pixels estimated at 1.0x their error, median; 0.47x before, when
+    65 pixels, 0.45 %, were under-read: at most 0.1 % now, measured 0)."""
     board = core.Plane(point=(0, 12, 0), normal=(0, -1, 0), u_axis=(1, 0, 0), extent=(16, 16),
                        color=core.checker(8, 8))  # fmt: skip
     scene = core.Scene(model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"), objects=[board],
@@ -436,7 +437,7 @@ def test_an_interpolated_disk_pixels_hit_point_is_within_the_tolerance():
     assert np.count_nonzero(finite & (truth > 1.0)) <= 0.005 * truth.size
     assert not np.any(finite & (truth > 3.0))
     under = finite & (truth > 1e-3) & (est < truth / 3)
-    assert np.count_nonzero(under) <= 0.01 * truth.size
+    assert np.count_nonzero(under) <= 0.001 * truth.size
 
 
 def test_an_interpolated_centre_whose_colour_its_error_could_change_is_traced():
