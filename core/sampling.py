@@ -373,13 +373,16 @@ class TileSampler:
                 np.concatenate([directions, directions]),
                 step=np.repeat([step, COMPANION_RATIO * step], n),
                 cancel=cancel,
+                clearance=np.repeat([True, False], n),  # the companion's is never read
             )
             rays, coarse = both.take(slice(0, n)), both.take(slice(n, None))
         else:  # the companion needs no differentials: a batch of its own costs less than
             # carrying them through its half of a shared batch (benchmarks/frame.py)
             rays = self.tracer.trace(origins, directions, step=step, cancel=cancel, tangents=seen)
-            coarse = self.tracer.trace(origins, directions, step=COMPANION_RATIO * step,
-                                       cancel=cancel)  # fmt: skip
+            coarse = self.tracer.trace(
+                origins, directions, step=COMPANION_RATIO * step, cancel=cancel,
+                clearance=np.zeros(n, dtype=bool),
+            )  # fmt: skip
         self.error_rays += n
         assert self.tracer.order is not None  # a companion run: the scene is curved
         error = richardson_error(rays, coarse, origins, self.tracer.order)

@@ -269,6 +269,7 @@ class Tracer:
         step: float | np.ndarray | None = None,
         cancel: Callable[[], bool] | None = None,
         tangents: np.ndarray | None = None,
+        clearance: np.ndarray | None = None,
     ) -> RayResults:
         """Trace rays (N, 3) from world origins along unit world directions, at ``step``
         (the tracer's by default; one for all, or (N,) per ray: runs at several steps share
@@ -277,7 +278,9 @@ class Tracer:
         direction gets its derivatives too (``RayResults.sky_jacobian``) and its image's
         magnification (``RayResults.magnification``, per the camera's solid angle: a moving
         camera's own) (core/tracing/differentials.py; ValueError where the method cannot
-        carry them: ``supports_tangents``)."""
+        carry them: ``supports_tangents``). Where the tracer watches the geometry,
+        ``clearance`` (N,) bool says which rays' paths record it inside the model's region
+        (default all; the others' stays inf there: a companion run's is never read)."""
         n = origins.shape[0]
         if np.ndim(step) and np.shape(step) != (n,):
             raise ValueError(f"step: one for all rays or one per ray ({n}), got {np.shape(step)}")
@@ -290,7 +293,7 @@ class Tracer:
             if tangents is not None:
                 out.sky_jacobian[:] = static_tangents
         else:
-            self._trace_curved(origins, directions, step, cancel, static_tangents, out)
+            self._trace_curved(origins, directions, step, cancel, static_tangents, out, clearance)
         if tangents is not None:  # per the camera's own solid angle (a moving one's)
             out.sky_jacobian[out.ending != ENDING["escaped"]] = np.nan
             out.magnification = magnification(tangents, out.sky_jacobian)
@@ -313,7 +316,9 @@ class Tracer:
             out.sky_jacobian = np.full(tangents.shape, np.nan)
         return out, tangents
 
-    def _trace_curved(self, origins, directions, step, cancel, tangents, out) -> None:
+    def _trace_curved(
+        self, origins, directions, step, cancel, tangents, out, clearance=None
+    ) -> None:
         """Rays straight to the model's region, then integrated through it (``trace``)."""
         assert self.region is not None
         X = self._to_local(origins)
@@ -330,9 +335,10 @@ class Tracer:
             if np.ndim(h):
                 h = np.asarray(h, dtype=np.float64)[todo]
             local_tangents = None if tangents is None else tangents[todo] @ self.rotation
+            watch = None if clearance is None else np.asarray(clearance, dtype=bool)[todo]
             self._integrate(
                 todo, start[todo].T.copy(), D[todo].T.copy(), out, h, cancel, camera,
-                local_tangents,
+                local_tangents, watch,
             )  # fmt: skip
 
     @property
@@ -400,10 +406,12 @@ class Tracer:
 
     # --- the integration ---------------------------------------------------------------
     def _integrate(
-        self, rows, X, D, out: RayResults, h: float | np.ndarray, cancel, camera, tangents=None
-    ):
+        self, rows, X, D, out: RayResults, h: float | np.ndarray, cancel, camera, tangents=None,
+        watch=None,
+    ):  # fmt: skip
         """Follow rays from local positions X (3, M) along local directions D (3, M) (with
-        ``tangents`` (M, k, 3): the directions' derivatives, carried along).
+        ``tangents`` (M, k, 3): the directions' derivatives, carried along; ``watch`` (M,)
+        bool: the rays whose clearance is recorded, default all).
 
         Per step, everything is done in the model's local frame on (3, M) arrays; world
         coordinates are computed only for the rays that need them: segments near geometry
@@ -425,7 +433,8 @@ class Tracer:
              "h": np.broadcast_to(np.asarray(h, dtype=np.float64), rows.shape).copy(),
              "h0": np.broadcast_to(np.asarray(h, dtype=np.float64), rows.shape).copy(),
              "heading": D / np.linalg.norm(D, axis=0),  # the last chord's direction
-             "streak": np.zeros(rows.size, dtype=np.int64)},  # steps in a row off the cone
+             "streak": np.zeros(rows.size, dtype=np.int64),  # steps in a row off the cone
+             "watch": np.ones(rows.size, dtype=bool) if watch is None else watch},
         )  # fmt: skip
 
         def step(batch: Batch):
@@ -504,7 +513,8 @@ class Tracer:
                 S, X = Q[chart.offset :], np.where(redo, X_prev, X)
                 paths, going = paths.without(redo), ok & ~redo
         if self._watch is not None:  # the steps within the margin of the objects' box
-            r = np.flatnonzero(segment_overlaps(X_prev.T, X.T, *self._watch_near))
+            near = segment_overlaps(X_prev.T, X.T, *self._watch_near)
+            r = np.flatnonzero(near & arrays["watch"])
             if r.size:
                 world = [self._to_world(x[:, r].T) for x in (X_prev, X, camera)]
                 *bends, slack = _bends(paths, X.shape[1])
