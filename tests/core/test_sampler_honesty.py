@@ -492,3 +492,29 @@ def test_hits_far_behind_a_hole_at_long_steps_are_within_the_tolerance():
     assert hit.sum() > 100
     assert np.nanmax(truth[np.isfinite(truth)]) <= 3 * 0.05
     assert not np.any(hit & (truth > 0.005) & (est < truth / 3))
+
+
+def test_a_trace_records_clearance_only_for_the_rays_it_is_asked_to():
+    """The error pass's companion run records no clearance (the sampler never reads it:
+    Tracer.trace(clearance=mask)): rays left out keep an infinite clearance inside the
+    region, the others the same as in a trace that records every ray's, and every ray's
+    ending and hit point are those of the full trace."""
+    from core.render import TRACE_SHARE, _scene_extent
+    from core.trace import TraceOptions, Tracer
+
+    scene, cam = _thin_front()
+    jj, ii = np.mgrid[20:70:5, 30:130:5]
+    xy = np.stack([ii.ravel() + 0.5, jj.ravel() + 0.5], axis=1)
+    origins, directions = cam.rays_at(xy)
+    tracer = Tracer(
+        scene, TraceOptions(tolerance=TRACE_SHARE * cam.pixel_angle()), _scene_extent(scene, cam)
+    )
+    tracer.watch_geometry(0.3)
+    full = tracer.trace(origins, directions)
+    mask = np.arange(xy.shape[0]) % 2 == 0
+    part = tracer.trace(origins, directions, clearance=mask)
+    assert np.isfinite(full.clearance[~mask]).sum() > 20  # the left-out rays passed objects
+    assert np.all(np.isinf(part.clearance[~mask]))
+    np.testing.assert_array_equal(part.clearance[mask], full.clearance[mask])
+    np.testing.assert_array_equal(part.ending, full.ending)
+    np.testing.assert_array_equal(part.position, full.position)
