@@ -932,12 +932,12 @@ class TileSampler:
         cell_j = np.clip(np.floor(y).astype(np.int64), 0, blocks.block.shape[0] - 1)
         cell_i = np.clip(np.floor(x).astype(np.int64), 0, blocks.block.shape[1] - 1)
         b = blocks.block[cell_j, cell_i]
-        inside = np.flatnonzero(b >= 0)
-        if inside.size:
-            self._interpolate(nodes, blocks, b[inside], y[inside], x[inside], out, inside)
         on_node = (y == np.round(y)) & (x == np.round(x))
         nj, ni = np.round(y).astype(np.int64), np.round(x).astype(np.int64)
         traced = on_node & nodes.traced[np.clip(nj, 0, None), np.clip(ni, 0, None)]
+        inside = np.flatnonzero((b >= 0) & ~traced)  # a traced node's own stands
+        if inside.size:
+            self._interpolate(nodes, blocks, b[inside], y[inside], x[inside], out, inside)
         t = np.flatnonzero(traced)
         out.rgba[t] = nodes.rgba[nj[t], ni[t]]
         out.ending[t] = nodes.ending[nj[t], ni[t]]
@@ -962,15 +962,17 @@ class TileSampler:
         weights = [(1 - u) * (1 - v), u * (1 - v), (1 - u) * v, u * v]
         corners = [(bj, bi), (bj, bi + s), (bj + s, bi), (bj + s, bi + s)]
         width = nodes.traced.shape[1]
-        flat = [j * width + i for j, i in corners]  # a node's index in a flattened field
+        first = bj * width + bi  # a node's index in a flattened field
+        flat = [first, first + s, first + s * width, first + s * (width + 1)]
 
         def blend(field, at=slice(None)):
             spread = (-1,) + (1,) * (field.ndim - 2)  # a weight per point, over its values
             rows = field.reshape(-1, *field.shape[2:])
-            return sum(
-                (wk[at] if field.ndim == 2 else wk[at].reshape(spread)) * rows[k[at]]
-                for wk, k in zip(weights, flat, strict=True)
-            )
+            total = None
+            for wk, k in zip(weights, flat, strict=True):
+                term = (wk[at] if field.ndim == 2 else wk[at].reshape(spread)) * rows[k[at]]
+                total = term if total is None else total.__iadd__(term)
+            return total
 
         d = blend(nodes.direction)
         d = d / np.linalg.norm(d, axis=1, keepdims=True)
@@ -1020,8 +1022,9 @@ class TileSampler:
         out.ending[rows] = ending
         shape = _error_shape(u, v)
         interpolation = np.einsum("mk,mk->m", blocks.deviation[b], shape)
+        summed = np.matmul(shape[:, None, :], blocks.vectors[b])[:, 0]  # (M, 3)
         with np.errstate(invalid="ignore"):
-            as_vector = np.linalg.norm(np.einsum("mkc,mk->mc", blocks.vectors[b], shape), axis=1)
+            as_vector = np.sqrt(np.einsum("mc,mc->m", summed, summed))
         interpolation = np.where(np.isfinite(as_vector), as_vector, interpolation)
         out.error[rows] = blend(nodes.error[..., None])[:, 0] + interpolation
 
