@@ -136,12 +136,17 @@ times the other, the surface folds or hides part of itself between them (a depth
 the smaller is the footprint (``screen_differences`` with ``jumps``)."""
 
 
-def screen_differences(values: np.ndarray, label: np.ndarray, jumps: bool = False) -> np.ndarray:
+def screen_differences(
+    values: np.ndarray, label: np.ndarray, jumps: bool = False, rows: np.ndarray | None = None
+) -> np.ndarray:
     """Derivatives (H, W, 2, c) along image x and y of a map of ``values`` (H, W, c) by
     differences between neighbours of the same ``label`` (H, W; below 0: none): central
     where both neighbours share it, one-sided towards the one that does, NaN where neither
     (screen-space derivatives, as a GPU takes them); with ``jumps``, the smaller one-sided
-    difference where the two differ more than DEPTH_JUMP-fold."""
+    difference where the two differ more than DEPTH_JUMP-fold. With ``rows`` (flat pixel
+    indices (K,)), only theirs (K, 2, c): the same numbers."""
+    if rows is not None:
+        return _differences_at(values, label, jumps, rows)
     out = []
     for axis in (1, 0):
         step = np.diff(values, axis=axis)
@@ -153,21 +158,46 @@ def screen_differences(values: np.ndarray, label: np.ndarray, jumps: bool = Fals
         before = np.pad(step, pad, constant_values=np.nan)
         pad[axis] = (0, 1)
         after = np.pad(step, pad, constant_values=np.nan)
-        central = 0.5 * (before + after)
-        one_sided = np.where(np.isnan(before), after, before)
-        if jumps:
-            nb, na = np.linalg.norm(before, axis=-1), np.linalg.norm(after, axis=-1)
-            jump = (np.maximum(nb, na) > DEPTH_JUMP * np.minimum(nb, na))[..., None]
-            central = np.where(jump, np.where((nb <= na)[..., None], before, after), central)
-        out.append(np.where(np.isnan(central), one_sided, central))
+        out.append(_derivative(before, after, jumps))
     return np.stack(out, axis=-2)
 
 
-def map_footprint(directions: np.ndarray, sky: np.ndarray) -> np.ndarray:
+def _differences_at(values: np.ndarray, label: np.ndarray, jumps: bool, rows) -> np.ndarray:
+    """screen_differences at the flat pixels ``rows`` alone: (K, 2, c)."""
+    height, width = label.shape
+    flat, labels = values.reshape(height * width, -1), label.ravel()
+    j, i = np.divmod(rows, width)
+    out = []
+    for at, size, stride in ((i, width, 1), (j, height, width)):
+        sides = []
+        for offset, inside in ((-stride, at > 0), (stride, at < size - 1)):
+            other = np.where(inside, rows + offset, rows)
+            same = inside & (labels[other] == labels[rows]) & (labels[rows] >= 0)
+            step = flat[other] - flat[rows] if offset > 0 else flat[rows] - flat[other]
+            sides.append(np.where(same[:, None], step, np.nan))
+        out.append(_derivative(*sides, jumps))
+    return np.stack(out, axis=-2)
+
+
+def _derivative(before: np.ndarray, after: np.ndarray, jumps: bool) -> np.ndarray:
+    """A derivative (..., c) from the one-sided differences before and after a pixel
+    (NaN: none): their mean, else the one there is (``screen_differences``)."""
+    central = 0.5 * (before + after)
+    one_sided = np.where(np.isnan(before), after, before)
+    if jumps:
+        nb, na = np.linalg.norm(before, axis=-1), np.linalg.norm(after, axis=-1)
+        jump = (np.maximum(nb, na) > DEPTH_JUMP * np.minimum(nb, na))[..., None]
+        central = np.where(jump, np.where((nb <= na)[..., None], before, after), central)
+    return np.where(np.isnan(central), one_sided, central)
+
+
+def map_footprint(
+    directions: np.ndarray, sky: np.ndarray, rows: np.ndarray | None = None
+) -> np.ndarray:
     """Footprints (H, W, 2, 3) from a map of pixel centres' unit ``directions`` (H, W, 3)
     where they see the sky (``sky`` (H, W)): screen_differences among the sky's pixels (no
-    ray differentials needed)."""
-    return screen_differences(directions, np.where(sky, 0, -1))
+    ray differentials needed); with ``rows``, only theirs (K, 2, 3)."""
+    return screen_differences(directions, np.where(sky, 0, -1), rows=rows)
 
 
 def span_differences(

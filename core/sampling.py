@@ -823,19 +823,19 @@ class TileSampler:
         if self.background.detail >= self.pixel_angle:
             sky &= shaky
         if sky.any():
-            slope = map_footprint(centre.direction.reshape(shape + (3,)), escaped.reshape(shape))
             rows = np.flatnonzero(sky)
-            shaky[rows] = self._shaky_sky(
-                centre.direction[rows], slope.reshape(-1, 2, 3)[rows], move[rows]
+            slope = map_footprint(
+                centre.direction.reshape(shape + (3,)), escaped.reshape(shape), rows
             )
+            shaky[rows] = self._shaky_sky(centre.direction[rows], slope, move[rows])
         surface = shaky & hit
         if surface.any():
             label = np.where(hit, centre.object_id, -1).reshape(shape)
-            slope = screen_differences(centre.position.reshape(shape + (3,)), label, jumps=True)
             rows = np.flatnonzero(surface)
-            shaky[rows] = self._shaky_surface(
-                centre, rows, slope.reshape(-1, 2, 3)[rows], move[rows], jj, ii
+            slope = screen_differences(
+                centre.position.reshape(shape + (3,)), label, jumps=True, rows=rows
             )
+            shaky[rows] = self._shaky_surface(centre, rows, slope, move[rows], jj, ii)
         return np.flatnonzero(shaky)
 
     def _shaky_sky(self, d: np.ndarray, slope: np.ndarray, move: np.ndarray) -> np.ndarray:

@@ -116,7 +116,8 @@ def test_the_checker_is_its_average_over_each_footprint():
 def test_surface_footprints_are_neighbours_differences_on_the_same_object():
     """surface_footprint: central differences of a smooth map within one object; one-sided
     at another object's edge; the smaller side at a depth jump within one object (it folds
-    behind itself); NaN with no neighbour on the same object."""
+    behind itself); NaN with no neighbour on the same object. screen_differences at some
+    pixels alone (``rows``: the sampler's colour test) gives their numbers bit for bit."""
     h, w = 5, 6
     jj, ii = np.mgrid[0:h, 0:w].astype(float)
     position = np.stack([ii**2, jj, np.zeros_like(ii)], axis=-1)
@@ -133,6 +134,11 @@ def test_surface_footprints_are_neighbours_differences_on_the_same_object():
     assert np.all(np.isnan(out[4, 0]))
     whole = screen_differences(position, label, jumps=True)
     np.testing.assert_array_equal(whole, out)
+    rows = np.array([0, 5, 8, 14, 16, 23, 24, 29])  # corners, edges, folds, the lone pixel
+    for jumps in (True, False):  # the pixels asked for alone: the same numbers
+        every = screen_differences(position, label, jumps=jumps).reshape(-1, 2, 3)
+        some = screen_differences(position, label, jumps=jumps, rows=rows)
+        np.testing.assert_array_equal(some, every[rows])
 
 
 def _board(cells: int) -> core.Plane:
