@@ -95,6 +95,9 @@ SAMPLE_POINTS = 1 << 16
 """Anti-aliasing shades at most this many sub-pixel points (pixels x their samples) at once:
 its memory does not grow with ``samples`` (128x96 at 1024 samples: 1.3 GiB before, in one
 batch; ~0.5 kB a traced point)."""
+INTERPOLATE_POINTS = 1 << 15
+"""Points are interpolated this many at a time: their temporaries stay in the cache and
+the allocator's reused memory (a tile's 500 000 centres at once took 1.5x as long)."""
 FILTERS = ("box", "blackman_harris")
 """Reconstruction filters: the pixel's square, or Cycles' default (width ``filter_size``)."""
 CLEARANCE = 1.0
@@ -936,8 +939,9 @@ class TileSampler:
         nj, ni = np.round(y).astype(np.int64), np.round(x).astype(np.int64)
         traced = on_node & nodes.traced[np.clip(nj, 0, None), np.clip(ni, 0, None)]
         inside = np.flatnonzero((b >= 0) & ~traced)  # a traced node's own stands
-        if inside.size:
-            self._interpolate(nodes, blocks, b[inside], y[inside], x[inside], out, inside)
+        for start in range(0, inside.size, INTERPOLATE_POINTS):
+            part = inside[start : start + INTERPOLATE_POINTS]
+            self._interpolate(nodes, blocks, b[part], y[part], x[part], out, part)
         t = np.flatnonzero(traced)
         out.rgba[t] = nodes.rgba[nj[t], ni[t]]
         out.ending[t] = nodes.ending[nj[t], ni[t]]
