@@ -175,7 +175,7 @@ def _differences_at(values: np.ndarray, label: np.ndarray, jumps: bool, rows) ->
             same = inside & (labels[other] == labels[rows]) & (labels[rows] >= 0)
             step = flat[other] - flat[rows] if offset > 0 else flat[rows] - flat[other]
             sides.append(np.where(same[:, None], step, np.nan))
-        out.append(_derivative(*sides, jumps))
+        out.append(_derivative(sides[0], sides[1], jumps))
     return np.stack(out, axis=-2)
 
 
