@@ -138,30 +138,25 @@ class LogarithmicSplit(SplitSystem):
             return dual.Dual(f.v, {0: f.d[0] * rho2.d[0]})
         return self._radial_factor(rho2)
 
-    def _radial_factor(self, rho2):
-        """f of ``_force_factor`` at ρ² (an array, or a Dual)."""
+    def _radial_factor(self, rho2, with_slope: bool = False):
+        """f of ``_force_factor`` at ρ² (an array, or a Dual); ``with_slope`` (arrays):
+        (f, df/dρ²), the slope written out: with u = M/2ρ, f = −K u / ρ² where
+        K = 2 n n'/(n² − 1), and du/dρ² = −u / 2ρ², so df/dρ² = (u / ρ⁴) K (u K'/K / 2 + 3/2),
+        with K'/K = n'/n + n''/n' − K = 5/a + 3/b − 1/(2 − u) − K (a = 1 + u, b = 1 − u; n
+        of index_and_slope); NaN inside ρ = M/2 (the tangent kick's: a scalar dual through
+        index_and_slope gives the same to rounding)."""
         with np.errstate(all="ignore"):
             u = 0.5 * self.model.mass / dual.sqrt(rho2)
             n, dn_du = index_and_slope(u)
-            factor = (2.0 * n / (n * n - 1.0)) * dn_du * (-u / rho2)
-        return dual.where(dual.value_of(u) < 1.0, factor, np.nan)
-
-    def _radial_slope(self, rho2: np.ndarray) -> np.ndarray:
-        """df/dρ² of ``_radial_factor``'s f, written out (arrays): with u = M/2ρ, a = 1 + u,
-        b = 1 − u, f = −K u / ρ² where K = 2 n n'/(n² − 1) = 2 a⁵ (4 − 2u) / (b (a⁶ − b²)),
-        and du/dρ² = −u / 2ρ², so df/dρ² = (u / ρ⁴) (K' u / 2 + 3 K / 2) with
-        K'/K = 5/a − 1/(2 − u) + 1/b − (6 a⁵ + 2 b)/(a⁶ − b²); NaN inside ρ = M/2 (the
-        tangent kick's: a scalar dual through index_and_slope gives the same to rounding)."""
-        with np.errstate(all="ignore"):
-            u = 0.5 * self.model.mass / np.sqrt(rho2)
-            a, b = 1.0 + u, 1.0 - u
-            a2 = a * a
-            a5 = a2 * a2 * a
-            rest = a5 * a - b * b
-            K = 2.0 * a5 * (4.0 - 2.0 * u) / (b * rest)
-            ratio = 5.0 / a - 1.0 / (2.0 - u) + 1.0 / b - (6.0 * a5 + 2.0 * b) / rest
-            slope = (u / (rho2 * rho2)) * K * (0.5 * ratio * u + 1.5)
-        return np.where(u < 1.0, slope, np.nan)
+            K = (2.0 * n / (n * n - 1.0)) * dn_du
+            factor = K * (-u / rho2)
+            if with_slope:
+                ratio = 5.0 / (1.0 + u) + 3.0 / (1.0 - u) - 1.0 / (2.0 - u) - K
+                slope = (u / (rho2 * rho2)) * K * (0.5 * ratio * u + 1.5)
+        inside = dual.value_of(u) < 1.0
+        if with_slope:
+            return np.where(inside, factor, np.nan), np.where(inside, slope, np.nan)
+        return dual.where(inside, factor, np.nan)
 
     def _force(self, Q: np.ndarray) -> np.ndarray:
         """∇ln(n² − 1) = 2 n ∇n / (n² − 1), (3, N)."""
@@ -170,13 +165,14 @@ class LogarithmicSplit(SplitSystem):
     def kick(self, Q, P, t) -> None:
         """Exact flow of −ln B over t (q fixed): p += t ∇ln(n² − 1). In place, row by row
         (arrays), or on core.dual.DualRows with its tangent map written out: c = t f(ρ²),
-        dc = t f'(ρ²) 2 q·dq (f' written out: ``_radial_slope``), dp += dc q + c dq."""
+        dc = t f'(ρ²) 2 q·dq (f' written out: ``_radial_factor``), dp += dc q + c dq."""
         if isinstance(Q, DualRows):
             q, dq = Q.value, Q.tangent
-            rho2 = np.einsum("ij,ij->j", q, q)
-            c = t * self._radial_factor(rho2)
-            dc = (2.0 * t * self._radial_slope(rho2)) * np.einsum("ij,kij->kj", q, dq)
-            P.tangent += dc[:, None, :] * q + c * dq
+            f, slope = self._radial_factor(np.einsum("ij,ij->j", q, q), with_slope=True)
+            c = t * f
+            dc = (2.0 * t * slope) * np.einsum("ij,kij->kj", q, dq)
+            P.tangent += c * dq
+            P.tangent += dc[:, None, :] * q
             P.value += c * q
             return
         c = t * self._force_factor(Q)
@@ -192,7 +188,8 @@ class LogarithmicSplit(SplitSystem):
             A = 0.5 * np.einsum("ij,ij->j", p, p) - self.H0
             c = t / A
             dc = (-c / A) * np.einsum("ij,kij->kj", p, dp)
-            Q.tangent += dc[:, None, :] * p + c * dp
+            Q.tangent += c * dp
+            Q.tangent += dc[:, None, :] * p
             Q.value += c * p
             return
         c = t / (0.5 * (P[0] * P[0] + P[1] * P[1] + P[2] * P[2]) - self.H0)
