@@ -97,7 +97,8 @@ its memory does not grow with ``samples`` (128x96 at 1024 samples: 1.3 GiB befor
 batch; ~0.5 kB a traced point)."""
 INTERPOLATE_POINTS = 1 << 15
 """Points are interpolated this many at a time: their temporaries stay in the cache and
-the allocator's reused memory (a tile's 500 000 centres at once took 1.5x as long)."""
+the allocator's reused memory (a 1080p tile's ~480 000 centres at once: the Kerr board's
+Preview frame 9.45-9.67 s against 8.51-8.53 s, 2 workers)."""
 FILTERS = ("box", "blackman_harris")
 """Reconstruction filters: the pixel's square, or Cycles' default (width ``filter_size``)."""
 CLEARANCE = 1.0
@@ -975,7 +976,10 @@ class TileSampler:
             total = None
             for wk, k in zip(weights, flat, strict=True):
                 term = (wk[at] if field.ndim == 2 else wk[at].reshape(spread)) * rows[k[at]]
-                total = term if total is None else total.__iadd__(term)
+                if total is None:
+                    total = term
+                else:
+                    total += term
             return total
 
         d = blend(nodes.direction)
