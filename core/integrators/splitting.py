@@ -76,6 +76,11 @@ class SplitSystem(System):
         """Exact flow of the momentum part T over t (p fixed)."""
         raise NotImplementedError
 
+    def gauge_tangents(self, Q: np.ndarray, P: np.ndarray, dQ: np.ndarray, dP: np.ndarray) -> None:
+        """In place on the tangents (k, n, N) a state (Q, P) starts with: make them the
+        cheapest to carry that give the same derivatives of what is read from them (by
+        default they are left as they are)."""
+
     def value_gradient_soa(self, Q: np.ndarray, P: np.ndarray) -> tuple[Any, Any, Any]:
         """(K, dK/dq, dK/dp) from value_soa and gradient_soa."""
         dq, dp = self.gradient_soa(Q, P)
@@ -213,7 +218,9 @@ class Splitting(Method):
                 f"flows carry derivatives; {type(H).__name__} has none: they are available "
                 "for Schwarzschild, Kerr with |a| < M and flat space"
             )
-        return (*state[:2], as_soa(dQ), as_soa(dP))
+        dQ, dP = as_soa(dQ), as_soa(dP)
+        H.gauge_tangents(state[0], state[1], dQ, dP)
+        return (*state[:2], dQ, dP)
 
     def with_options(self, **options: Any) -> Splitting:
         """No options: the method itself."""

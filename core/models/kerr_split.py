@@ -167,7 +167,7 @@ class KerrBoyerLindquist(Hamiltonian):
             dV_L = -a * pr / t.delta + a * E
         return V, sigma, (dV_s, dV_t, dV_E, dV_L), dsig
 
-    def curvature(self, Q: np.ndarray, P: np.ndarray, H0=0.0, sines=None):
+    def curvature(self, Q: np.ndarray, P: np.ndarray, H0=0.0, sines=None, energy=True):
         """V, its gradient (dV/ds, dV/dtheta, dV/dE, dV/dL) (``parts``) and its Hessian in
         (s, theta, E, L), for the kick's tangent map (SqrtSplit.kick on rows with
         derivatives): (V, gradient, H) with H the dict of second derivatives by pairs ("ss",
@@ -176,7 +176,8 @@ class KerrBoyerLindquist(Hamiltonian):
         Delta = r'^2 and q = P / Delta, ``parts``' gradient reads V_s = 2 q r r' E
         - q^2 Delta_s / 2 + H0 Sigma_s, V_theta = -a^2 sin cos (E^2 + 2 H0),
         V_E = q (r^2 + a^2) + a L - a^2 E sin^2 theta, V_L = a (E - q): differentiated
-        once more here."""
+        once more here. Without ``energy`` the pairs with E ("sE", "tE", "EL") are left
+        out (tangents along which E does not vary)."""
         terms = self._terms(Q, P, sines)
         V, _, gradient, _ = self._parts(terms, H0, True, with_sigma=False)
         E, a, b = terms.E, self.a, self.b
@@ -184,22 +185,21 @@ class KerrBoyerLindquist(Hamiltonian):
         st, ct, delta, ra2 = terms.st, terms.ct, terms.delta, terms.ra2
         with np.errstate(divide="ignore", invalid="ignore"):
             q = terms.pr / delta
-            delta_s, delta_ss = 2.0 * r1 * r2, 2.0 * (r2 * r2 + r1 * r1)
-            rr1 = r * r1
+            delta_s, half_delta_ss = 2.0 * r1 * r2, r2 * r2 + r1 * r1
+            rr1, sigma_ss = r * r1, r1 * r1 + r * r2  # Sigma_ss / 2
             q_s = (2.0 * rr1 * E - q * delta_s) / delta
-            q_E = ra2 / delta
             hessian = {
-                "ss": 2.0 * E * (q_s * rr1 + q * (r1 * r1 + r * r2))
-                - q * q_s * delta_s
-                - 0.5 * q * q * delta_ss
-                + H0 * 2.0 * (r1 * r1 + r * r2),
-                "sE": 2.0 * rr1 * (q + E * q_E) - q * q_E * delta_s,
+                "ss": 2.0 * (E * (q_s * rr1 + q * sigma_ss) + H0 * sigma_ss)
+                - q * (q_s * delta_s + q * half_delta_ss),
                 "sL": -a * q_s,
                 "tt": -a * a * (ct * ct - st * st) * (E * E + 2.0 * H0),
-                "tE": -2.0 * a * a * E * st * ct,
-                "EL": a * (1.0 - ra2 / delta),
                 "LL": a * a / delta,
             }
+            if energy:
+                q_E = ra2 / delta
+                hessian["sE"] = 2.0 * rr1 * (q + E * q_E) - q * q_E * delta_s
+                hessian["tE"] = -2.0 * a * a * E * st * ct
+                hessian["EL"] = a * (1.0 - ra2 / delta)
         return V, gradient, hessian
 
     @staticmethod
@@ -289,6 +289,17 @@ class SqrtSplit(SplitSystem):
         """The split for the rays keep (per-ray H0)."""
         return SqrtSplit(self.model, self.H0 if self.H0.ndim == 0 else self.H0[keep])
 
+    def gauge_tangents(self, Q: np.ndarray, P: np.ndarray, dQ: np.ndarray, dP: np.ndarray) -> None:
+        """Take out of the tangents their part along (0, p): Λ is homogeneous of degree 1
+        in p (for light, H0 = 0), so its flows (and a step's map) carry (0, p) to (0, p'),
+        which moves no position and no direction a ray leaves along. Then dE = -dp_t = 0
+        on every ray, E is conserved, and the kick and the drift skip E's terms."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            scale = dP[:, 0] / P[0]  # (k, N)
+        scale[~np.isfinite(scale)] = 0.0
+        dP -= scale[:, None, :] * P
+        dP[:, 0] = 0.0
+
     def _root_T(self, Q: np.ndarray, P: np.ndarray, sines=None):
         """sqrt(T + c), dT/dtheta and E (``sines`` as ``kinetic``'s)."""
         T, dT_t = self.model.kinetic(Q, P, sines)
@@ -307,8 +318,7 @@ class SqrtSplit(SplitSystem):
         n on the unit sphere turns about the angular momentum J at |J| / sqrt(T + c)."""
         sines = self._sines(Q)  # theta's, shared: sin and cos cost the most here
         if isinstance(Q, DualRows):
-            c, dc = self._drift_tangents(Q, P, t, sines)
-            self._keep_sines(Q, sphere_geodesic_tangents(Q, P, c, dc, sines))
+            self._keep_sines(Q, self._drift_tangents(Q, P, t, sines))
             return
         root, _, E = self._root_T(Q, P, sines)
         c = t / root
@@ -339,29 +349,27 @@ class SqrtSplit(SplitSystem):
             self._kept = (Q, theta.copy(), sines)
 
     def _drift_tangents(self, Q: DualRows, P: Any, t, sines) -> tuple[np.ndarray, np.ndarray]:
-        """The drift's move of s with its tangent map, written out (R = sqrt(T + c0 E^2),
-        c = t / R, dc = -c dR / R, dR = (dT + 2 c0 E dE) / (2 R)), and t's move (its
-        derivative not carried: see the module); -> (c, dc), for the sphere's turn
-        (sphere_geodesic_tangents); ``sines``: (sin theta, cos theta)."""
+        """The drift and its tangent map, written out: R = sqrt(T + c0 E^2) with T = (p_s^2
+        + |J|^2) / 2, the turn c = t / R with dc = -c dR / R, R dR = p_s dp_s + |J| d|J|
+        + 2 c0 E dE (E's term only where E varies: ``gauge_tangents``), s's move, then the
+        sphere's turn (sphere_geodesic_tangents); t's derivative is not carried (see the
+        module). ``sines``: (sin theta, cos theta). -> (sin theta', cos theta')."""
         q, p, dq, dp = Q.value, P.value, Q.tangent, P.tangent
-        E, L, p_s, p_theta = -p[0], p[3], p[1], p[2]
-        st, ct = sines
+        E, p_s = -p[0], p[1]
+        start = sphere_start(p[2], p[3], sines, dq[:, 2], dp[:, 2], dp[:, 3])
         with np.errstate(divide="ignore", invalid="ignore"):
-            spin = L / (st * st)
-            l2 = spin * L
-            root = np.sqrt(0.5 * (p_s * p_s + p_theta * p_theta + l2) + self.c0 * E * E)
+            root = np.sqrt(0.5 * (p_s * p_s + start.size2) + self.c0 * E * E)
             c = t / root
-            rate = -0.5 * c / (root * root)
+            rate = -0.5 * c / (root * root)  # dc = rate (R dR) 2 / 2
             dc = (rate * p_s) * dp[:, 1]
-            dc += (rate * p_theta) * dp[:, 2]
-            dc += (rate * spin) * dp[:, 3]
-            dc -= (rate * l2 * ct / st) * dq[:, 2]
-            dc -= (rate * 2.0 * self.c0 * E) * dp[:, 0]  # dE = -dp_t
+            dc += (rate * start.size) * start.along  # |J| d|J|
+            if dp[:, 0].any():  # dE = -dp_t
+                dc -= (rate * 2.0 * self.c0 * E) * dp[:, 0]
         dq[:, 1] += p_s * dc
         dq[:, 1] += c * dp[:, 1]
         q[0] -= c * (2.0 * self.c0 * E)
         q[1] += c * p_s
-        return c, dc
+        return sphere_geodesic_tangents(Q, P, c, dc, start)
 
     def kick(self, Q: np.ndarray, P: np.ndarray, t) -> None:
         """Exact flow of -2 sqrt(V + c) over t ((s, theta), E, L fixed). On rows with
@@ -381,32 +389,37 @@ class SqrtSplit(SplitSystem):
         so with c = t w, w = (V + c0 E^2)^(-1/2) and the gradient and Hessian of V
         (KerrBoyerLindquist.curvature), each increment's derivative is dc x + c dx, with
         dc = -t w^3 (dV + 2 c0 E dE) / 2; the per-ray coefficients are formed first, so each
-        direction costs one product and one sum per term. t's derivative is not carried
-        (see the module). The same numbers as the generic rows (core.dual) to rounding."""
+        direction costs one product and one sum per term. E's terms are skipped where E
+        does not vary (``gauge_tangents``); t's derivative is not carried (see the module).
+        The same numbers as the generic rows (core.dual) to rounding."""
         q, p, dq, dp = Q.value, P.value, Q.tangent, P.tangent
-        V, (V_s, V_t, V_E, V_L), H = self.model.curvature(q, p, self.H0, self._sines(Q))
+        ds, d_theta, dp_t, dL = dq[:, 1], dq[:, 2], dp[:, 0], dp[:, 3]  # (k, N) each
+        energy = bool(dp_t.any())  # dE = -dp_t
+        V, (V_s, V_t, V_E, V_L), H = self.model.curvature(
+            q, p, self.H0, self._sines(Q), energy=energy
+        )
         E = -p[0]
         with np.errstate(invalid="ignore", divide="ignore"):
             w = 1.0 / np.sqrt(V + self.c0 * E * E)
         c = t * w
         clock = V_E + 2.0 * self.c0 * E
-        rate = 0.5 * t * w**3  # dc = -rate (dV + 2 c0 E dE), with dE = -dp_t
-        ds, d_theta, dp_t, dL = dq[:, 1], dq[:, 2], dp[:, 0], dp[:, 3]  # (k, N) each
+        rate = (0.5 * c) * (w * w)  # dc = -rate (dV + 2 c0 E dE)
         dc = (-rate * V_s) * ds
         dc -= (rate * V_t) * d_theta
-        dc += (rate * clock) * dp_t
         dc -= (rate * V_L) * dL
-        c_sL, c_tE, c_EL = c * H["sL"], c * H["tE"], c * H["EL"]
+        c_sL = c * H["sL"]
+        if energy:
+            dc += (rate * clock) * dp_t
+            dp[:, 1] -= (c * H["sE"]) * dp_t
+            dp[:, 2] -= (c * H["tE"]) * dp_t
+            dq[:, 3] += (c * H["EL"]) * dp_t
         dp[:, 1] += V_s * dc
         dp[:, 1] += (c * H["ss"]) * ds
-        dp[:, 1] -= (c * H["sE"]) * dp_t
         dp[:, 1] += c_sL * dL
         dp[:, 2] += V_t * dc
         dp[:, 2] += (c * H["tt"]) * d_theta
-        dp[:, 2] -= c_tE * dp_t
         dq[:, 3] -= V_L * dc
         dq[:, 3] -= c_sL * ds
-        dq[:, 3] += c_EL * dp_t
         dq[:, 3] -= (c * H["LL"]) * dL
         p[1] += c * V_s
         p[2] += c * V_t
@@ -466,63 +479,88 @@ def sphere_geodesic(Q: np.ndarray, P: np.ndarray, c, sines=None):
     return (rho, down) if isinstance(rho, np.ndarray) else None
 
 
-def sphere_geodesic_tangents(
-    Q: DualRows, P: Any, c: np.ndarray, dc: np.ndarray, sines=None
-) -> tuple[np.ndarray, np.ndarray]:
-    """sphere_geodesic on rows with derivatives (core.dual.DualRows), its tangent map
-    written out line by line (each quantity x beside its derivatives dx, (k, N), as sums of
-    per-ray coefficients times derivatives), for a turn c with derivatives dc: the same
-    numbers as sphere_geodesic on Duals, with a few times fewer array operations. The new
-    direction is a unit vector, so with rho = sin theta' and down = cos theta',
-    d theta' = -d(down) / rho and d rho = down d theta'. -> (rho, down)."""
-    q, p, dq, dp = Q.value, P.value, Q.tangent, P.tangent
-    theta, p_theta, L = q[2], p[2], p[3]
-    d_theta, d_p_theta, dL = dq[:, 2], dp[:, 2], dp[:, 3]
-    st, ct = (np.sin(theta), np.cos(theta)) if sines is None else sines
+class SphereStart(NamedTuple):
+    """A drift's start on the unit sphere (sphere_start): J's parts, its heading and the
+    direction's derivatives in the frame that moves with it (sphere_geodesic_tangents)."""
+
+    sines: tuple[np.ndarray, np.ndarray]  # (sin theta, cos theta)
+    spin: np.ndarray  # L / sin theta: J x n along e_phi
+    size2: np.ndarray  # |J|^2
+    size: np.ndarray  # |J|
+    inverse: np.ndarray  # 1 / |J| (0 where J = 0)
+    heading: tuple[np.ndarray, np.ndarray]  # (cos chi, sin chi): e_theta to the motion
+    along: np.ndarray  # (k, N): the velocity's derivative along the motion, d|J|
+    across: np.ndarray  # (k, N): across it, along J / |J|
+
+
+def sphere_start(p_theta, L, sines, d_theta, d_p_theta, dL) -> SphereStart:
+    """The start of a turn on the sphere with its derivatives (SphereStart): the motion
+    p_theta e_theta + spin e_phi at the angle chi from e_theta (chi = 0 where J = 0: the
+    turn then moves nothing), the derivative of that velocity (its covariant one: e_theta
+    and e_phi are parallel along e_theta) is d p_theta e_theta + d spin e_phi, with
+    d spin = dL / sin theta - spin cot theta d theta."""
+    st, ct = sines
     with np.errstate(divide="ignore", invalid="ignore"):
         spin = L / st
+        size2 = p_theta * p_theta + spin * spin
+        size = np.sqrt(size2)
+        inverse = np.where(size > 0, 1.0 / size, 0.0)
+        cos_h, sin_h = np.where(size > 0, p_theta * inverse, 1.0), spin * inverse
         d_spin = (1.0 / st) * dL
         d_spin -= (spin * ct / st) * d_theta
-        size = np.sqrt(p_theta * p_theta + spin * spin)
-        inverse_size = np.where(size > 0, 1.0 / size, 0.0)
-        d_size = (p_theta / size) * d_p_theta
-        d_size += (spin / size) * d_spin
-        omega = c * size
-        d_omega = size * dc
-        d_omega += c * d_size
-        cw, sin_w = np.cos(omega), np.sin(omega)
-        sw = sin_w * inverse_size
-        d_sw = (cw * inverse_size) * d_omega
-        d_sw -= (sw * inverse_size) * d_size
-    along_rho = cw * st + sw * p_theta * ct
+    along = cos_h * d_p_theta
+    along += sin_h * d_spin
+    across = cos_h * d_spin
+    across -= sin_h * d_p_theta
+    return SphereStart(sines, spin, size2, size, inverse, (cos_h, sin_h), along, across)
+
+
+def sphere_geodesic_tangents(
+    Q: DualRows, P: Any, c: np.ndarray, dc: np.ndarray, start: SphereStart
+) -> tuple[np.ndarray, np.ndarray]:
+    """sphere_geodesic on rows with derivatives (core.dual.DualRows) for a turn c with
+    derivatives dc, its tangent map written out in the frame that moves with the
+    direction n: T (the motion, at the angle chi from e_theta) and B = J / |J|, both
+    parallel along the great circle. Over the angle w = c |J| a derivative x T + y B of n
+    with velocity derivative u T + v B (``start``) becomes x' = x + d(c |J|) (along the
+    circle) and the Jacobi field of the unit sphere across it, y' = y cos w
+    + v sin w / |J|, v' = v cos w - y |J| sin w, u' = u; back in (e_theta, e_phi) at the
+    end (heading chi'), d phi = (x' sin chi' + y' cos chi') / sin theta' and
+    d p_theta = u cos chi' - v' sin chi' + spin' cos theta' d phi (e_theta turns
+    along e_phi). The same numbers as sphere_geodesic on Duals to rounding, with a
+    few times fewer array operations. -> (sin theta', cos theta')."""
+    q, p, dq, dp = Q.value, P.value, Q.tangent, P.tangent
+    (st, ct), p_theta, L = start.sines, p[2], p[3]
+    cos_h, sin_h = start.heading
+    d_theta = dq[:, 2]
+    size, spin = start.size, start.spin
+    omega = c * size
+    cw, sin_w = np.cos(omega), np.sin(omega)
+    sw = np.where(size > 0, sin_w * start.inverse, c)  # sin w / |J|
+    along_rho = cw * st + sw * p_theta * ct  # n' . e_rho(phi)
     down = cw * ct - sw * p_theta * st
-    along_phi = sw * spin
-    # d(along_rho), d(down): d(cos w) = -sin w d omega, d(sin θ) = cos θ dθ, d(cos θ) = -sin θ dθ
-    d_rho_part = (-st * sin_w) * d_omega
-    d_rho_part += (p_theta * ct) * d_sw
-    d_rho_part += (sw * ct) * d_p_theta
-    d_rho_part += down * d_theta
-    d_down = (-ct * sin_w) * d_omega
-    d_down -= (p_theta * st) * d_sw
-    d_down -= (sw * st) * d_p_theta
-    d_down -= along_rho * d_theta
-    d_phi_part = spin * d_sw
-    d_phi_part += sw * d_spin
-    rho2 = along_rho * along_rho + along_phi * along_phi
-    rho = np.sqrt(rho2)
+    along_phi = sw * spin  # n' . e_phi(phi)
+    rho = np.sqrt(along_rho * along_rho + along_phi * along_phi)
     with np.errstate(divide="ignore", invalid="ignore"):
         new_p_theta = (p_theta * along_rho + spin * ct * along_phi) / rho
-        d_new_theta = (-1.0 / rho) * d_down
-        d_top = along_rho * d_p_theta
-        d_top += p_theta * d_rho_part
-        d_top += (along_phi * ct) * d_spin
-        d_top -= (along_phi * spin * st) * d_theta
-        d_top += (spin * ct) * d_phi_part
-        dq[:, 3] += (along_rho / rho2) * d_phi_part
-        dq[:, 3] -= (along_phi / rho2) * d_rho_part
-        np.multiply(1.0 / rho, d_top, out=dp[:, 2])
-        dp[:, 2] -= (new_p_theta * down / rho) * d_new_theta  # d rho = down d theta'
-        dq[:, 2] = d_new_theta
+        new_spin = L / rho
+        cos_end = np.where(size > 0, new_p_theta * start.inverse, 1.0)
+        sin_end = new_spin * start.inverse
+        x = cos_h * d_theta  # along the circle
+        x += c * start.along
+        x += size * dc
+        y = (-sin_h * cw) * d_theta  # across it
+        y += sw * start.across
+        v = (start.size2 * sw * sin_h) * d_theta
+        v += cw * start.across
+        d_phi = (sin_end / rho) * x
+        d_phi += (cos_end / rho) * y
+    np.multiply(cos_end, x, out=dq[:, 2])
+    dq[:, 2] -= sin_end * y
+    dq[:, 3] += d_phi
+    np.multiply(cos_end, start.along, out=dp[:, 2])
+    dp[:, 2] -= sin_end * v
+    dp[:, 2] += (new_spin * down) * d_phi
     q[2] = np.arctan2(rho, down)
     q[3] += np.arctan2(along_phi, along_rho)
     p[2] = new_p_theta

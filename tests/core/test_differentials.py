@@ -186,13 +186,17 @@ class _PlainRows:
 
 
 @pytest.mark.parametrize("name", ["kick", "drift"])
-@pytest.mark.parametrize("form", ["kerr_bl_split", "schwarzschild_log_split"])
+@pytest.mark.parametrize(
+    "form", ["kerr_bl_split", "kerr_bl_split_fixed_E", "schwarzschild_log_split"]
+)
 def test_written_out_tangent_maps_are_forward_mode_ad(form, name):
     """The splits' kick and drift tangent maps, written out by hand for speed
     (SqrtSplit._kick_tangents with V's Hessian, _drift_tangents and
     sphere_geodesic_tangents; LogarithmicSplit's), equal dual numbers carried through
     their own plain code (an independent derivation) to 1e-12 relative, on random states in
-    both hemispheres with per-ray steps and energies, rays with L = 0 among them. Kerr's
+    both hemispheres with per-ray steps and energies, rays with L = 0 among them, and
+    for Kerr with tangents along which E varies and along which it does not (the maps
+    then skip E's terms: ``gauge_tangents``). Kerr's
     flows leave t's derivative as it was (t is cyclic and read by nothing the derivatives
     give: core/models/kerr_split.py), so that row is checked to be untouched instead."""
     from core.dual import DualRows
@@ -201,7 +205,7 @@ def test_written_out_tangent_maps_are_forward_mode_ad(form, name):
 
     rng = np.random.default_rng(7)
     n = 60
-    if form == "kerr_bl_split":
+    if form.startswith("kerr_bl_split"):
         split = KerrBoyerLindquist(rg=1.0, a=0.45).split_parts(rng.uniform(-0.05, 0.05, n))
         q = np.stack([np.zeros(n), rng.uniform(0.5, 3, n), rng.uniform(0.1, 3.0, n),
                       rng.uniform(0, 6, n)])  # fmt: skip
@@ -211,12 +215,14 @@ def test_written_out_tangent_maps_are_forward_mode_ad(form, name):
         split = SchwarzschildOptical(rg=1.0).split_parts(rng.uniform(0.3, 0.7, n))
         q, p = 4.0 * rng.normal(size=(3, n)), rng.normal(size=(3, n))
     dq, dp = rng.normal(size=(2, *q.shape)), rng.normal(size=(2, *p.shape))
+    if form == "kerr_bl_split_fixed_E":
+        dp[:, 0] = 0.0
     t = rng.uniform(0.01, 0.3, n)
     generic = DualRows(q.copy(), dq.copy()), DualRows(p.copy(), dp.copy())
     getattr(split, name)(*(_PlainRows(rows) for rows in generic), t)
     written = DualRows(q.copy(), dq.copy()), DualRows(p.copy(), dp.copy())
     getattr(split, name)(*written, t)
-    if form == "kerr_bl_split":
+    if form.startswith("kerr_bl_split"):
         np.testing.assert_array_equal(written[0].tangent[:, 0], dq[:, 0])
         written[0].tangent[:, 0] = generic[0].tangent[:, 0]
     for ours, theirs in zip(written, generic, strict=True):
@@ -224,3 +230,36 @@ def test_written_out_tangent_maps_are_forward_mode_ad(form, name):
             got, want = getattr(ours, field), getattr(theirs, field)
             assert np.isfinite(got).all()
             np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
+
+
+def test_kerr_tangents_lose_only_their_scale_part():
+    """Kerr's gauge (SqrtSplit.gauge_tangents) takes out of each tangent its part along
+    (0, p), which a homogeneous Λ carries to (0, p'): after ten steps of blanes_moan_s10,
+    the gauged tangents' positions (s, theta, phi) equal the full tangents' to 1e-10
+    relative, and their momenta differ by that part, (dE / E) p' (checked to 1e-10), while
+    dp_t stays exactly 0."""
+    from core.integrators import get_method
+    from core.models.kerr_split import KerrBoyerLindquist
+
+    rng = np.random.default_rng(3)
+    n = 40
+    split = KerrBoyerLindquist(rg=1.0, a=0.45).split_parts(0.0)
+    q = np.stack([np.zeros(n), rng.uniform(1.5, 3, n), rng.uniform(0.3, 2.8, n),
+                  rng.uniform(0, 6, n)])  # fmt: skip
+    p = np.stack([-rng.uniform(0.5, 1.5, n), *rng.normal(size=(3, n))])
+    dq, dp = rng.normal(size=(2, *q.shape)), rng.normal(size=(2, *p.shape))
+    method = get_method("blanes_moan_s10")
+    full = (q.copy(), p.copy(), dq.copy(), dp.copy())
+    gauged = method.with_tangents(split, method.init(split, q, p), dq, dp)
+    assert (gauged[3][:, 0] == 0).all()
+    scale = dp[:, 0] / p[0]  # (k, N): the part along (0, p) taken out
+    h = rng.uniform(0.05, 0.2, n)
+    for _ in range(10):
+        full, _ = method.step(split, full, h)
+        gauged, _ = method.step(split, gauged, h)
+    np.testing.assert_array_equal(gauged[0], full[0])
+    assert (gauged[3][:, 0] == 0).all()
+    positions, momenta = gauged[2][:, 1:], gauged[3] + scale[:, None, :] * full[1]
+    np.testing.assert_allclose(positions, full[2][:, 1:], rtol=0,
+                               atol=1e-10 * np.abs(full[2][:, 1:]).max())  # fmt: skip
+    np.testing.assert_allclose(momenta, full[3], rtol=0, atol=1e-10 * np.abs(full[3]).max())
