@@ -296,9 +296,10 @@ class SqrtSplit(SplitSystem):
         on every ray, E is conserved, and the kick and the drift skip E's terms."""
         with np.errstate(divide="ignore", invalid="ignore"):
             scale = dP[:, 0] / P[0]  # (k, N)
-        scale[~np.isfinite(scale)] = 0.0
+        scalable = np.isfinite(scale)  # E = 0 (inside the ergoregion): left as it is
+        scale[~scalable] = 0.0
         dP -= scale[:, None, :] * P
-        dP[:, 0] = 0.0
+        dP[:, 0][scalable] = 0.0
 
     def _root_T(self, Q: np.ndarray, P: np.ndarray, sines=None):
         """sqrt(T + c), dT/dtheta and E (``sines`` as ``kinetic``'s)."""
@@ -493,7 +494,10 @@ class SphereStart(NamedTuple):
     across: np.ndarray  # (k, N): across it, along J / |J|
 
 
-def sphere_start(p_theta, L, sines, d_theta, d_p_theta, dL) -> SphereStart:
+def sphere_start(
+    p_theta: np.ndarray, L: np.ndarray, sines: tuple[np.ndarray, np.ndarray],
+    d_theta: np.ndarray, d_p_theta: np.ndarray, dL: np.ndarray,
+) -> SphereStart:  # fmt: skip
     """The start of a turn on the sphere with its derivatives (SphereStart): the motion
     p_theta e_theta + spin e_phi at the angle chi from e_theta (chi = 0 where J = 0: the
     turn then moves nothing), the derivative of that velocity (its covariant one: e_theta

@@ -237,7 +237,7 @@ def test_kerr_tangents_lose_only_their_scale_part():
     (0, p), which a homogeneous Λ carries to (0, p'): after ten steps of blanes_moan_s10,
     the gauged tangents' positions (s, theta, phi) equal the full tangents' to 1e-10
     relative, and their momenta differ by that part, (dE / E) p' (checked to 1e-10), while
-    dp_t stays exactly 0."""
+    dp_t stays exactly 0; rays with E = 0 keep their tangents."""
     from core.integrators import get_method
     from core.models.kerr_split import KerrBoyerLindquist
 
@@ -263,3 +263,9 @@ def test_kerr_tangents_lose_only_their_scale_part():
     np.testing.assert_allclose(positions, full[2][:, 1:], rtol=0,
                                atol=1e-10 * np.abs(full[2][:, 1:]).max())  # fmt: skip
     np.testing.assert_allclose(momenta, full[3], rtol=0, atol=1e-10 * np.abs(full[3]).max())
+    # rays with E = 0 (a camera in the ergoregion) have no scale part to take: left as is
+    p[0, :3] = 0.0
+    dP = dp.copy()
+    split.gauge_tangents(q, p, dq.copy(), dP)
+    np.testing.assert_array_equal(dP[..., :3], dp[..., :3])
+    assert (dP[:, 0, 3:] == 0).all()
