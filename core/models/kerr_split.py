@@ -488,6 +488,7 @@ class SphereStart(NamedTuple):
     spin: np.ndarray  # L / sin theta: J x n along e_phi
     size2: np.ndarray  # |J|^2
     size: np.ndarray  # |J|
+    moving: np.ndarray  # J != 0 (bool): where the turn moves the direction
     inverse: np.ndarray  # 1 / |J| (0 where J = 0)
     heading: tuple[np.ndarray, np.ndarray]  # (cos chi, sin chi): e_theta to the motion
     along: np.ndarray  # (k, N): the velocity's derivative along the motion, d|J|
@@ -508,15 +509,16 @@ def sphere_start(
         spin = L / st
         size2 = p_theta * p_theta + spin * spin
         size = np.sqrt(size2)
-        inverse = np.where(size > 0, 1.0 / size, 0.0)
-        cos_h, sin_h = np.where(size > 0, p_theta * inverse, 1.0), spin * inverse
+        moving = size > 0
+        inverse = np.where(moving, 1.0 / size, 0.0)
+        cos_h, sin_h = np.where(moving, p_theta * inverse, 1.0), spin * inverse
         d_spin = (1.0 / st) * dL
         d_spin -= (spin * ct / st) * d_theta
     along = cos_h * d_p_theta
     along += sin_h * d_spin
     across = cos_h * d_spin
     across -= sin_h * d_p_theta
-    return SphereStart(sines, spin, size2, size, inverse, (cos_h, sin_h), along, across)
+    return SphereStart(sines, spin, size2, size, moving, inverse, (cos_h, sin_h), along, across)
 
 
 def sphere_geodesic_tangents(
@@ -540,7 +542,7 @@ def sphere_geodesic_tangents(
     size, spin = start.size, start.spin
     omega = c * size
     cw, sin_w = np.cos(omega), np.sin(omega)
-    sw = np.where(size > 0, sin_w * start.inverse, c)  # sin w / |J|
+    sw = np.where(start.moving, sin_w * start.inverse, c)  # sin w / |J|
     along_rho = cw * st + sw * p_theta * ct  # n' . e_rho(phi)
     down = cw * ct - sw * p_theta * st
     along_phi = sw * spin  # n' . e_phi(phi)
@@ -548,7 +550,7 @@ def sphere_geodesic_tangents(
     with np.errstate(divide="ignore", invalid="ignore"):
         new_p_theta = (p_theta * along_rho + spin * ct * along_phi) / rho
         new_spin = L / rho
-        cos_end = np.where(size > 0, new_p_theta * start.inverse, 1.0)
+        cos_end = np.where(start.moving, new_p_theta * start.inverse, 1.0)
         sin_end = new_spin * start.inverse
         x = cos_h * d_theta  # along the circle
         x += c * start.along
