@@ -134,6 +134,14 @@ class Hamiltonian(System):
         return self._time_scale is not None
 
     @property
+    def spherical(self) -> bool:
+        """Whether turning a ray about any axis through the model's centre turns its whole
+        path with it: the model, its chart, its flows and its far field are symmetric under
+        rotations (core/tracing/differentials.py carries one ray differential instead of
+        two)."""
+        return False
+
+    @property
     def chart(self) -> Chart:
         """The chart its coordinates are written in (core.charts): Cartesian (t, x, y, z) for
         a spacetime, (x, y, z) otherwise, unless a model writes them in another."""

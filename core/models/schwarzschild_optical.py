@@ -87,6 +87,12 @@ class SchwarzschildOptical(Medium):
         """The logarithmic split's steps scale with the distance from the mass."""
         return True
 
+    @property
+    def spherical(self) -> bool:
+        """n depends on ρ alone, in Cartesian isotropic coordinates: rotations about the
+        mass map rays to rays (see Hamiltonian.spherical)."""
+        return True
+
     def kerr_orbits(self) -> tuple[float, float]:
         """(M, 0): Schwarzschild's metric (see Hamiltonian.kerr_orbits)."""
         return self.mass, 0.0
@@ -132,6 +138,8 @@ class LogarithmicSplit(SplitSystem):
         ρ = M/2. Written row by row with core.dual's functions: on rows carrying
         derivatives (core.dual.DualRows) it gives f's as well, f being a function of ρ²
         alone (its derivative is taken with one scalar seed, then chained)."""
+        if isinstance(Q, np.ndarray):
+            return self._radial_factor(np.einsum("ij,ij->j", Q, Q))
         rho2 = Q[0] * Q[0] + Q[1] * Q[1] + Q[2] * Q[2]
         if isinstance(rho2, dual.Dual):
             f = self._radial_factor(dual.Dual.variable(rho2.v, 0))
@@ -140,22 +148,30 @@ class LogarithmicSplit(SplitSystem):
 
     def _radial_factor(self, rho2, with_slope: bool = False):
         """f of ``_force_factor`` at ρ² (an array, or a Dual); ``with_slope`` (arrays):
-        (f, df/dρ²), the slope written out: with u = M/2ρ, f = −K u / ρ² where
-        K = 2 n n'/(n² − 1), and du/dρ² = −u / 2ρ², so df/dρ² = (u / ρ⁴) K (u K'/K / 2 + 3/2),
-        with K'/K = n'/n + n''/n' − K = 5/a + 3/b − 1/(2 − u) − K (a = 1 + u, b = 1 − u; n
-        of index_and_slope); NaN inside ρ = M/2 (the tangent kick's: a scalar dual through
-        index_and_slope gives the same to rounding)."""
+        (f, df/dρ²). With u = M/2ρ, a = 1 + u, b = 1 − u (n = a³/b, n' = dn/du =
+        2a²(2 − u)/b²: index_and_slope) and 1/ρ² = 4u²/M², f = −2 n n' u / ((n² − 1) ρ²)
+        is rational in u; n² − 1 = (a³ − b)(a³ + b)/b² with a³ − b = u (4 + 3u + u²), so
+        f = −(16/M²) u² a⁵ (2 − u) / (b w (a³ + b)), w = 4 + 3u + u², free of the
+        cancellation in n² − 1 far away (u → 0), and df/dρ² = f (d ln f/du) du/dρ² with
+        d ln f/du = 2/u + 5/a + 1/b − 1/(2 − u) − (3 + 2u)/w − (3a² − 1)/(a³ + b) and
+        du/dρ² = −2u³/M²; NaN inside ρ = M/2."""
+        m = self.model.mass
         with np.errstate(all="ignore"):
-            u = 0.5 * self.model.mass / dual.sqrt(rho2)
-            n, dn_du = index_and_slope(u)
-            K = (2.0 * n / (n * n - 1.0)) * dn_du
-            factor = K * (-u / rho2)
+            u = (0.5 * m) / dual.sqrt(rho2)
+            a, b, c = 1.0 + u, 1.0 - u, 2.0 - u
+            a2 = a * a
+            a3 = a2 * a
+            w = 4.0 + u * (3.0 + u)
+            rest = a3 + b
+            u2 = u * u
+            factor = (-16.0 / (m * m)) * u2 * (a3 * a2) * c / (b * w * rest)
             if with_slope:
-                ratio = 5.0 / (1.0 + u) + 3.0 / (1.0 - u) - 1.0 / (2.0 - u) - K
-                slope = (u / (rho2 * rho2)) * K * (0.5 * ratio * u + 1.5)
+                log_slope = 2.0 / u + 5.0 / a + 1.0 / b - 1.0 / c
+                log_slope -= (3.0 + 2.0 * u) / w + (3.0 * a2 - 1.0) / rest
+                slope = factor * log_slope * ((-2.0 / (m * m)) * u2 * u)
         inside = dual.value_of(u) < 1.0
         if with_slope:
-            return np.where(inside, factor, np.nan), np.where(inside, slope, np.nan)
+            return np.where(inside, factor, np.nan), slope
         return dual.where(inside, factor, np.nan)
 
     def _force(self, Q: np.ndarray) -> np.ndarray:

@@ -15,11 +15,16 @@ and a relative step of ``FD_STEP`` leaves an error ~FD_STEP^2 + 1e-16 / FD_STEP 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 
 FD_STEP = 1e-6
 """Relative step of the central differences of the closed-form maps (see the module)."""
+RADIAL = 1e-7
+"""|â × d| below which a ray leaves the camera along the axis â (``axial_tangents``): off it,
+the turn's share is known to ~1e-16 / |â × d|; on it, the second tangent is the first turned,
+to O(|â × d|)."""
 
 
 def directional(
@@ -70,3 +75,72 @@ def magnification(camera_tangents: np.ndarray, sky_jacobian: np.ndarray) -> np.n
     there is no sky Jacobian)."""
     with np.errstate(all="ignore"):
         return solid_angle_rate(camera_tangents) / solid_angle_rate(sky_jacobian)
+
+
+class AxialTangents(NamedTuple):
+    """k direction tangents of rays leaving cameras on the axis â through the centre of a
+    spherically symmetric model, as one tangent traced and a turn about â
+    (``axial_tangents``); rays on the last axis."""
+
+    axis: np.ndarray  # (3, M): â, local
+    along: np.ndarray  # (k, M): each tangent's share of the traced one
+    turn: np.ndarray  # (k, M): of the turn about â, per radian (rays off the axis)
+    turned: np.ndarray  # (k, M): of the traced one turned by 90° about â (rays on it)
+
+    def subset(self, keep: np.ndarray) -> AxialTangents:
+        """The rays ``keep``."""
+        return AxialTangents(*(a[:, keep] for a in self))
+
+    def final(self, traced: np.ndarray, d: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+        """The k tangents' final-direction derivatives (M, k, 3) from the traced tangent's
+        (M, 1, 3) and the final directions d (M, 3), both in world axes (local x -> x @
+        rotation.T): a turn about â by ε turns the whole path, so d by ε â × d."""
+        axis = self.axis.T @ rotation.T
+        u = traced[:, 0]
+        spin = np.cross(axis, d)
+        quarter = np.cross(axis, u) + np.einsum("ij,ij->i", axis, u)[:, None] * axis
+        return (
+            self.along.T[..., None] * u[:, None]
+            + self.turn.T[..., None] * spin[:, None]
+            + self.turned.T[..., None] * quarter[:, None]
+        )
+
+
+def axial_tangents(
+    camera: np.ndarray, d: np.ndarray, tangents: np.ndarray
+) -> tuple[AxialTangents, np.ndarray]:
+    """Split the direction tangents (M, k, 3) of unit directions d (M, 3) seen from cameras
+    at ``camera`` (M, 3) (local, about a spherically symmetric model's centre) into one to
+    trace and the rest by symmetry. A ray and the axis â = camera / |camera| span a plane
+    that holds its path: e_out = â × d / |â × d| turns the ray about â (the whole path turns:
+    its state's derivative is the rotation's generator over |â × d|), e_in = e_out × d stays
+    in the plane and is traced. Rays along â (|â × d| < RADIAL) have no plane: e_in is the
+    tangents' own direction across d, and e_out = e_in turned by 90° about â, whose path is
+    the traced one's turned. -> (AxialTangents, e_in (M, 1, 3))."""
+    axis = camera / np.linalg.norm(camera, axis=1, keepdims=True)
+    cross = np.cross(axis, d)
+    size = np.linalg.norm(cross, axis=1)
+    radial = size < RADIAL
+    with np.errstate(divide="ignore", invalid="ignore"):
+        e_out = cross / size[:, None]
+    e_in = np.cross(e_out, d)
+    if radial.any():
+        e_in[radial], e_out[radial] = _radial_frame(axis[radial], d[radial], tangents[radial])
+    along = np.einsum("mkj,mj->km", tangents, e_in)
+    side = np.einsum("mkj,mj->km", tangents, e_out)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        turn = np.where(radial, 0.0, side / size)
+    turned = np.where(radial, side, 0.0)
+    return AxialTangents(axis.T.copy(), along, turn, turned), e_in[:, None, :]
+
+
+def _radial_frame(axis, d, tangents) -> tuple[np.ndarray, np.ndarray]:
+    """(e_in, e_out) (M, 3) of rays along the axis (``axial_tangents``): e_in the unit part
+    across d of the tangent with the largest one, e_out = e_in turned by 90° about â."""
+    across = tangents - np.einsum("mkj,mj->mk", tangents, d)[..., None] * d[:, None]
+    sizes = np.linalg.norm(across, axis=2)
+    pick = np.argmax(sizes, axis=1)
+    rows = np.arange(d.shape[0])
+    e_in = across[rows, pick] / sizes[rows, pick][:, None]
+    e_out = np.cross(axis, e_in) + np.einsum("ij,ij->i", axis, e_in)[:, None] * axis
+    return e_in, e_out

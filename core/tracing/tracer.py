@@ -28,7 +28,7 @@ from ..motion import Motion
 from ..observer import medium_momenta, spacetime_momenta
 from . import dense
 from .clearance import ClearanceBoxes, clear_radius
-from .differentials import directional, magnification, unit_directional
+from .differentials import axial_tangents, directional, magnification, unit_directional
 from .disklight import DiskLight
 from .regions import Region, SphereRegion, region_for
 from .scene import DISK_ID, ENDING, Scene
@@ -422,7 +422,10 @@ class Tracer:
         H0 = model.value_soa(Q, P)
         K = model.split_parts(H0) or integrators.PoincareTransformed(model, H0)
         state = self.method.init(K, Q, P)
+        axial = None
         if tangents is not None:
+            if self._axial:  # one tangent traced, the other by symmetry
+                axial, tangents = axial_tangents(camera.T, D.T, tangents)
             dQ, dP = self._start_tangents(camera, D, tangents, Q.shape[0])
             state = self.method.with_tangents(K, state, dQ, dP)
         batch = Batch(
@@ -436,6 +439,8 @@ class Tracer:
              "streak": np.zeros(rows.size, dtype=np.int64),  # steps in a row off the cone
              "watch": np.ones(rows.size, dtype=bool) if watch is None else watch},
         )  # fmt: skip
+        if axial is not None:
+            batch.arrays["axial"] = axial
 
         def step(batch: Batch):
             assert self.stepper is not None  # a curved scene's tracer has one
@@ -461,6 +466,13 @@ class Tracer:
         if self.spacetime:
             return spacetime_momenta(self.model, self.chart, S, D)
         return medium_momenta(self.model, S, D)
+
+    @property
+    def _axial(self) -> bool:
+        """Whether rays' differentials go by the model's spherical symmetry: one traced,
+        the other a turn about the camera's axis (core/tracing/differentials.py
+        axial_tangents): a spherical model in a ball about its centre."""
+        return self.model.spherical and isinstance(self.region, SphereRegion)
 
     def _start_tangents(self, camera, D, tangents, n: int) -> tuple[np.ndarray, np.ndarray]:
         """(dQ, dP) (k, n, M): the start state's derivatives along the directions' tangents
@@ -861,10 +873,12 @@ class Tracer:
             rest &= ~self._leave_at_boundary(idx, np.flatnonzero(leaving), X_prev, X, ends, out)
         if rest.any():
             Q, P = ends.end
+            axial = batch.arrays.get("axial")
             self._escape(
                 idx[rest], Q[:, rest], P[:, rest], self._to_world(X[:, rest].T), out,
                 self._to_world(camera[:, rest].T),
                 [d[..., rest] for d in self.method.tangents_of(batch.state)],
+                None if axial is None else axial.subset(rest),
             )  # fmt: skip
 
     @property
@@ -902,9 +916,10 @@ class Tracer:
             done[rows] = True
         return done
 
-    def _escape(self, rows, Q, P, world, out: RayResults, eye, tangents=()):
+    def _escape(self, rows, Q, P, world, out: RayResults, eye, tangents=(), axial=None):
         """Rays leaving the region: direction from dq/ds, far-field correction, straight on
-        (with ``tangents`` (dQ, dP) (k, n, M): the escape direction's derivatives too)."""
+        (with ``tangents`` (dQ, dP) (k, n, M): the escape direction's derivatives too; with
+        ``axial``, the traced tangent's expanded into the camera's k: AxialTangents)."""
         d_world = self._escape_direction(Q, P)
         self._straight(rows, world, d_world, out, eye)
         failed = ~np.isfinite(d_world).all(axis=1)
@@ -918,6 +933,8 @@ class Tracer:
             Z = np.concatenate([Q, P]).T
             dZ = np.moveaxis(np.concatenate(tangents, axis=1), -1, 0)  # (M, k, 2n)
             jacobian = directional(escape, Z, dZ)
+            if axial is not None:
+                jacobian = axial.final(jacobian, d_world, self.rotation)
             sky = out.ending[rows] == ENDING["escaped"]
             out.sky_jacobian[rows[sky]] = jacobian[sky]
 
@@ -934,18 +951,21 @@ class Tracer:
         """Bend directions D (M, 3) at X by the rest of the first-order deflection of a mass.
 
         A straight ray from X along D passes the mass M at impact b; it still turns by
-        (2M/b)(1 - cos psi) towards the mass (cos psi = X.D/|X|, impulse approximation).
+        (2M/b)(1 - cos psi) towards the mass (cos psi = X.D/|X|, impulse approximation),
+        i.e. by 2M b / (r (r + X.D)) (1 - cos psi = b^2 / (r (r + X.D))): written so, the
+        turn (its angle times the unit vector towards the mass) is -2M perp / (r (r + X.D))
+        with perp = X - (X.D) D, free of the cancellations of 1 - cos psi and of perp / b
+        on rays leaving nearly radially.
         """
         if self.mass == 0.0:
             return D
         r = np.linalg.norm(X, axis=1)
         along = np.einsum("ij,ij->i", X, D)
         perp = X - along[:, None] * D  # from the ray's line to X, ⟂ D
-        b = np.linalg.norm(perp, axis=1)
         with np.errstate(all="ignore"):
-            angle = np.where(b > 0, 2 * self.mass / b * (1 - along / r), 0.0)
-            toward = np.where(b[:, None] > 0, -perp / b[:, None], 0.0)
-        return np.cos(angle)[:, None] * D + np.sin(angle)[:, None] * toward
+            turn = (-2.0 * self.mass / (r * (r + along)))[:, None] * perp
+        angle = np.linalg.norm(turn, axis=1)
+        return np.cos(angle)[:, None] * D + np.sinc(angle / np.pi)[:, None] * turn
 
     # --- frames ------------------------------------------------------------------------
     def _to_local(self, world):

@@ -269,3 +269,54 @@ def test_kerr_tangents_lose_only_their_scale_part():
     split.gauge_tangents(q, p, dq.copy(), dP)
     np.testing.assert_array_equal(dP[..., :3], dp[..., :3])
     assert (dP[:, 0, 3:] == 0).all()
+
+
+def _axis_fan(camera: np.ndarray, seed: int = 5):
+    """Unit directions from ``camera``: around the hole, behind the camera, along the axis
+    through the hole both ways and at 1e-9 to 1e-2 rad from it (the spherical reduction's
+    two regimes and the threshold between them), with two random tangents each, ⟂ d."""
+    rng = np.random.default_rng(seed)
+    axis = camera / np.linalg.norm(camera)
+    across = np.cross(axis, [1.0, 0.0, 0.0])
+    across /= np.linalg.norm(across)
+    offsets = (0, 1e-9, 1e-8, 1e-7, 2e-7, 1e-6, 1e-4, 1e-2)
+    near = [sign * axis + s * across for sign in (1, -1) for s in offsets]
+    d = np.concatenate([-axis + 0.25 * rng.normal(size=(150, 3)), rng.normal(size=(50, 3)), near])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    t = rng.normal(size=(d.shape[0], 2, 3))
+    t -= np.einsum("nkj,nj->nk", t, d)[..., None] * d[:, None]
+    return d, 1e-3 * t
+
+
+def test_spherical_models_trace_one_tangent_and_turn_the_other(monkeypatch):
+    """Schwarzschild is symmetric about any axis through the hole: a ray's differential
+    across the plane of the camera's axis and the ray is a turn of the whole path about that
+    axis, known in closed form at the end (â × d per radian), so one tangent is traced, not
+    two (core/tracing/differentials.py axial_tangents). Against both tangents traced (the
+    model's symmetry switched off), on rays around the hole, behind the camera, along the
+    axis both ways and at 1e-9 to 1e-2 rad from it: the same endings, the sky Jacobian to
+    1e-7 relative (measured: median 2e-10, largest 7e-9 at 1e-7 rad from the axis, where
+    the turn's share is known to ~1e-16 / 1e-7); the camera's tangents are rebuilt from the
+    traced one and the turn exactly off the axis, to O(angle) < 1e-7 within RADIAL of it."""
+    from core.models.schwarzschild_optical import SchwarzschildOptical
+    from core.tracing.differentials import axial_tangents
+
+    d, t = _axis_fan(CAMERA)
+    origins = np.broadcast_to(CAMERA, d.shape).copy()
+    axial, traced = axial_tangents(origins, d, t)
+    rebuilt = axial.final(traced, d, np.eye(3))  # the turn's derivative at the camera: â × d
+    radial = (axial.turned != 0).any(axis=0)
+    assert radial.sum() == 8  # both ways: on the axis and 1e-9 to 1e-7 rad (normalised: < RADIAL)
+    assert np.abs(rebuilt - t)[~radial].max() < 1e-12 * np.abs(t).max()
+    assert np.abs(rebuilt - t)[radial].max() < 1e-7 * np.abs(t).max()  # to O(|â × d|)
+    scene = core.Scene(model=hm.schwarzschild(1.0))
+    one = Tracer(scene, TraceOptions(tolerance=1e-8)).trace(origins, d, tangents=t)
+    monkeypatch.setattr(SchwarzschildOptical, "spherical", property(lambda self: False))
+    two = Tracer(scene, TraceOptions(tolerance=1e-8)).trace(origins, d, tangents=t)
+    np.testing.assert_array_equal(one.ending, two.ending)
+    escaped = one.ending == core.ENDING["escaped"]
+    assert escaped.sum() > 120 and escaped[-16:].sum() == 8  # outwards along the axis
+    error = np.linalg.norm(one.sky_jacobian - two.sky_jacobian, axis=2)
+    error /= np.linalg.norm(two.sky_jacobian, axis=2)
+    assert error[escaped].max() < 1e-7
+    assert np.median(error[escaped]) < 1e-9
