@@ -148,12 +148,12 @@ class LogarithmicSplit(SplitSystem):
 
     def _radial_factor(self, rho2, with_slope: bool = False):
         """f of ``_force_factor`` at ρ² (an array, or a Dual); ``with_slope`` (arrays):
-        (f, df/dρ²). With u = M/2ρ, a = 1 + u, b = 1 − u (n = a³/b, n' = dn/du =
+        (f, 2 df/dρ²). With u = M/2ρ, a = 1 + u, b = 1 − u (n = a³/b, n' = dn/du =
         2a²(2 − u)/b²: index_and_slope) and 1/ρ² = 4u²/M², f = −2 n n' u / ((n² − 1) ρ²)
         is rational in u; n² − 1 = (a³ − b)(a³ + b)/b² with a³ − b = u (4 + 3u + u²), so
         f = −(16/M²) u² a⁵ (2 − u) / (b w (a³ + b)), w = 4 + 3u + u², free of the
         cancellation in n² − 1 far away (u → 0), and df/dρ² = f (d ln f/du) du/dρ² with
-        d ln f/du = 2/u + 5/a + 1/b − 1/(2 − u) − (3 + 2u)/w − (3a² − 1)/(a³ + b) and
+        d ln f/du = 2/u + 5/a + 1/(b (2 − u)) − (3 + 2u)/w − (3a² − 1)/(a³ + b) and
         du/dρ² = −2u³/M²; NaN inside ρ = M/2."""
         m = self.model.mass
         with np.errstate(all="ignore"):
@@ -166,9 +166,9 @@ class LogarithmicSplit(SplitSystem):
             u2 = u * u
             factor = (-16.0 / (m * m)) * u2 * (a3 * a2) * c / (b * w * rest)
             if with_slope:
-                log_slope = 2.0 / u + 5.0 / a + 1.0 / b - 1.0 / c
+                log_slope = 2.0 / u + 5.0 / a + 1.0 / (b * c)  # 1/b - 1/c = 1/(b c)
                 log_slope -= (3.0 + 2.0 * u) / w + (3.0 * a2 - 1.0) / rest
-                slope = factor * log_slope * ((-2.0 / (m * m)) * u2 * u)
+                slope = factor * log_slope * ((-4.0 / (m * m)) * u2 * u)  # twice df/dρ²
         inside = dual.value_of(u) < 1.0
         if with_slope:
             return np.where(inside, factor, np.nan), slope
@@ -181,12 +181,12 @@ class LogarithmicSplit(SplitSystem):
     def kick(self, Q, P, t) -> None:
         """Exact flow of −ln B over t (q fixed): p += t ∇ln(n² − 1). In place, row by row
         (arrays), or on core.dual.DualRows with its tangent map written out: c = t f(ρ²),
-        dc = t f'(ρ²) 2 q·dq (f' written out: ``_radial_factor``), dp += dc q + c dq."""
+        dc = t 2 f'(ρ²) q·dq (2f' written out: ``_radial_factor``), dp += dc q + c dq."""
         if isinstance(Q, DualRows):
             q, dq = Q.value, Q.tangent
-            f, slope = self._radial_factor(np.einsum("ij,ij->j", q, q), with_slope=True)
+            f, slope2 = self._radial_factor(np.einsum("ij,ij->j", q, q), with_slope=True)
             c = t * f
-            dc = (2.0 * t * slope) * np.einsum("ij,kij->kj", q, dq)
+            dc = (t * slope2) * np.einsum("ij,kij->kj", q, dq)
             P.tangent += c * dq
             P.tangent += dc[:, None, :] * q
             P.value += c * q
@@ -208,7 +208,10 @@ class LogarithmicSplit(SplitSystem):
             Q.tangent += dc[:, None, :] * p
             Q.value += c * p
             return
-        c = t / (0.5 * (P[0] * P[0] + P[1] * P[1] + P[2] * P[2]) - self.H0)
+        if isinstance(P, np.ndarray):
+            c = t / (0.5 * np.einsum("ij,ij->j", P, P) - self.H0)
+        else:  # rows of Duals
+            c = t / (0.5 * (P[0] * P[0] + P[1] * P[1] + P[2] * P[2]) - self.H0)
         for i in range(3):
             Q[i] += c * P[i]
 
