@@ -13,13 +13,8 @@ State = tuple[np.ndarray, ...]
 
 
 def take(a: Any, idx: np.ndarray | None) -> Any:
-    """Per-ray subset of a scalar, of an array with rays on its last axis or of an object with
-    its own ``subset(idx)`` (idx None: all rays)."""
-    if idx is None:
-        return a
-    if hasattr(a, "subset"):
-        return a.subset(idx)
-    if np.ndim(a) == 0:
+    """Per-ray subset of a scalar or of an array with rays on its last axis (idx None: all rays)."""
+    if idx is None or np.ndim(a) == 0:
         return a
     return a[..., idx]
 

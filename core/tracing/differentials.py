@@ -15,7 +15,6 @@ and a relative step of ``FD_STEP`` leaves an error ~FD_STEP^2 + 1e-16 / FD_STEP 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import NamedTuple
 
 import numpy as np
 
@@ -77,38 +76,21 @@ def magnification(camera_tangents: np.ndarray, sky_jacobian: np.ndarray) -> np.n
         return solid_angle_rate(camera_tangents) / solid_angle_rate(sky_jacobian)
 
 
-class AxialTangents(NamedTuple):
-    """k direction tangents of rays leaving cameras on the axis â through the centre of a
-    spherically symmetric model, as one tangent traced and a turn about â
-    (``axial_tangents``); rays on the last axis."""
-
-    axis: np.ndarray  # (3, M): â, local
-    along: np.ndarray  # (k, M): each tangent's share of the traced one
-    turn: np.ndarray  # (k, M): of the turn about â, per radian (rays off the axis)
-    turned: np.ndarray  # (k, M): of the traced one turned by 90° about â (rays on it)
-
-    def subset(self, keep: np.ndarray) -> AxialTangents:
-        """The rays ``keep``."""
-        return AxialTangents(*(a[:, keep] for a in self))
-
-    def final(self, traced: np.ndarray, d: np.ndarray, rotation: np.ndarray) -> np.ndarray:
-        """The k tangents' final-direction derivatives (M, k, 3) from the traced tangent's
-        (M, 1, 3) and the final directions d (M, 3), both in world axes (local x -> x @
-        rotation.T): a turn about â by ε turns the whole path, so d by ε â × d."""
-        axis = self.axis.T @ rotation.T
-        u = traced[:, 0]
-        spin = np.cross(axis, d)
-        quarter = np.cross(axis, u) + np.einsum("ij,ij->i", axis, u)[:, None] * axis
-        return (
-            self.along.T[..., None] * u[:, None]
-            + self.turn.T[..., None] * spin[:, None]
-            + self.turned.T[..., None] * quarter[:, None]
-        )
+def axial_final(shares: np.ndarray, traced: np.ndarray, d: np.ndarray, axis: np.ndarray):
+    """The k tangents' final-direction derivatives (M, k, 3) from ``axial_tangents``'
+    ``shares`` (3, k, M), the traced tangent's (M, 1, 3), the final directions d (M, 3) and
+    the cameras' axes â (M, 3), all in the same axes: a turn about â by ε turns the whole
+    path, so d by ε â × d; the traced one turned by 90° about â is â × u + (â · u) â."""
+    u = traced[:, 0]
+    spin = np.cross(axis, d)
+    quarter = np.cross(axis, u) + np.einsum("ij,ij->i", axis, u)[:, None] * axis
+    along, turn, turned = (share.T[..., None] for share in shares)
+    return along * u[:, None] + turn * spin[:, None] + turned * quarter[:, None]
 
 
 def axial_tangents(
     camera: np.ndarray, d: np.ndarray, tangents: np.ndarray
-) -> tuple[AxialTangents, np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray]:
     """Split the direction tangents (M, k, 3) of unit directions d (M, 3) seen from cameras
     at ``camera`` (M, 3) (local, about a spherically symmetric model's centre) into one to
     trace and the rest by symmetry. A ray and the axis â = camera / |camera| span a plane
@@ -116,7 +98,9 @@ def axial_tangents(
     its state's derivative is the rotation's generator over |â × d|), e_in = e_out × d stays
     in the plane and is traced. Rays along â (|â × d| < RADIAL) have no plane: e_in is the
     tangents' own direction across d, and e_out = e_in turned by 90° about â, whose path is
-    the traced one's turned. -> (AxialTangents, e_in (M, 1, 3))."""
+    the traced one's turned. -> (shares (3, k, M), e_in (M, 1, 3)): each tangent's share of
+    e_in, of the turn about â per radian (rays off the axis) and of e_in turned by 90° about
+    â (rays on it), rays on the last axis (``axial_final``)."""
     axis = camera / np.linalg.norm(camera, axis=1, keepdims=True)
     cross = np.cross(axis, d)
     size = np.linalg.norm(cross, axis=1)
@@ -131,7 +115,7 @@ def axial_tangents(
     with np.errstate(divide="ignore", invalid="ignore"):
         turn = np.where(radial, 0.0, side / size)
     turned = np.where(radial, side, 0.0)
-    return AxialTangents(axis.T.copy(), along, turn, turned), e_in[:, None, :]
+    return np.stack([along, turn, turned]), e_in[:, None, :]
 
 
 def _radial_frame(axis, d, tangents) -> tuple[np.ndarray, np.ndarray]:

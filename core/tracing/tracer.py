@@ -28,7 +28,13 @@ from ..motion import Motion
 from ..observer import medium_momenta, spacetime_momenta
 from . import dense
 from .clearance import ClearanceBoxes, clear_radius
-from .differentials import axial_tangents, directional, magnification, unit_directional
+from .differentials import (
+    axial_final,
+    axial_tangents,
+    directional,
+    magnification,
+    unit_directional,
+)
 from .disklight import DiskLight
 from .regions import Region, SphereRegion, region_for
 from .scene import DISK_ID, ENDING, Scene
@@ -422,10 +428,10 @@ class Tracer:
         H0 = model.value_soa(Q, P)
         K = model.split_parts(H0) or integrators.PoincareTransformed(model, H0)
         state = self.method.init(K, Q, P)
-        axial = None
+        shares = None
         if tangents is not None:
             if self._axial:  # one tangent traced, the other by symmetry
-                axial, tangents = axial_tangents(camera.T, D.T, tangents)
+                shares, tangents = axial_tangents(camera.T, D.T, tangents)
             dQ, dP = self._start_tangents(camera, D, tangents, Q.shape[0])
             state = self.method.with_tangents(K, state, dQ, dP)
         batch = Batch(
@@ -439,8 +445,8 @@ class Tracer:
              "streak": np.zeros(rows.size, dtype=np.int64),  # steps in a row off the cone
              "watch": np.ones(rows.size, dtype=bool) if watch is None else watch},
         )  # fmt: skip
-        if axial is not None:
-            batch.arrays["axial"] = axial
+        if shares is not None:
+            batch.arrays["axial"] = shares
 
         def step(batch: Batch):
             assert self.stepper is not None  # a curved scene's tracer has one
@@ -873,12 +879,12 @@ class Tracer:
             rest &= ~self._leave_at_boundary(idx, np.flatnonzero(leaving), X_prev, X, ends, out)
         if rest.any():
             Q, P = ends.end
-            axial = batch.arrays.get("axial")
+            shares = batch.arrays.get("axial")
             self._escape(
                 idx[rest], Q[:, rest], P[:, rest], self._to_world(X[:, rest].T), out,
                 self._to_world(camera[:, rest].T),
                 [d[..., rest] for d in self.method.tangents_of(batch.state)],
-                None if axial is None else axial.subset(rest),
+                None if shares is None else shares[..., rest],
             )  # fmt: skip
 
     @property
@@ -916,10 +922,10 @@ class Tracer:
             done[rows] = True
         return done
 
-    def _escape(self, rows, Q, P, world, out: RayResults, eye, tangents=(), axial=None):
+    def _escape(self, rows, Q, P, world, out: RayResults, eye, tangents=(), shares=None):
         """Rays leaving the region: direction from dq/ds, far-field correction, straight on
         (with ``tangents`` (dQ, dP) (k, n, M): the escape direction's derivatives too; with
-        ``axial``, the traced tangent's expanded into the camera's k: AxialTangents)."""
+        ``shares``, the traced tangent's expanded into the camera's k: axial_final)."""
         d_world = self._escape_direction(Q, P)
         self._straight(rows, world, d_world, out, eye)
         failed = ~np.isfinite(d_world).all(axis=1)
@@ -933,8 +939,10 @@ class Tracer:
             Z = np.concatenate([Q, P]).T
             dZ = np.moveaxis(np.concatenate(tangents, axis=1), -1, 0)  # (M, k, 2n)
             jacobian = directional(escape, Z, dZ)
-            if axial is not None:
-                jacobian = axial.final(jacobian, d_world, self.rotation)
+            if shares is not None:  # the cameras' axes: eye - centre, in world axes
+                axis = eye - self.scene.center
+                axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+                jacobian = axial_final(shares, jacobian, d_world, axis)
             sky = out.ending[rows] == ENDING["escaped"]
             out.sky_jacobian[rows[sky]] = jacobian[sky]
 

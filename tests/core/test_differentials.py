@@ -299,13 +299,14 @@ def test_spherical_models_trace_one_tangent_and_turn_the_other(monkeypatch):
     the turn's share is known to ~1e-16 / 1e-7); the camera's tangents are rebuilt from the
     traced one and the turn exactly off the axis, to O(angle) < 1e-7 within RADIAL of it."""
     from core.models.schwarzschild_optical import SchwarzschildOptical
-    from core.tracing.differentials import axial_tangents
+    from core.tracing.differentials import axial_final, axial_tangents
 
     d, t = _axis_fan(CAMERA)
     origins = np.broadcast_to(CAMERA, d.shape).copy()
-    axial, traced = axial_tangents(origins, d, t)
-    rebuilt = axial.final(traced, d, np.eye(3))  # the turn's derivative at the camera: â × d
-    radial = (axial.turned != 0).any(axis=0)
+    shares, traced = axial_tangents(origins, d, t)
+    axis = origins / np.linalg.norm(origins, axis=1, keepdims=True)
+    rebuilt = axial_final(shares, traced, d, axis)  # the turn's derivative at the camera: â × d
+    radial = (shares[2] != 0).any(axis=0)
     assert radial.sum() == 8  # both ways: on the axis and 1e-9 to 1e-7 rad (normalised: < RADIAL)
     assert np.abs(rebuilt - t)[~radial].max() < 1e-12 * np.abs(t).max()
     assert np.abs(rebuilt - t)[radial].max() < 1e-7 * np.abs(t).max()  # to O(|â × d|)
