@@ -468,16 +468,26 @@ def sphere_geodesic(Q: np.ndarray, P: np.ndarray, c, sines=None):
         omega = c * size
         cw = dual.cos(omega)
         sw = dual.sin(omega) / dual.where(dual.value_of(size) > 0, size, np.inf)
+    rho, down = _turn_end(Q, P, (st, ct), spin, cw, sw)
+    return (rho, down) if isinstance(rho, np.ndarray) else None
+
+
+def _turn_end(Q: Any, P: Any, sines, spin, cw, sw):
+    """The end of sphere_geodesic's turn by w, in place on (theta, phi, p_theta): n' in
+    the frame (e_rho, e_phi, z) at the old phi, from cw = cos w and sw = sin w / |J|
+    (arrays or Duals). -> (rho, down) = (sin theta', cos theta')."""
+    (st, ct), p_theta = sines, P[2]
     along_rho = cw * st + sw * p_theta * ct  # n' . e_rho(phi)
     along_phi = sw * spin  # n' . e_phi(phi)
     rho = dual.sqrt(along_rho * along_rho + along_phi * along_phi)
     down = cw * ct - sw * p_theta * st
-    Q[2] = dual.arctan2(rho, down)
-    Q[3] += dual.arctan2(along_phi, along_rho)
     with np.errstate(divide="ignore", invalid="ignore"):
         # J . e_phi(phi'), with e_phi(phi') = cos d e_phi(phi) - sin d e_rho(phi)
-        P[2] = (p_theta * along_rho + spin * ct * along_phi) / rho
-    return (rho, down) if isinstance(rho, np.ndarray) else None
+        new_p_theta = (p_theta * along_rho + spin * ct * along_phi) / rho
+    Q[2] = dual.arctan2(rho, down)
+    Q[3] += dual.arctan2(along_phi, along_rho)
+    P[2] = new_p_theta
+    return rho, down
 
 
 class SphereStart(NamedTuple):
@@ -536,21 +546,16 @@ def sphere_geodesic_tangents(
     along e_phi). The same numbers as sphere_geodesic on Duals to rounding, with a
     few times fewer array operations. -> (sin theta', cos theta')."""
     q, p, dq, dp = Q.value, P.value, Q.tangent, P.tangent
-    (st, ct), p_theta, L = start.sines, p[2], p[3]
     cos_h, sin_h = start.heading
     d_theta = dq[:, 2]
     size, spin = start.size, start.spin
     omega = c * size
     cw, sin_w = np.cos(omega), np.sin(omega)
     sw = np.where(start.moving, sin_w * start.inverse, c)  # sin w / |J|
-    along_rho = cw * st + sw * p_theta * ct  # n' . e_rho(phi)
-    down = cw * ct - sw * p_theta * st
-    along_phi = sw * spin  # n' . e_phi(phi)
-    rho = np.sqrt(along_rho * along_rho + along_phi * along_phi)
+    rho, down = _turn_end(q, p, start.sines, spin, cw, sw)  # p[2] is p_theta' from here
     with np.errstate(divide="ignore", invalid="ignore"):
-        new_p_theta = (p_theta * along_rho + spin * ct * along_phi) / rho
-        new_spin = L / rho
-        cos_end = np.where(start.moving, new_p_theta * start.inverse, 1.0)
+        new_spin = p[3] / rho
+        cos_end = np.where(start.moving, p[2] * start.inverse, 1.0)
         sin_end = new_spin * start.inverse
         x = cos_h * d_theta  # along the circle
         x += c * start.along
@@ -567,7 +572,4 @@ def sphere_geodesic_tangents(
     np.multiply(cos_end, start.along, out=dp[:, 2])
     dp[:, 2] -= sin_end * v
     dp[:, 2] += (new_spin * down) * d_phi
-    q[2] = np.arctan2(rho, down)
-    q[3] += np.arctan2(along_phi, along_rho)
-    p[2] = new_p_theta
     return rho, down
