@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import copy
 import math
-import re
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -699,26 +698,36 @@ _SUMMARY_FIELDS = (
     ("rays", "{} rays"),
     ("steps", "{} steps"),
     ("failed", "{} failed"),
-    ("error_median", "median error {:.3g}"),
-    ("error_max", "max error {:.3g}"),
+    ("error_px_median", "median error {:.3g} px"),
+    ("error_px_max", "max error {:.3g} px"),
+    ("error_median", "median error {:.3g} rad"),
+    ("error_max", "max error {:.3g} rad"),
     ("disk_exposure", "disk exposure {:.3g}"),
 )
+"""What summary_text prints, in order; the error in pixels of the camera (the Error pass's
+unit) where the summary has it, else in radians."""
 
 
 def summary_text(summary: dict) -> str:
-    """One line describing a render summary; an error without an estimate (None) is 'n/a'."""
+    """One line describing a render summary, with units; an error without an estimate
+    (None) is 'n/a'."""
     parts = []
     for key, fmt in _SUMMARY_FIELDS:
-        if key not in summary:
+        in_pixels = key.replace("error_", "error_px_", 1) in summary
+        if key not in summary or key.startswith("error_") and in_pixels:
             continue
         value = summary[key]
         try:
-            parts.append(
-                fmt.format(value) if value is not None else re.sub(r"\{[^}]*\}", "n/a", fmt)
-            )
+            parts.append(fmt.format(value) if value is not None else _no_value(fmt))
         except (TypeError, ValueError):
             parts.append(f"{key} {value}")
     return ", ".join(parts)
+
+
+def _no_value(fmt: str) -> str:
+    """A summary field without a value: its words, then 'n/a' (no unit)."""
+    words = fmt.split("{")[0].strip()
+    return f"{words} n/a" if words else "n/a"
 
 
 def shade(rays: RayResults, background: Background, footprint=None) -> np.ndarray:

@@ -86,6 +86,8 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
             job = render_job.prepare(
                 scene, depsgraph, use_border=True, camera_object=self.camera_override
             )
+        if self.is_animation:
+            self._pin_exposure(job)
         for warning in job.warnings:
             if warning not in _warned:  # once per render job: an animation's frames repeat them
                 _warned.add(warning)
@@ -99,7 +101,8 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
         res = self.begin_result(0, 0, job.camera.width, job.camera.height, layer=view_layer)
         try:
             shown = _Progressive(self, res, job.camera.width, job.camera.height)
-            result = render_job.run(job, self._progress_callback(), self.test_break, shown.tile)
+            progress = self._progress_callback(scene.frame_current)
+            result = render_job.run(job, progress, self.test_break, shown.tile)
             if result.cancelled or self.test_break():
                 self.end_result(res, cancel=True)
                 return
@@ -109,10 +112,21 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
             self.end_result(res, cancel=True)  # nothing of a failed frame is committed
             raise
         self.end_result(res)
+        if self.is_animation and job_exposure.frame is None:
+            job_exposure.found(result.summary.get("disk_exposure"), scene.frame_current)
         text = render_job.finished(result.summary)
         self.update_stats("", f"SymRay: {text}")
         if bpy.app.background:
             print(f"SymRay: frame {scene.frame_current}: {text}")
+
+    def _pin_exposure(self, job: render_job.RenderJob) -> None:
+        """An animation's frames after the first take the first frame's automatic disk
+        exposure (job_exposure), so that they do not flicker; said once per job."""
+        if job_exposure.frame is None or not render_job.pin_exposure(job, job_exposure.value):
+            return
+        if not job_exposure.said:
+            job_exposure.said = True
+            self.report({"INFO"}, job_exposure.text())
 
     def _bake_progress(self, done: int, total: int, name: str) -> None:
         """The progress bar and status line while Cycles bakes the lighting (bake.py)."""
@@ -125,9 +139,12 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
         else:
             self.update_stats("", f"SymRay: lighting of {total} objects baked")
 
-    def _progress_callback(self):
-        """progress(done, total) for core.render: the progress bar and a status line."""
+    def _progress_callback(self, frame: int):
+        """progress(done, total) for core.render: the progress bar and a status line; in
+        the background (``blender -b``, a farm) a console line every PRINT_INTERVAL_S."""
         last_report = [0.0]
+        started = time.monotonic()
+        last_print = [started]
 
         def progress(done: int, total: int) -> None:
             if total > 0:
@@ -136,34 +153,77 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
             if now - last_report[0] > 0.25:
                 last_report[0] = now
                 self.update_stats("", f"SymRay: {done} of {total} pixels")
+            if bpy.app.background and total > 0 and now - last_print[0] >= PRINT_INTERVAL_S:
+                last_print[0] = now
+                print(
+                    f"SymRay: frame {frame}: {100 * done / total:.0f} % "
+                    f"({done} of {total} pixels, {now - started:.0f} s)",
+                    flush=True,
+                )
 
         return progress
 
     def _write_result(self, res: Any, result: Any, passes: list[tuple[str, str]]) -> None:
-        """Copy the image and passes into Blender's render result ``res`` (not committed)."""
+        """Copy the image and passes into Blender's render result ``res`` (not committed),
+        each with one ``foreach_set`` of a flat float32 buffer (``rect = array`` converts
+        element by element: seconds at 1080p)."""
         layer = res.layers[0]
-        layer.passes["Combined"].rect = output.bottom_up(result.rgba, 4)
+        write_pass(layer.passes["Combined"], result.rgba, 4)
         for core_name, name in passes:
             data = result.passes.get(core_name)
             render_pass = layer.passes.get(name)
             if data is not None and render_pass is not None:
-                render_pass.rect = output.bottom_up(data, 1)
+                write_pass(render_pass, data, 1)
+
+
+def write_pass(render_pass: Any, image: np.ndarray, channels: int) -> None:
+    """Write a (h, w[, c]) top-first image into ``render_pass`` of the same size."""
+    render_pass.rect.foreach_set(output.bottom_up(image, channels).reshape(-1))
+
+
+PRINT_INTERVAL_S = 10.0
+"""A background render prints its progress this often."""
+SHOW_INTERVAL_S = 1.0
+"""Finished tiles are shown at most this often (and never so often that showing them takes
+more than SHOW_SHARE of the time): a redraw copies and redraws the whole frame."""
+SHOW_SHARE = 0.05
 
 
 class _Progressive:
-    """Shows each finished tile in the open render result (``update_result``), as Cycles
-    shows its tiles; the result is committed (or discarded) by the engine at the end."""
+    """Shows the finished tiles in the open render result (``update_result``), as Cycles
+    shows its tiles; the result is committed (or discarded) by the engine at the end.
+
+    Each tile is copied into a frame buffer (its own region only); the frame is pushed
+    to Blender (``show``) when SHOW_INTERVAL_S has passed since the last push and the
+    pushes have cost at most SHOW_SHARE of the time since the first tile."""
+
+    clock = staticmethod(time.monotonic)
 
     def __init__(self, engine: SymRayRenderEngine, res: Any, width: int, height: int) -> None:
         self.engine, self.res = engine, res
         self.rgba = np.zeros((height, width, 4), dtype=np.float32)  # row 0 at the top
+        self.start = self.last = self.clock()
+        self.spent = 0.0
+        self.shown = 0
+        """Frames pushed to Blender so far."""
 
     def tile(self, rect: tuple[int, int, int, int], part: Any) -> None:
-        """Copy a finished tile (x0, y0, x1, y1; row 0 at the top) and redraw."""
+        """Copy a finished tile (x0, y0, x1, y1; row 0 at the top); redraw when due."""
         x0, y0, x1, y1 = rect
         self.rgba[y0:y1, x0:x1] = part.rgba.reshape(y1 - y0, x1 - x0, 4)
-        self.res.layers[0].passes["Combined"].rect = output.bottom_up(self.rgba, 4)
+        now = self.clock()
+        due = now - self.last >= SHOW_INTERVAL_S
+        if due and self.spent <= SHOW_SHARE * (now - self.start):
+            self.show()
+
+    def show(self) -> None:
+        """Push the frame so far to Blender's render window."""
+        began = self.clock()
+        write_pass(self.res.layers[0].passes["Combined"], self.rgba, 4)
         self.engine.update_result(self.res)
+        self.last = self.clock()
+        self.spent += self.last - began
+        self.shown += 1
 
 
 # Built-in panels shown for SYMRAY: every generic panel (those listing BLENDER_RENDER in
@@ -184,10 +244,43 @@ _warned: set[str] = set()
 """Warnings reported in this render job (a still, or every frame of an animation)."""
 
 
+class _JobExposure:
+    """The automatic disk exposure of an animation render job's first frame."""
+
+    def __init__(self) -> None:
+        self.value: float | None = None
+        self.frame: int | None = None
+        self.said = False
+
+    def found(self, value: float | None, frame: int) -> None:
+        """Remember the first frame's exposure (nothing when it has no disk)."""
+        if value is not None:
+            self.value, self.frame = float(value), frame
+
+    def text(self) -> str:
+        """What the user is told once per job."""
+        return (
+            f"Auto Exposure: every frame of this animation uses frame {self.frame}'s disk "
+            f"exposure {self.value:.3g}, so that the frames do not flicker (rendering frames "
+            "in separate jobs, as a farm does? Turn Auto Exposure off and set Exposure to "
+            "that value, so that every job uses it)"
+        )
+
+    def clear(self) -> None:
+        """A new render job."""
+        self.value = self.frame = None
+        self.said = False
+
+
+job_exposure = _JobExposure()
+
+
 @bpy.app.handlers.persistent
 def _new_render_job(*_args: Any) -> None:
-    """A render job starts (F12, or an animation before its first frame): warn afresh."""
+    """A render job starts (F12, or an animation before its first frame): warn afresh, and
+    choose the automatic disk exposure afresh."""
     _warned.clear()
+    job_exposure.clear()
 
 
 _added_to: list[type] = []

@@ -8,6 +8,8 @@ thread, background mode directly.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 import traceback
 from collections.abc import Callable
 from concurrent.futures.process import BrokenProcessPool
@@ -166,6 +168,17 @@ def _baked_surfaces(
         warnings.append(UNBAKED_WARNING)
         return None
     return bake.bake_surfaces(scene, depsgraph, warnings, bake=not cached_only)
+
+
+def pin_exposure(job: RenderJob, exposure: float | None) -> bool:
+    """Give the job's disk of automatic exposure the fixed ``exposure`` (an animation's
+    first frame's: engine.job_exposure); True when it had one to fix."""
+    disk = job.scene.disk
+    if exposure is None or disk is None or disk.exposure is not None:
+        return False
+    job.scene = copy.copy(job.scene)
+    job.scene.disk = dataclasses.replace(disk, exposure=exposure)
+    return True
 
 
 def run(

@@ -234,7 +234,11 @@ def test_summary_with_estimate_is_positive():
     out = core.render(kerr_scene(), small_camera(), tolerance=1e-3, workers=1)
     s = out.summary
     assert 0 < s["error_median"] <= s["error_max"] < math.inf
-    assert f"max error {s['error_max']:.3g}" in summary_text(s)
+    # in the Error pass's unit, pixels, and said so (a bare 3.14 read as pixels was radians)
+    assert f"max error {s['error_px_max']:.3g} px" in summary_text(s)
+    assert s["error_px_max"] == s["error_max"] / s["pixel_angle"]
+    bare = {k: v for k, v in s.items() if not k.startswith("error_px")}
+    assert f"max error {s['error_max']:.3g} rad" in summary_text(bare)
 
 
 # -- item 8: why rays cannot start at the camera --------------------------------------------

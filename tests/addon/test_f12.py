@@ -1,0 +1,146 @@
+"""F12 itself (issue 51): the engine fills the render result without copying the whole frame
+per tile, prints its progress in the background, and keeps an animation's automatic disk
+exposure from flickering."""
+
+from __future__ import annotations
+
+import bpy
+import numpy as np
+import OpenEXR
+
+
+def _exr(path) -> np.ndarray:
+    """The Combined RGBA of an EXR written by F12, (h, w, 4), row 0 at the top."""
+    with OpenEXR.File(str(path), separate_channels=True) as f:
+        channels = {n: np.array(c.pixels) for p in f.parts for n, c in p.channels.items()}
+    names = [next(k for k in channels if k.endswith(f"Combined.{c}")) for c in "RGBA"]
+    return np.stack([channels[n] for n in names], axis=-1)
+
+
+def _multilayer(scene, path) -> None:
+    """F12 writes a 32-bit multilayer EXR to exactly ``path``."""
+    settings = scene.render.image_settings
+    if "media_type" in settings.bl_rna.properties:  # Blender 5
+        settings.media_type = "MULTI_LAYER_IMAGE"
+    settings.file_format = "OPEN_EXR_MULTILAYER"
+    settings.color_depth = "32"
+    scene.render.filepath = str(path)
+    scene.render.use_file_extension = False
+
+
+def _hole_and_disk(scene, helpers, width=96, height=72):
+    """A black hole with its disk (Add › Black Hole's defaults) seen from 30 units."""
+    scene.render.resolution_x, scene.render.resolution_y = width, height
+    scene.render.engine = "SYMRAY"
+    scene.symray.quality = "PREVIEW"
+    cam = helpers.add_camera(scene, location=(0.0, -30.0, 3.0))
+    cam.rotation_euler = (np.pi / 2 - 0.1, 0.0, 0.0)
+    bpy.ops.symray.add_black_hole()
+    helpers.set_world_color(scene, (0.02, 0.02, 0.05, 1.0))
+    bpy.context.view_layer.update()
+    return cam
+
+
+class _FakeClock:
+    """A monotonic clock that advances ``tick`` seconds each time it is read."""
+
+    def __init__(self, tick: float) -> None:
+        self.now, self.tick = 0.0, tick
+
+    def __call__(self) -> float:
+        self.now += self.tick
+        return self.now
+
+
+def test_f12_copies_tiles_not_frames(addon, scene, helpers, tmp_path, monkeypatch):
+    """Each finished tile is copied into the engine's frame buffer (its own region); the
+    frame goes to Blender's render window at most once a (fake) second and the passes once
+    at the end, each with one foreach_set (a ``rect = array`` of the whole frame per tile
+    took 8-9 s at 1080p: issue 51). The committed image is the core's render."""
+    engine = addon.module("symray_addon.engine")
+    job = addon.module("symray_addon.render_job")
+    _hole_and_disk(scene, helpers, 40, 256)  # tiles are bands of 31 rows at least
+    scene.symray.parallel, scene.symray.workers = "THREADS", 4  # 8 bands
+    clock = _FakeClock(0.2)
+    monkeypatch.setattr(engine._Progressive, "clock", staticmethod(clock))
+    writes: list[tuple[str, tuple[int, ...]]] = []
+    real_write = engine.write_pass
+    monkeypatch.setattr(
+        engine,
+        "write_pass",
+        lambda p, image, c: (writes.append((p.name, image.shape)), real_write(p, image, c)),
+    )
+    tiles: list[tuple[int, int, int, int]] = []
+    real_tile = engine._Progressive.tile
+    monkeypatch.setattr(
+        engine._Progressive,
+        "tile",
+        lambda self, rect, part: (tiles.append(rect), real_tile(self, rect, part)),
+    )
+    _multilayer(scene, tmp_path / "f12.exr")
+    bpy.ops.render.render(write_still=True)
+    assert len(tiles) >= 8
+    covered = sum((x1 - x0) * (y1 - y0) for x0, y0, x1, y1 in tiles)
+    assert covered == 40 * 256  # every tile copied once, its own region
+    combined = [shape for name, shape in writes if name == "Combined"]
+    assert all(shape == (256, 40, 4) for shape in combined)
+    assert sorted(name for name, _ in writes[len(combined) - 1 :]) == sorted(
+        ["Combined", *(name for _, name in engine.enabled_passes(scene.symray))]
+    )  # the finished image and each pass switched on, once
+    pushes = len(combined) - 1  # the last write is the finished image
+    # one clock reading per tile, two per push: 0.2 s each; a push at most once a second
+    assert 1 <= pushes <= 1 + clock.now / engine.SHOW_INTERVAL_S
+    assert pushes < len(tiles) / 2
+    reference = job.run(job.prepare(scene, bpy.context.evaluated_depsgraph_get()))
+    np.testing.assert_allclose(_exr(tmp_path / "f12.exr"), reference.rgba, atol=1e-6)
+
+
+def test_background_render_prints_its_progress(addon, scene, helpers, tmp_path, capsys):
+    """`blender -b` prints how far a frame is (a 43-minute frame printed nothing until it
+    finished: issue 51), with the frame, the share and the pixels."""
+    engine = addon.module("symray_addon.engine")
+    _hole_and_disk(scene, helpers, 48, 36)
+    assert bpy.app.background
+    interval = engine.PRINT_INTERVAL_S
+    engine.PRINT_INTERVAL_S = 0.0
+    try:
+        bpy.ops.render.render()
+    finally:
+        engine.PRINT_INTERVAL_S = interval
+    lines = [line for line in capsys.readouterr().out.splitlines() if " % (" in line]
+    assert lines and all(line.startswith("SymRay: frame 1: ") for line in lines)
+    assert lines[-1].startswith("SymRay: frame 1: 100 % (1728 of 1728 pixels")
+
+
+def _animation_exposures(render_job) -> list[float]:
+    """render(animation=True) over the scene's frames; each frame's disk exposure."""
+    exposures: list[float] = []
+
+    def remember(*_args) -> None:
+        exposures.append(render_job.last_summary["disk_exposure"])
+
+    bpy.app.handlers.render_post.append(remember)
+    try:
+        assert bpy.ops.render.render(animation=True) == {"FINISHED"}
+    finally:
+        bpy.app.handlers.render_post.remove(remember)
+    return exposures
+
+
+def test_animation_keeps_the_first_frames_auto_exposure(addon, scene, helpers, tmp_path):
+    """A fly-by with Auto Exposure: every frame of the animation job uses the first frame's
+    exposure (it jumped 36.9 -> 46.6 -> 36.9 over three frames: issue 51); a still of a
+    later frame still chooses its own."""
+    cam = _hole_and_disk(scene, helpers, 32, 24)
+    scene.render.filepath = str(tmp_path / "frame_####")
+    cam.keyframe_insert("location", frame=1)
+    cam.location = (6.0, -14.0, 3.0)
+    cam.keyframe_insert("location", frame=3)
+    scene.frame_start, scene.frame_end = 1, 3
+    render_job = addon.module("symray_addon.render_job")
+    exposures = _animation_exposures(render_job)
+    assert len(exposures) == 3
+    assert exposures[1] == exposures[2] == exposures[0]
+    scene.frame_set(3)
+    bpy.ops.render.render()  # a still chooses afresh
+    assert render_job.last_summary["disk_exposure"] != exposures[0]
