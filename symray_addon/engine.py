@@ -60,11 +60,12 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
 
     def _fail(self, message: str) -> None:
         """Report a failed frame. An ERROR report is what makes Blender's render operator
-        raise and keep the output file as it was (error_set alone or raising does not)."""
+        raise and keep the output file as it was (error_set alone or raising does not); in
+        the background the report is the console's one line (error_set would print the
+        message a second time), else error_set also shows it in the render window."""
         self.report({"ERROR"}, message)
-        self.error_set(message)
-        if bpy.app.background:
-            print(f"SymRay: error: {message}")
+        if not bpy.app.background:
+            self.error_set(message)
 
     def render(self, depsgraph: bpy.types.Depsgraph) -> None:
         """Trace one frame of the evaluated scene into the render result.

@@ -7,6 +7,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 import OpenEXR
+import pytest
 
 
 def _exr(path) -> np.ndarray:
@@ -144,3 +145,17 @@ def test_animation_keeps_the_first_frames_auto_exposure(addon, scene, helpers, t
     scene.frame_set(3)
     bpy.ops.render.render()  # a still chooses afresh
     assert render_job.last_summary["disk_exposure"] != exposures[0]
+
+
+def test_a_failed_frame_is_said_once(addon, factory_scene, capfd):
+    """`blender -b`: a frame that fails prints its reason once (three times before: the
+    report, error_set's echo and the engine's own line)."""
+    camera = bpy.data.objects["Camera"]
+    factory_scene.cursor.location = camera.location
+    bpy.ops.symray.add_black_hole(size=3.0)  # the camera inside its horizon
+    capfd.readouterr()
+    with pytest.raises(RuntimeError, match="inside the black hole's horizon"):
+        bpy.ops.render.render()
+    printed = capfd.readouterr()
+    said = (printed.out + printed.err).count("inside the black hole's horizon")
+    assert said == 1
