@@ -108,6 +108,8 @@ class SymRayRenderEngine(bpy.types.RenderEngine):
                 self.end_result(res, cancel=True)
                 return
             output.check_finite(result.rgba)
+            if bpy.app.background or self.is_animation:  # the frame will be saved
+                output.check_room_to_save(scene, job.width, job.height, len(passes))
             self._write_result(res, result, passes)
         except BaseException:
             self.end_result(res, cancel=True)  # nothing of a failed frame is committed

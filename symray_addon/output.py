@@ -16,6 +16,7 @@ instead: choose OpenEXR MultiLayer there to get every pass ("SymRay Error", ...)
 from __future__ import annotations
 
 import os
+import shutil
 import uuid
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -231,3 +232,40 @@ def write_exr(
         return imageio.write_exr_files(files)
     except imageio.ImageWriteError as err:
         raise OSError(f"SymRay {err}") from None  # "cannot write image '<path>': ..."
+
+
+SAVE_MARGIN_BYTES = 1 << 20
+"""Room kept beyond a frame's uncompressed size (headers, a codec's worst case)."""
+
+
+def frame_bytes(scene: bpy.types.Scene, width: int, height: int, passes: int) -> int:
+    """An upper bound of the size of the frame Blender's writer will save: its samples
+    uncompressed (a codec's output is rarely larger), plus SAVE_MARGIN_BYTES."""
+    settings = scene.render.image_settings
+    depth = {"32": 4, "16": 2}.get(getattr(settings, "color_depth", ""), 1)
+    channels = len(settings.color_mode) if settings.color_mode != "BW" else 1
+    if settings.file_format == "OPEN_EXR_MULTILAYER":
+        channels = 4 + passes
+    return width * height * channels * depth + SAVE_MARGIN_BYTES
+
+
+def check_room_to_save(scene: bpy.types.Scene, width: int, height: int, passes: int) -> None:
+    """OSError when the folder the frame will be saved to has less free space than the
+    frame may take (frame_bytes): Blender's writer would cut the file short over the
+    previous one and still print 'Saved:'. Raised before the frame is handed over, so the
+    previous file stays as it was."""
+    path = os.path.abspath(bpy.path.abspath(scene.render.frame_path(frame=scene.frame_current)))
+    folder = os.path.dirname(path)
+    while folder and not os.path.isdir(folder):  # Blender makes the missing folders
+        folder = os.path.dirname(folder) if os.path.dirname(folder) != folder else ""
+    if not folder:
+        return
+    need = frame_bytes(scene, width, height, passes)
+    free = shutil.disk_usage(folder).free
+    if free < need:
+        raise OSError(
+            f"Not enough free space to save frame {scene.frame_current} in '{folder}': it may "
+            f"take {need / 1e6:.1f} MB and there are {free / 1e6:.1f} MB free. "
+            "The frame was not handed to Blender's writer, so any file there keeps its "
+            "previous contents; free some space or choose another Output path"
+        )

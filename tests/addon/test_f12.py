@@ -159,3 +159,28 @@ def test_a_failed_frame_is_said_once(addon, factory_scene, capfd):
     printed = capfd.readouterr()
     said = (printed.out + printed.err).count("inside the black hole's horizon")
     assert said == 1
+
+
+def test_a_full_disk_keeps_the_previous_frame(addon, scene, helpers, tmp_path, monkeypatch):
+    """F12 with write_still onto a disk without room for the frame: Blender's writer would
+    cut the file short over the previous good one and still print 'Saved:' (issue 45).
+    SymRay checks the room before it hands the frame over, fails the frame by name, and
+    the previous file stays byte for byte."""
+    output = addon.module("symray_addon.output")
+    engine = addon.module("symray_addon.engine")
+    _hole_and_disk(scene, helpers, 32, 24)
+    path = tmp_path / "frame.exr"
+    _multilayer(scene, path)
+    bpy.ops.render.render(write_still=True)
+    good = path.read_bytes()
+    need = output.frame_bytes(scene, 32, 24, len(engine.enabled_passes(scene.symray)))
+    assert need >= 32 * 24 * 4 * 4
+    usage = output.shutil.disk_usage(tmp_path)
+    monkeypatch.setattr(output.shutil, "disk_usage", lambda _: usage._replace(free=need - 1))
+    scene.symray.quality = "FINAL"  # a different frame
+    with pytest.raises(RuntimeError, match="Not enough free space to save frame 1"):
+        bpy.ops.render.render(write_still=True)
+    assert path.read_bytes() == good
+    monkeypatch.setattr(output.shutil, "disk_usage", lambda _: usage._replace(free=need))
+    bpy.ops.render.render(write_still=True)
+    assert path.read_bytes() != good
