@@ -12,10 +12,10 @@ import math
 
 import bpy
 import numpy as np
-from mathutils import Vector
+from mathutils import Matrix, Vector
 
 from ..core.presets import MIRAGE_EQ17_INDEX, MIRAGE_EQ18_INDEX
-from . import models, objects
+from . import models, objects, world
 
 MINKOWSKI_METRIC = "-1, 0, 0, 0; 0, 1, 0, 0; 0, 0, 1, 0; 0, 0, 0, 1"
 """Flat spacetime in Cartesian coordinates (seed Eq. 13): the default user metric."""
@@ -117,6 +117,8 @@ def frame_hole(scene: bpy.types.Scene, camera: bpy.types.Object) -> None:
     hole = objects.hole_of(scene)
     if hole is None:
         return
+    if bpy.context.scene == scene:  # a hole made just now: its matrix_world is not set yet
+        bpy.context.view_layer.update()
     where = models.placement(hole.matrix_world)
     rg = objects.rg_of(hole.symray.size, hole.symray.spin)
     disk = scene.symray.disk.enabled
@@ -135,10 +137,14 @@ def frame_hole(scene: bpy.types.Scene, camera: bpy.types.Object) -> None:
     distance = extent / math.tan(half_angle)
     inclination = math.radians(INCLINATION[disk])
     local = np.array([0.0, -math.sin(inclination), math.cos(inclination)])
-    camera.location = tuple(where.center + where.rotation @ local * distance)
-    forward = -(where.rotation @ local)
-    camera.rotation_euler = Vector(forward).to_track_quat("-Z", "Y").to_euler()
+    location = Vector(where.center + where.rotation @ local * distance)
+    forward = Vector(-(where.rotation @ local))
+    turn = forward.to_track_quat("-Z", "Y").to_matrix().to_4x4()
+    # in the world, whatever the camera's parents (a rig) do to its own location/rotation
+    camera.matrix_world = Matrix.Translation(location) @ turn
     data.clip_end = max(data.clip_end, 4.0 * distance)
+    if bpy.context.scene == scene:
+        bpy.context.view_layer.update()
 
 
 class SYMRAY_OT_apply_preset(bpy.types.Operator):
@@ -173,6 +179,7 @@ class SYMRAY_OT_apply_preset(bpy.types.Operator):
         if settings.model == "OBJECTS":
             if self.frame_camera:
                 frame_hole(scene, _scene_camera(scene))
+            self._show_lensing(scene)
             return {"FINISHED"}
         if self.add_center and settings.center is None:
             empty = bpy.data.objects.new("SymRay Centre", None)
@@ -180,6 +187,25 @@ class SYMRAY_OT_apply_preset(bpy.types.Operator):
             context.scene.collection.objects.link(empty)
             settings.center = empty
         return {"FINISHED"}
+
+    def _show_lensing(self, scene: bpy.types.Scene) -> None:
+        """A black hole preset's picture shows lensing: a plain-colour world (the factory
+        grey) gives way to the procedural sky, and a hole inside an object is reported."""
+        settings = scene.symray
+        if settings.background == "AUTO" and world.plain_colour(scene):
+            settings.background = "PROCEDURAL"
+            self.report({"INFO"}, SKY_NOTE)
+        hole = objects.hole_of(scene)
+        warning = objects.inside_warning(scene, hole) if hole is not None else ""
+        if warning:
+            self.report({"WARNING"}, warning)
+
+
+SKY_NOTE = (
+    "Background set to Procedural Sky: the world is one plain colour, which shows nothing "
+    "of the lensing (Render Properties › SymRay › Background › Auto shows the world again)"
+)
+"""What a black hole preset says when it gives a plain-colour world the procedural sky."""
 
 
 def _scene_camera(scene: bpy.types.Scene) -> bpy.types.Object:

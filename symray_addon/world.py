@@ -113,3 +113,15 @@ def world_background(scene: bpy.types.Scene, mode: str = "AUTO") -> Any:
         return "procedural" if mode == "AUTO" else (0.0, 0.0, 0.0, 1.0)
     rgb = np.array(color.default_value[:3], dtype=np.float64) * strength
     return (*rgb.tolist(), 1.0)
+
+
+def plain_colour(scene: bpy.types.Scene) -> bool:
+    """True when Background › Auto shows the world as one plain colour (the factory grey
+    world: no environment texture), which shows nothing of a black hole's lensing."""
+    world = scene.world
+    if world is None:
+        return False
+    node = _background_node(world)
+    if node is None:
+        return node_tree_of(world) is None
+    return not node.inputs["Color"].is_linked

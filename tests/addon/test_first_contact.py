@@ -247,3 +247,68 @@ def test_a_black_hole_preset_frames_its_camera(addon, factory_scene, preset):
     span = ndc[:, axis].max() - ndc[:, axis].min()
     assert 0.65 <= span <= 0.78, span
     assert abs(0.5 * (ndc[:, axis].max() + ndc[:, axis].min()) - 0.5) < 0.05  # centred
+
+
+def _looks_at(camera, point) -> float:
+    """Degrees between the camera's view axis (its -Z in the world) and ``point``."""
+    from mathutils import Vector
+
+    matrix = camera.matrix_world
+    forward = (matrix.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
+    towards = (Vector(point) - matrix.translation).normalized()
+    return math.degrees(forward.angle(towards))
+
+
+@pytest.mark.parametrize("preset", ["KERR_DISK", "SCHWARZSCHILD_LENS"])
+def test_a_preset_frames_the_new_hole_not_the_origin(addon, factory_scene, preset):
+    """Issue 45: with the 3D cursor at (6, 6, 0) the preset's hole is made there, and the
+    camera looks at it (it looked at the origin: the hole 6.4° off-centre, the disk cut)."""
+    scene = factory_scene
+    scene.cursor.location = (6.0, 6.0, 0.0)
+    assert bpy.ops.symray.apply_preset(preset=preset) == {"FINISHED"}
+    hole = next(o for o in scene.objects if o.symray.kind == "BLACK_HOLE")
+    assert tuple(hole.matrix_world.translation) == pytest.approx((6.0, 6.0, 0.0))
+    assert _looks_at(scene.camera, (6.0, 6.0, 0.0)) < 0.01
+
+
+def test_a_preset_frames_a_camera_on_a_rotated_rig(addon, factory_scene):
+    """Issue 45: a camera parented to a rotated, moved rig ends where the preset puts it in
+    the world (it ended 11° off: its local rotation was set as if it were the world's)."""
+    scene = factory_scene
+    rig = bpy.data.objects.new("Rig", None)
+    scene.collection.objects.link(rig)
+    rig.location, rig.rotation_euler = (1.0, -2.0, 0.5), (0.3, -0.2, 0.7)
+    scene.camera.parent = rig
+    assert bpy.ops.symray.apply_preset(preset="KERR_DISK") == {"FINISHED"}
+    assert _looks_at(scene.camera, (0.0, 0.0, 0.0)) < 0.01
+    bpy.context.view_layer.update()
+    alone = tuple(scene.camera.matrix_world.translation)
+    bpy.ops.wm.read_homefile(use_factory_startup=True)
+    bpy.context.scene.render.engine = "SYMRAY"
+    bpy.context.scene.render.resolution_x, bpy.context.scene.render.resolution_y = 64, 48
+    assert bpy.ops.symray.apply_preset(preset="KERR_DISK") == {"FINISHED"}
+    placed = tuple(bpy.context.scene.camera.matrix_world.translation)
+    assert alone == pytest.approx(placed, abs=1e-5)  # float32 matrices
+
+
+def test_a_preset_shows_lensing_on_the_factory_world(addon, factory_scene, capfd):
+    """Issue 51: the factory's grey world shows a black disc on grey, nothing lensed: a
+    black hole preset gives it the procedural sky and says so, and names the cube the hole
+    sits in. A world with an environment texture is kept."""
+    scene = factory_scene
+    assert scene.symray.background == "AUTO"
+    assert bpy.ops.symray.apply_preset(preset="KERR") == {"FINISHED"}
+    assert scene.symray.background == "PROCEDURAL"
+    printed = capfd.readouterr().out
+    assert "Background set to Procedural Sky" in printed
+    assert "is inside 'Cube': its surfaces hide it" in printed
+    bpy.ops.wm.read_homefile(use_factory_startup=True)
+    scene = bpy.context.scene
+    scene.render.engine = "SYMRAY"
+    tree = scene.world.node_tree
+    texture = tree.nodes.new("ShaderNodeTexEnvironment")
+    texture.image = bpy.data.images.new("Sky", 8, 4, float_buffer=True)
+    background = next(n for n in tree.nodes if n.type == "BACKGROUND")
+    tree.links.new(texture.outputs["Color"], background.inputs["Color"])
+    assert bpy.ops.symray.apply_preset(preset="KERR") == {"FINISHED"}
+    assert scene.symray.background == "AUTO"
