@@ -70,7 +70,10 @@ PASSES: tuple[Pass, ...] = (
     Pass("error_px", np.float32, 0.0,
          "per-pixel error estimate in pixels of this camera (integration, far field, hit "
          "point and interpolation)", derived_from="error", label="Error", shown=True),
-    Pass("steps", np.int32, 0, "integration steps per pixel", interpolated=False,
+    Pass("steps", np.int32, 0,
+         "integration steps of the pixel's own ray; 0 where the pixel was interpolated "
+         "from traced neighbours (no ray of its own: the adaptive sampler's smooth blocks)",
+         interpolated=False,
          label="Steps", shown=True),
     Pass("ending", np.int8, -1, "how each ray ended (core.ENDING code; -1: not rendered)",
          label="Ending"),

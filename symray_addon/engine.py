@@ -5,7 +5,7 @@ by Cycles first, or reused from the cache: bake.py), honouring the render
 region (border), resolution percentage, Esc (``test_break``) and film transparency, and
 writes the Combined pass plus "SymRay Error", "SymRay Steps", "SymRay Ending" and "SymRay
 Redshift" (one channel 'X' each, when enabled in the SymRay panel). Saving is Blender's
-business: choose OpenEXR MultiLayer in Output Properties to keep every pass.
+business: choose a multi-layer OpenEXR in Output Properties to keep every pass.
 """
 
 from __future__ import annotations
