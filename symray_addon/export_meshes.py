@@ -42,6 +42,11 @@ class BakedSurface:
         return MaterialSampler(np.ones(4), self.pixels, extension="EXTEND")
 
 
+FLOAT32_SLACK = 4e-6
+"""Distance (relative to the coordinates' size, 1 + max |x|) within which a float32
+BVHTree cannot tell which side of a surface a point is on: 30 float32 epsilons."""
+
+
 class BVHIntersector:
     """Straight-segment queries against triangles in a BVH (core Intersector protocol)."""
 
@@ -104,13 +109,19 @@ class BVHIntersector:
         n = a.shape[0]
         d = b - a
         length = np.sqrt(np.einsum("ij,ij->i", d, d))
+        slack = FLOAT32_SLACK * (1.0 + np.abs(a).max(axis=1))
         lo, hi = self.bounds
         candidate = (
-            np.all(np.maximum(a, b) >= lo, axis=1)
-            & np.all(np.minimum(a, b) <= hi, axis=1)
+            np.all(np.maximum(a, b) >= lo - slack[:, None], axis=1)
+            & np.all(np.minimum(a, b) <= hi + slack[:, None], axis=1)
             & (length > 0.0)
         )
         rows = np.flatnonzero(candidate)
+        # BVHTree works in float32: a segment starting on a surface (a hit point moved onto
+        # the method's path: the tracer's _surface_crossing) may miss it either way. Each
+        # cast starts ``slack`` before a; a hit in that slack is a hit at a.
+        unit = d[rows] / length[rows, None]
+        origins = a[rows] - slack[rows, None] * unit
         # one ray_cast per segment; keep only (face index, distance), None on a miss: the
         # hit point and the face normal follow in numpy (Vectors are costly to convert)
         cast = self._tree.ray_cast
@@ -118,14 +129,18 @@ class BVHIntersector:
             [
                 cast(origin, direction, limit)[2:]
                 for origin, direction, limit in zip(
-                    a[rows].tolist(), d[rows].tolist(), length[rows].tolist(), strict=True
+                    origins.tolist(),
+                    unit.tolist(),
+                    (length[rows] + slack[rows]).tolist(),
+                    strict=True,
                 )
             ],
             dtype=np.float64,
         ).reshape(-1, 2)
         hit = ~np.isnan(found[:, 0])
         seen = None if footprint is None else footprint[rows[hit]]
-        face, dist = found[hit, 0].astype(np.int64), found[hit, 1]
+        face = found[hit, 0].astype(np.int64)
+        dist = np.maximum(found[hit, 1] - slack[rows[hit]], 0.0)
         return self._hits(n, a, d, length, rows[hit], face, dist, seen)
 
     def _hits(
