@@ -73,7 +73,7 @@ def prepare(
     what is cached (a viewport never bakes: UNBAKED_WARNING without a bake). Raises
     ValueError (bad settings, no camera, camera inside a horizon, nothing to render).
     """
-    settings = objects.effective(scene.symray)
+    settings = objects.effective(scene.symray, depsgraph)  # the frame's evaluated objects
     problems = validation.settings_problems(settings)
     if problems:
         raise ValueError(problems[0])
@@ -96,7 +96,7 @@ def prepare(
     models.check_camera(settings, model, where, position)
 
     warnings = validation.ignored_settings(scene, depsgraph.view_layer, camera_object)
-    hole = objects.hole_of(scene) if settings.follows_objects else None
+    hole = objects.hole_of(scene, depsgraph) if settings.follows_objects else None
     inside = objects.inside_warning(scene, hole) if hole is not None else ""
     if inside:
         warnings.append(inside)
