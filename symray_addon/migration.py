@@ -53,6 +53,15 @@ def _any_set(settings: bpy.types.PropertyGroup) -> bool:
     return False
 
 
+def _world_is_read(scene: bpy.types.Scene) -> bool:
+    """Whether Background › Auto shows the scene's world (not the procedural sky); a world
+    refused by name (a Mirror Ball image) is the render's to report."""
+    try:
+        return not isinstance(world.world_background(scene, "AUTO"), str)
+    except ValueError:
+        return False
+
+
 def migrate(scene: bpy.types.Scene) -> bool:
     """Bring an unstamped scene's settings to FILE_VERSION, keeping its image; True if
     anything was done."""
@@ -62,7 +71,7 @@ def migrate(scene: bpy.types.Scene) -> bool:
     for name, old_default in (("model", "SCHWARZSCHILD"), ("quality", "FINAL")):
         if not settings.is_property_set(name):
             setattr(settings, name, old_default)
-    if settings.background == "AUTO" and not isinstance(world.world_background(scene, "AUTO"), str):
+    if settings.background == "AUTO" and _world_is_read(scene):
         settings.background = "PROCEDURAL"  # Auto showed the stars over a plain world
     disk = settings.disk
     if not disk.is_property_set("outer_radius"):

@@ -110,7 +110,9 @@ def prepare(
     transparent = bool(scene.render.film_transparent)
     # Film › Transparent: a clear sky, so that what lies in front of it (a translucent disk,
     # volumes) keeps its light and its coverage (core.render.shade)
-    background = TRANSPARENT if transparent else world.world_background(scene, settings.background)
+    background = (
+        TRANSPARENT if transparent else world.world_background(scene, settings.background, warnings)
+    )
     core_scene = core.Scene(
         model=model,
         center=tuple(where.center),
