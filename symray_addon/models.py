@@ -113,21 +113,33 @@ def check_index_in_box(model: Any, lo: Any, hi: Any) -> None:
     """ValueError naming the Refractive Index where n has a pole in the medium's box, or
     is not a positive finite number at a point of it (sampled before any ray is traced:
     rays there fail or crawl)."""
+    box = (tuple(map(float, lo)), tuple(map(float, hi)))
+    problem = _index_problem(model.index_text, model.literal, *box)
+    if problem:
+        raise ValueError(problem)
+
+
+@functools.lru_cache(maxsize=16)
+def _index_problem(text: str, literal: bool, lo: tuple, hi: tuple) -> str:
+    """check_index_in_box's message ("" if none) on plain values: cached, as the Rendered
+    viewport prepares a render at every change of the scene."""
+    model = hm.medium(text, literal=literal, bounds=(lo, hi))
     remedy = "change n(x, y, z), or the box (the Medium object's size, or Box Min / Max)"
     pole = index_pole(model, lo, hi)
     if pole is not None:
         where, n = pole
-        raise ValueError(
-            f"Refractive Index '{model.index_text}' has a pole inside the medium's box, at "
-            f"(x, y, z) = {_point(where)} in the medium's axes (n reaches {n:.3g} there): "
-            f"light cannot be traced through it; {remedy}"
+        return (
+            f"Refractive Index '{text}' has a pole inside the medium's box, at (x, y, z) = "
+            f"{_point(where)} in the medium's axes (n reaches {n:.3g} there): light cannot "
+            f"be traced through it; {remedy}"
         )
     axes = [np.linspace(lo[i], hi[i], 9) for i in range(3)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     try:
         model.check_index(grid)
     except ValueError as err:
-        raise ValueError(f"Refractive Index: {err} inside the medium's box; {remedy}") from None
+        return f"Refractive Index: {err} inside the medium's box; {remedy}"
+    return ""
 
 
 def check_camera(settings: Any, model: Any, where: Placement, camera_position: Any) -> None:
