@@ -228,6 +228,7 @@ class Effective:
             spin = float(hole.symray.spin)
             self.model = "KERR" if spin != 0.0 else "SCHWARZSCHILD"
             self.rg, self.spin, self.center = rg_of(hole.symray.size, spin), spin, hole
+            self.hole_size = hole.symray.size  # Size as set (rg is NaN where Spin is)
         else:
             self.model, self.center = "MEDIUM", media[0]
             self.use_medium_bounds = True
