@@ -95,7 +95,7 @@ class SymRayObjectSettings(bpy.types.PropertyGroup):
     spin: spin_property()  # type: ignore[valid-type]
 
 
-def _rendering_collections(view_layer: Any) -> set[int]:
+def rendering_collections(view_layer: Any) -> set[int]:
     """Pointers of the collections whose objects render in ``view_layer``: not excluded
     from it and not disabled in renders, nor under a collection that is."""
     found: set[int] = set()
@@ -136,10 +136,14 @@ def of_kind(
     ]
     if not chosen or view_layer is None:
         return chosen
-    shown = _rendering_collections(view_layer)
-    return [
-        obj for obj in chosen if any(c.as_pointer() in shown for c in obj.original.users_collection)
-    ]
+    shown = rendering_collections(view_layer)
+    return [obj for obj in chosen if in_collections(obj, shown)]
+
+
+def in_collections(obj: bpy.types.Object, collections: set[int]) -> bool:
+    """Whether ``obj`` (original or evaluated) is in one of ``collections`` (pointers, as
+    rendering_collections gives them)."""
+    return any(c.as_pointer() in collections for c in obj.original.users_collection)
 
 
 def hole_of(

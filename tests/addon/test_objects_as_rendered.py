@@ -143,3 +143,20 @@ def test_a_keyed_render_visibility_hides_the_hole_at_its_frames(factory_scene, t
     frames = _animation(scene, tmp_path)
     np.testing.assert_array_equal(frames[1], seen)
     np.testing.assert_array_equal(frames[3], flat)
+
+
+@pytest.mark.parametrize("how", ["render", "exclude"])
+def test_a_mesh_in_a_hidden_collection_is_not_rendered(factory_scene, tmp_path, how):
+    """The factory cube hidden by its collection: Render SymRay Image (the viewport's
+    depsgraph, which still holds it) renders what F12 does, the scene without it."""
+    scene = _scene(factory_scene)
+    scene.symray.lighting = "UNLIT"
+    _add_hole((0.0, 0.0, 0.0))
+    cube = bpy.data.objects["Cube"]
+    seen = _operator(scene)
+    _hide(cube, how)
+    hidden_op, hidden_f12 = _operator(scene), _f12(scene, tmp_path, "hidden")
+    assert not np.array_equal(hidden_op, seen)  # the cube showed before
+    bpy.data.objects.remove(cube)
+    np.testing.assert_array_equal(_operator(scene), hidden_op)
+    np.testing.assert_array_equal(_f12(scene, tmp_path, "removed"), hidden_f12)
