@@ -100,6 +100,11 @@ def shift(rgb: np.ndarray, g: np.ndarray) -> np.ndarray:
     return out
 
 
+def plain(vector: Any) -> str:
+    """A vector as its reader wants it: "(0.8, 0.8, 0)", never numpy's reprs."""
+    return "(" + ", ".join(f"{float(v):.6g}" for v in np.ravel(vector)) + ")"
+
+
 def check_observer(observer: Any) -> str | np.ndarray:
     """``observer`` checked: one of OBSERVERS, or a 3-velocity (3,) of speed below
     SPEED_LIMIT; ValueError naming the problem."""
@@ -112,16 +117,25 @@ def check_observer(observer: Any) -> str | np.ndarray:
     if not isinstance(observer, (Sequence, np.ndarray)) or np.shape(observer) != (3,):
         raise ValueError(
             f"observer must be one of {OBSERVERS} or a 3-velocity (vx, vy, vz) in units of c, "
-            f"got {observer!r}"
+            f"got {_shown(observer)}"
         )
     velocity = np.asarray(observer, dtype=np.float64)
     speed = float(np.linalg.norm(velocity))
     if not np.all(np.isfinite(velocity)) or not speed < SPEED_LIMIT:
         raise ValueError(
-            f"observer velocity {tuple(velocity)} has speed {speed:.6g} c: it must be below "
+            f"observer velocity {plain(velocity)} has speed {speed:.6g} c: it must be below "
             f"the speed of light (at most {SPEED_LIMIT} c)"
         )
     return velocity
+
+
+def _shown(observer: Any) -> str:
+    """``observer`` in a message: numbers plainly (not numpy's reprs), anything else as
+    its repr."""
+    try:
+        return plain(np.asarray(observer, dtype=np.float64))
+    except (TypeError, ValueError):
+        return repr(observer)
 
 
 def observer_motion(observer: Any, tracer: Any, position: Any, shift_colours: bool = True):

@@ -9,6 +9,7 @@ colour of a black body at its temperature, normalised to luminance Y = 1.
 from __future__ import annotations
 
 import csv
+import io
 import math
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,9 @@ FLUX_ZERO = 1e-6
 pixels span 1.3e-7 sr each, its pixels sum to ~8 (a magnitude-6 star's to ~0.03)."""
 SUN_KELVIN = 5800.0
 """The temperature of a star given none."""
+BRIGHTEST = -30.0
+"""The brightest magnitude a catalogue may hold (the Sun is −26.7): brighter ones reach
+fluxes beyond 32-bit floats (inf pixels)."""
 _COLUMNS = {
     "ra": ("ra", "ra_deg", "raj2000"),
     "dec": ("dec", "de", "dec_deg", "dej2000"),
@@ -133,31 +137,58 @@ class StarField(Background):
 
     @classmethod
     def from_csv(cls, path: str | Path, **options: Any) -> StarField:
-        """Stars from a CSV file with a header naming right ascension and declination
-        (degrees), visual magnitude and, optionally, the B−V colour index (_COLUMNS' names,
-        any case; without B−V the stars are SUN_KELVIN); ValueError naming the line."""
-        with open(path, newline="", encoding="utf-8") as handle:
-            rows = list(csv.reader(handle))
+        """Stars from a CSV file (UTF-8, with or without a byte-order mark) with a header
+        naming right ascension and declination (degrees), visual magnitude and, optionally,
+        the B−V colour index (_COLUMNS' names, any case; without B−V the stars are
+        SUN_KELVIN); blank lines are skipped. ValueError naming the file and the line."""
+        rows = _csv_rows(path)
         if not rows:
             raise ValueError(f"{path}: empty star catalogue")
-        columns = _header_columns(rows[0], path)
-        values = np.empty((len(rows) - 1, 4))
-        values[:, 3] = np.nan
-        for number, row in enumerate(rows[1:], start=2):
+        columns = _header_columns(rows[0][1], path)
+        values = np.full((len(rows) - 1, 4), np.nan)
+        for i, (number, row) in enumerate(rows[1:]):
             for k, name in enumerate(("ra", "dec", "mag", "bv")):
-                if name not in columns:
-                    continue
-                try:
-                    values[number - 2, k] = float(row[columns[name]])
-                except (ValueError, IndexError):
-                    raise ValueError(
-                        f"{path}, line {number}: column {name!r} is not a number"
-                    ) from None
+                if name in columns:
+                    values[i, k] = _cell(row, columns[name], name, f"{path}, line {number}")
         temperatures = np.where(
             np.isnan(values[:, 3]), SUN_KELVIN, temperature_from_bv(np.nan_to_num(values[:, 3]))
         )
         directions = radec_to_direction(values[:, 0], values[:, 1])
         return cls(directions, values[:, 2], temperatures, **options)
+
+
+def _csv_rows(path: str | Path) -> list[tuple[int, list[str]]]:
+    """(line number, cells) of a CSV file's non-blank lines; ValueError naming the file and
+    line when it is not UTF-8 text (a byte-order mark, as Excel's "CSV UTF-8" writes, is not
+    part of the first name)."""
+    data = Path(path).read_bytes()
+    try:
+        text = data.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        line = data[: err.start].count(b"\n") + 1
+        raise ValueError(
+            f"{path}, line {line}: not UTF-8 text (byte {data[err.start]:#04x}): save the "
+            "catalogue as CSV UTF-8"
+        ) from None
+    reader = csv.reader(io.StringIO(text, newline=""))
+    return [(reader.line_num, row) for row in reader if any(c.strip() for c in row)]
+
+
+def _cell(row: list[str], column: int, name: str, where: str) -> float:
+    """The number in ``row[column]``, a finite one (and, for a magnitude, no brighter than
+    BRIGHTEST); ValueError naming ``where`` (file and line) and the column."""
+    try:
+        value = float(row[column])
+    except (ValueError, IndexError):
+        raise ValueError(f"{where}: column {name!r} is not a number") from None
+    if not math.isfinite(value):
+        raise ValueError(f"{where}: column {name!r} is {value}, not a finite number")
+    if name == "mag" and value < BRIGHTEST:
+        raise ValueError(
+            f"{where}: magnitude {value:g} is brighter than {BRIGHTEST:g} (the Sun is -26.7): "
+            "its light would overflow the image"
+        )
+    return value
 
 
 def _header_columns(header: list[str], path: Any) -> dict[str, int]:

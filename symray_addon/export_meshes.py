@@ -20,6 +20,7 @@ from mathutils.bvhtree import BVHTree
 
 from ..core.intersect import Hits, barycentric_gradients
 from .materials import MaterialSampler, material_sampler, unsupported_nodes
+from .objects import in_collections, rendering_collections
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
 CURVE_TYPES = {"CURVE", "FONT"}
@@ -231,9 +232,13 @@ def _mesh_arrays(mesh: bpy.types.Mesh, loop_uv: np.ndarray | None = None) -> tup
     return co.reshape(nv, 3), tris.reshape(nt, 3), slots, uv
 
 
-def _is_rendered(instance: bpy.types.DepsgraphObjectInstance) -> bool:
+def _is_rendered(
+    instance: bpy.types.DepsgraphObjectInstance, collections: set[int] | None = None
+) -> bool:
     """Whether an instance's own geometry shows in a render (as Cycles decides: a curve or
-    text object shows through the mesh instance of its surface, not as itself)."""
+    text object shows through the mesh instance of its surface, not as itself). An object
+    of its own must be in one of ``collections`` when given (a viewport's depsgraph holds
+    the collections disabled in renders too; a render's leaves them out)."""
     obj = instance.object
     if obj.type not in GEOMETRY_TYPES or not instance.show_self:
         return False
@@ -241,6 +246,8 @@ def _is_rendered(instance: bpy.types.DepsgraphObjectInstance) -> bool:
         return False
     if instance.is_instance and not own_surface(instance):
         return True
+    if collections is not None and not in_collections(obj, collections):
+        return False
     return not obj.original.hide_render
 
 
@@ -283,8 +290,11 @@ def build_intersector(
     sampler_index: dict[str, int] = {}
     names: list[str] = []
     offset = 0
+    collections = None
+    if depsgraph.mode == "VIEWPORT" and depsgraph.view_layer is not None:
+        collections = rendering_collections(depsgraph.view_layer)
     for instance in depsgraph.object_instances:
-        if not _is_rendered(instance):
+        if not _is_rendered(instance, collections):
             continue
         obj = instance.object
         instanced = instance.is_instance and not own_surface(instance)

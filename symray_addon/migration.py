@@ -5,7 +5,9 @@ settings but no stamp was saved before the black hole became an object (issue 24
 settings are made explicit where a default changed (model Schwarzschild, quality Final,
 Background › Auto over a plain world = the procedural sky, the disk's outer radius 10 and
 its physical look at exposure 1), and a centre Empty of a Schwarzschild or Kerr model
-becomes the scene's black hole object with the same size and spin.
+becomes the scene's black hole object with the same size and spin. Scenes saved before
+version 2 (issue 45) that left Refractive Index at its default keep that default then
+(the seed's Eq. 17; the new default has no pole in the medium's box).
 """
 
 from __future__ import annotations
@@ -13,10 +15,14 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
+from ..core.presets import MIRAGE_EQ17_INDEX
 from . import objects, world
 
-FILE_VERSION = 1
-"""The settings' layout this version writes (0: before black hole objects)."""
+FILE_VERSION = 2
+"""The settings' layout this version writes (0: before black hole objects; 1: before the
+pole-free default Refractive Index)."""
+OLD_INDEX = MIRAGE_EQ17_INDEX
+"""Refractive Index's default before version 2."""
 
 
 def _centre_to_hole(settings: bpy.types.PropertyGroup) -> None:
@@ -53,24 +59,41 @@ def _any_set(settings: bpy.types.PropertyGroup) -> bool:
     return False
 
 
+def _world_is_read(scene: bpy.types.Scene) -> bool:
+    """Whether Background › Auto shows the scene's world (not the procedural sky); a world
+    refused by name (a Mirror Ball image) is the render's to report."""
+    try:
+        return not isinstance(world.world_background(scene, "AUTO"), str)
+    except ValueError:
+        return False
+
+
 def migrate(scene: bpy.types.Scene) -> bool:
-    """Bring an unstamped scene's settings to FILE_VERSION, keeping its image; True if
+    """Bring a scene's settings saved before FILE_VERSION to it, keeping its image; True if
     anything was done."""
     settings = getattr(scene, "symray", None)
     if settings is None or settings.file_version >= FILE_VERSION or not _any_set(settings):
         return False
+    if settings.file_version < 1:
+        _before_objects(scene, settings)
+    if not settings.is_property_set("refractive_index"):
+        settings.refractive_index = OLD_INDEX  # the default before version 2
+    settings.file_version = FILE_VERSION
+    return True
+
+
+def _before_objects(scene: bpy.types.Scene, settings: bpy.types.PropertyGroup) -> None:
+    """Version 0 -> 1: the defaults that changed when holes became objects (issue 24)."""
     for name, old_default in (("model", "SCHWARZSCHILD"), ("quality", "FINAL")):
         if not settings.is_property_set(name):
             setattr(settings, name, old_default)
-    if settings.background == "AUTO" and not isinstance(world.world_background(scene, "AUTO"), str):
+    if settings.background == "AUTO" and _world_is_read(scene):
         settings.background = "PROCEDURAL"  # Auto showed the stars over a plain world
     disk = settings.disk
     if not disk.is_property_set("outer_radius"):
         disk.outer_radius = 10.0  # the default then
     disk.look, disk.auto_exposure, disk.exposure = "PHYSICAL", False, 1.0  # no looks then
     _centre_to_hole(settings)
-    settings.file_version = FILE_VERSION
-    return True
 
 
 @persistent

@@ -16,6 +16,7 @@ import numpy as np
 
 from ..core import AccretionDisk, Scene, expressions
 from ..core import hamiltonians as hm
+from ..core.models.medium_scan import index_pole
 from ..core.render import check_scene_camera
 from . import objects, validation
 from .capabilities import capabilities
@@ -81,7 +82,10 @@ def build_model(settings: Any, metric_source: str) -> Any | None:
             if np.any(hi <= lo):
                 raise ValueError("The medium's box is empty: every Box Max must exceed Box Min")
             bounds = (lo, hi)
-        return hm.medium(index, literal=settings.index_form == "SEED", bounds=bounds)
+        model = hm.medium(index, literal=settings.index_form == "SEED", bounds=bounds)
+        if bounds is not None:
+            check_index_in_box(model, *bounds)
+        return model
     if model == "METRIC":
         try:
             spec = validation.parse_metric(metric_source)
@@ -98,6 +102,44 @@ def build_model(settings: Any, metric_source: str) -> Any | None:
             text, q=list(validation.HAMILTONIAN_COORDS), p=list(validation.HAMILTONIAN_MOMENTA)
         )
     raise ValueError(f"Unknown SymRay model '{model}'")
+
+
+def _point(p: Any) -> str:
+    """(x, y, z) as the user reads it: plain numbers."""
+    return "(" + ", ".join(f"{float(v):.3g}" for v in p) + ")"
+
+
+def check_index_in_box(model: Any, lo: Any, hi: Any) -> None:
+    """ValueError naming the Refractive Index where n has a pole in the medium's box, or
+    is not a positive finite number at a point of it (sampled before any ray is traced:
+    rays there fail or crawl)."""
+    box = (tuple(map(float, lo)), tuple(map(float, hi)))
+    problem = _index_problem(model.index_text, model.literal, *box)
+    if problem:
+        raise ValueError(problem)
+
+
+@functools.lru_cache(maxsize=16)
+def _index_problem(text: str, literal: bool, lo: tuple, hi: tuple) -> str:
+    """check_index_in_box's message ("" if none) on plain values: cached, as the Rendered
+    viewport prepares a render at every change of the scene."""
+    model = hm.medium(text, literal=literal, bounds=(lo, hi))
+    remedy = "change n(x, y, z), or the box (the Medium object's size, or Box Min / Max)"
+    pole = index_pole(model, lo, hi)
+    if pole is not None:
+        where, n = pole
+        return (
+            f"Refractive Index '{text}' has a pole inside the medium's box, at (x, y, z) = "
+            f"{_point(where)} in the medium's axes (n reaches {n:.3g} there): light cannot "
+            f"be traced through it; {remedy}"
+        )
+    axes = [np.linspace(lo[i], hi[i], 9) for i in range(3)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    try:
+        model.check_index(grid)
+    except ValueError as err:
+        return f"Refractive Index: {err} inside the medium's box; {remedy}"
+    return ""
 
 
 def check_camera(settings: Any, model: Any, where: Placement, camera_position: Any) -> None:

@@ -95,25 +95,69 @@ class SymRayObjectSettings(bpy.types.PropertyGroup):
     spin: spin_property()  # type: ignore[valid-type]
 
 
-def of_kind(scene: bpy.types.Scene, kind: str) -> list[bpy.types.Object]:
-    """The scene's objects of SymRay ``kind`` that render (not hidden in renders)."""
-    return [
+def rendering_collections(view_layer: Any) -> set[int]:
+    """Pointers of the collections whose objects render in ``view_layer``: not excluded
+    from it and not disabled in renders, nor under a collection that is."""
+    found: set[int] = set()
+    stack = [view_layer.layer_collection]
+    while stack:
+        layer = stack.pop()
+        if layer.exclude or layer.collection.hide_render:
+            continue
+        found.add(layer.collection.as_pointer())
+        stack.extend(layer.children)
+    return found
+
+
+def _view_layer(scene: bpy.types.Scene) -> Any:
+    """The view layer a scene's objects are judged in without a depsgraph: the context's
+    when it shows ``scene`` (the panel, the Add operators), else the scene's first."""
+    context_scene = getattr(bpy.context, "scene", None)
+    layer = getattr(bpy.context, "view_layer", None)
+    if context_scene is not None and context_scene.original == scene.original and layer:
+        return layer
+    return scene.view_layers[0] if len(scene.view_layers) else None
+
+
+def of_kind(
+    scene: bpy.types.Scene, kind: str, depsgraph: bpy.types.Depsgraph | None = None
+) -> list[bpy.types.Object]:
+    """The scene's objects of SymRay ``kind`` that render: not hidden in renders, in a
+    collection that renders in the view layer. With ``depsgraph`` its evaluated objects
+    (settings as animated at its frame, keyed visibility included), else the originals."""
+    if depsgraph is not None:
+        candidates, view_layer = list(depsgraph.objects), depsgraph.view_layer
+    else:
+        candidates, view_layer = list(scene.objects), _view_layer(scene)
+    chosen = [
         obj
-        for obj in scene.objects
+        for obj in candidates
         if getattr(getattr(obj, "symray", None), "kind", "NONE") == kind and not obj.hide_render
     ]
+    if not chosen or view_layer is None:
+        return chosen
+    shown = rendering_collections(view_layer)
+    return [obj for obj in chosen if in_collections(obj, shown)]
 
 
-def hole_of(scene: bpy.types.Scene) -> bpy.types.Object | None:
-    """The scene's black hole object, if it has exactly one."""
-    holes = of_kind(scene, "BLACK_HOLE")
+def in_collections(obj: bpy.types.Object, collections: set[int]) -> bool:
+    """Whether ``obj`` (original or evaluated) is in one of ``collections`` (pointers, as
+    rendering_collections gives them)."""
+    return any(c.as_pointer() in collections for c in obj.original.users_collection)
+
+
+def hole_of(
+    scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph | None = None
+) -> bpy.types.Object | None:
+    """The scene's black hole object, if it has exactly one (see of_kind)."""
+    holes = of_kind(scene, "BLACK_HOLE", depsgraph)
     return holes[0] if len(holes) == 1 else None
 
 
-def objects_problem(scene: bpy.types.Scene) -> str:
-    """Why the scene's SymRay objects cannot render ("" when they can)."""
-    holes = of_kind(scene, "BLACK_HOLE")
-    media = of_kind(scene, "MEDIUM")
+def objects_problem(scene: bpy.types.Scene, depsgraph: bpy.types.Depsgraph | None = None) -> str:
+    """Why the scene's SymRay objects cannot render ("" when they can; see of_kind)."""
+    holes = of_kind(scene, "BLACK_HOLE", depsgraph)
+    media = of_kind(scene, "MEDIUM", depsgraph)
     if len(holes) > 1:
         names = ", ".join(f"'{o.name}'" for o in holes)
         return (
@@ -170,23 +214,25 @@ def medium_box(obj: bpy.types.Object) -> tuple[tuple[float, ...], tuple[float, .
 
 class Effective:
     """A scene's ``symray`` settings as rendered: with model 'OBJECTS', model, rg, spin,
-    centre and medium box come from the scene's hole or medium object; every other
-    setting (and everything under any other model) reads through unchanged."""
+    centre and medium box come from the scene's hole or medium object (the depsgraph's
+    evaluated one when given: animated settings at its frame); every other setting (and
+    everything under any other model) reads through unchanged."""
 
-    def __init__(self, settings: Any) -> None:
+    def __init__(self, settings: Any, depsgraph: bpy.types.Depsgraph | None = None) -> None:
         self._settings = settings
         self.object_problem = ""
         if getattr(settings, "model", None) != "OBJECTS":
             return
         scene = settings.id_data
-        self.object_problem = objects_problem(scene)
-        hole, media = hole_of(scene), of_kind(scene, "MEDIUM")
+        self.object_problem = objects_problem(scene, depsgraph)
+        hole, media = hole_of(scene, depsgraph), of_kind(scene, "MEDIUM", depsgraph)
         if self.object_problem or (hole is None and not media):
             self.model, self.center = "FLAT", None
         elif hole is not None:
             spin = float(hole.symray.spin)
             self.model = "KERR" if spin != 0.0 else "SCHWARZSCHILD"
             self.rg, self.spin, self.center = rg_of(hole.symray.size, spin), spin, hole
+            self.hole_size = hole.symray.size  # Size as set (rg is NaN where Spin is)
         else:
             self.model, self.center = "MEDIUM", media[0]
             self.use_medium_bounds = True
@@ -201,9 +247,10 @@ class Effective:
         return self._settings.model == "OBJECTS"
 
 
-def effective(settings: Any) -> Any:
-    """``settings`` (a scene.symray) as rendered (see Effective); itself if already so."""
-    return settings if isinstance(settings, Effective) else Effective(settings)
+def effective(settings: Any, depsgraph: bpy.types.Depsgraph | None = None) -> Any:
+    """``settings`` (a scene.symray) as rendered (see Effective): with ``depsgraph``, from
+    its evaluated objects (what a frame renders); itself if already so."""
+    return settings if isinstance(settings, Effective) else Effective(settings, depsgraph)
 
 
 def _new_empty(

@@ -87,12 +87,29 @@ def observer_options(scene: bpy.types.Scene, camera_object: Any) -> dict[str, An
     elif settings.kind == "VELOCITY":
         observer = tuple(float(v) for v in settings.velocity)
     else:
-        observer = tuple(animated_velocity(scene, camera_object) / settings.speed_of_light)
+        observer = tuple(float(v) for v in animated_velocity(scene, camera_object))
+        observer = tuple(v / float(settings.speed_of_light) for v in observer)
     try:
         motion.check_observer(observer)
     except ValueError as err:
-        raise ValueError(f"Camera '{camera_object.name}' › SymRay Observer: {err}") from None
+        raise ValueError(_refusal(camera_object.name, settings, observer, err)) from None
     return {"observer": observer, "shift_colours": bool(settings.shift_colours)}
+
+
+def _refusal(camera: str, settings: Any, observer: Any, err: ValueError) -> str:
+    """Why ``camera``'s observer is refused, naming its settings (and plain numbers)."""
+    where = f"Camera '{camera}' › SymRay Observer"
+    if isinstance(observer, str):
+        return f"{where}: {err}"
+    speed = float(np.linalg.norm(observer))
+    limit = "it must be below the speed of light (1 c)"
+    if settings.kind == "VELOCITY":
+        return f"{where} › Velocity {motion.plain(observer)} has speed {speed:.6g} c: {limit}"
+    return (
+        f"{where} (From Animation): the camera moves at {speed:.6g} c, its animated velocity "
+        f"over Speed of Light ({float(settings.speed_of_light):g} units/s): {limit}; raise "
+        "Speed of Light or slow the camera"
+    )
 
 
 def animated_velocity(scene: bpy.types.Scene, camera_object: Any) -> np.ndarray:

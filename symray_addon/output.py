@@ -86,6 +86,14 @@ def check_image_name(name: str) -> str:
     name = name.strip()
     if not name:
         raise ValueError("Set the name of the image SymRay should write (SymRay › Output › Image)")
+    longest = bpy.types.ID.bl_rna.properties["name"].length_max - 1  # bytes, without the NUL
+    if len(name.encode("utf-8")) > longest:
+        raise ValueError(
+            f"The image name in SymRay › Output › Image is {len(name.encode('utf-8'))} bytes "
+            f"long: Blender keeps at most {longest} bytes of a name, so the image written "
+            "would never be found again (a new one at every render); shorten it; nothing was "
+            "written"
+        )
     image = bpy.data.images.get(name)
     kind = BLENDER_IMAGES.get(image.type) if image is not None else None
     if kind is None and name in RESERVED_IMAGE_NAMES:
@@ -109,7 +117,8 @@ def check_finite(rgba: np.ndarray) -> None:
     if bad.any():
         raise ValueError(
             f"{int(bad.sum())} pixels have a colour beyond 32-bit floats (inf or NaN; e.g. "
-            "a Disk Brightness or world strength too large): nothing was written"
+            "a Disk Brightness, Star Brightness or world strength too large): nothing was "
+            "written"
         )
 
 

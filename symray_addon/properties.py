@@ -85,6 +85,13 @@ def _method_items() -> list[tuple[str, str, str, str, int]]:
 
 METHOD_ITEMS = _method_items()
 
+MEDIUM_INDEX = "1 + 0.003*tanh(z/0.3)"
+"""The default n(x, y, z): air over hot ground at z = 0 of the medium's axes, n rising by
+0.6 % through a layer ~0.3 thick and level above and below, with no pole at any z: any box
+renders, and rays grazing z = 0 from above turn up (an inferior mirage). The default
+before (the seed's Eq. 17 in the physical form) had a pole at z = -0.87 inside the ±10
+box: a third of the rays failed (migration.py keeps it for files that used it)."""
+
 INDEX_FORM_ITEMS = [
     ("PHYSICAL", "Physical", "H = |p|² / 2n²: rays obey the ray equation of optics"),
     ("SEED", "Seed (literal)", "H = n|p|² / 2 as printed in the seed paper (Eq. 8/16)"),
@@ -239,7 +246,7 @@ class SymRaySettings(bpy.types.PropertyGroup):
     )
     refractive_index: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Refractive Index",
-        default=presets.MIRAGE_EQ17_INDEX,
+        default=MEDIUM_INDEX,
         update=_validator("refractive_index"),
         description="n(x, y, z) in the centre's local frame; + - * / **, sin, exp, sqrt, pi "
         "(plain ASCII, at most 100 nested operations)",

@@ -75,7 +75,7 @@ def prepare(
     what is cached (a viewport never bakes: UNBAKED_WARNING without a bake). Raises
     ValueError (bad settings, no camera, camera inside a horizon, nothing to render).
     """
-    settings = objects.effective(scene.symray)
+    settings = objects.effective(scene.symray, depsgraph)  # the frame's evaluated objects
     problems = validation.settings_problems(settings)
     if problems:
         raise ValueError(problems[0])
@@ -98,7 +98,7 @@ def prepare(
     models.check_camera(settings, model, where, position)
 
     warnings = validation.ignored_settings(scene, depsgraph.view_layer, camera_object)
-    hole = objects.hole_of(scene) if settings.follows_objects else None
+    hole = objects.hole_of(scene, depsgraph) if settings.follows_objects else None
     inside = objects.inside_warning(scene, hole) if hole is not None else ""
     if inside:
         warnings.append(inside)
@@ -112,7 +112,9 @@ def prepare(
     transparent = bool(scene.render.film_transparent)
     # Film › Transparent: a clear sky, so that what lies in front of it (a translucent disk,
     # volumes) keeps its light and its coverage (core.render.shade)
-    background = TRANSPARENT if transparent else world.world_background(scene, settings.background)
+    background = (
+        TRANSPARENT if transparent else world.world_background(scene, settings.background, warnings)
+    )
     core_scene = core.Scene(
         model=model,
         center=tuple(where.center),

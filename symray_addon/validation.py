@@ -45,6 +45,9 @@ SAMPLES = (1, 1024)
 DISK_BRIGHTNESS = (0.0, 1e6)
 """Disk Brightness (the property's limits): far beyond any scene, far below float32's
 largest value (3.4e38), which a larger brightness reaches (inf pixels)."""
+STAR_BRIGHTNESS = (0.0, 1e6)
+"""Star Brightness: far beyond any scene (its soft limit is 100), far below what takes the
+brightest catalogue star (core.stars.BRIGHTEST) beyond 32-bit floats."""
 FILTER_SIZE = (0.01, 2.0)
 """Film › Filter Size SymRay's sampler honours, in pixels (Blender's property allows 0-500)."""
 
@@ -251,11 +254,26 @@ def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
         found.append(lambda: checks.check_range("Texel Size", settings.bake_texel_size, 0.0))
         found.append(lambda: checks.check_int("Max Resolution", settings.bake_max_resolution, 8))
         found.append(lambda: checks.check_int("Bake Samples", settings.bake_samples))
-    if traits.mass:
-        found.append(lambda: checks.check_positive("Size", settings.rg))
+    if settings.background == "STARS":
+        found.extend(_star_checks(settings))
+    if traits.mass:  # a hole object's own Size (its rg also holds its Spin: NaN with it)
+        size = getattr(settings, "hole_size", settings.rg)
+        found.append(lambda: checks.check_positive("Size", size))
     if model == "MEDIUM" and settings.use_medium_bounds:
         found.append(lambda: checks.check_vector("Box Min", settings.medium_min))
         found.append(lambda: checks.check_vector("Box Max", settings.medium_max))
+    return found
+
+
+def _star_checks(settings: Any) -> list[Callable[[], Any]]:
+    """The checks of Point Stars' numbers, named as in the panel (a .blend or a script can
+    set them beyond the properties' ranges)."""
+    found = [
+        lambda: checks.check_range("Star Brightness", settings.star_brightness, *STAR_BRIGHTNESS)
+    ]
+    if not settings.star_catalog.strip():  # the random field
+        found.append(lambda: checks.check_int("Stars", settings.star_count, 0))
+        found.append(lambda: checks.check_int("Seed", settings.star_seed, 0))
     return found
 
 

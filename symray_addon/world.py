@@ -16,7 +16,7 @@ from mathutils import Euler
 
 from ..core.sky import Background
 from ..core.stars import FLUX_ZERO, StarField
-from .materials import image_pixels, node_tree_of
+from .materials import MISSING_TEXTURE_COLOR, image_pixels, node_tree_of
 
 
 def _background_node(world: bpy.types.World) -> bpy.types.Node | None:
@@ -52,19 +52,39 @@ def _mapping_matrix(texture: bpy.types.Node) -> np.ndarray | None:
     return r if mapping.vector_type == "TEXTURE" else r.T
 
 
-def _environment(node: bpy.types.Node, strength: float) -> Background | None:
-    """A Background for an Environment Texture node, or None when it has no usable image."""
+def _environment(node: bpy.types.Node, strength: float, warnings: list[str] | None) -> Any:
+    """The background of an Environment Texture node: a Background of its image's colour
+    (its alpha is not the render's: Cycles' sky is opaque), Blender's magenta (× Strength,
+    with a warning naming the image) where the image has no pixels (a missing file), or
+    None when the node is not one SymRay reads."""
     if node.type != "TEX_ENVIRONMENT" or node.image is None:
-        return None
-    if getattr(node, "projection", "EQUIRECTANGULAR") != "EQUIRECTANGULAR":
         return None
     pixels = image_pixels(node.image)
     if pixels is None:
-        return None
-    top_first = np.ascontiguousarray(pixels[::-1])
+        warning = missing_image_warning(node.image)
+        if warnings is not None and warning not in warnings:
+            warnings.append(warning)
+        return (*(c * strength for c in MISSING_TEXTURE_COLOR[:3]), 1.0)
+    projection = getattr(node, "projection", "EQUIRECTANGULAR")
+    if projection != "EQUIRECTANGULAR":
+        raise ValueError(
+            f"The world's Environment Texture ('{node.image.name}') uses the "
+            f"{projection.replace('_', ' ').title()} projection: SymRay reads Equirectangular "
+            "environment images only; set the node's projection to Equirectangular"
+        )
+    top_first = np.ascontiguousarray(pixels[::-1, :, :3])  # RGB: the sky is opaque
     interpolation = "closest" if node.interpolation == "Closest" else "linear"
     return Background(
         top_first, strength=strength, matrix=_mapping_matrix(node), interpolation=interpolation
+    )
+
+
+def missing_image_warning(image: bpy.types.Image) -> str:
+    """The warning for a world image that has no pixels: it renders magenta."""
+    where = f" (file '{image.filepath}' not found)" if image.filepath else ""
+    return (
+        f"The world's Environment Texture image '{image.name}' has no pixels{where}: the "
+        "sky renders magenta, as in Cycles"
     )
 
 
@@ -81,13 +101,16 @@ def point_stars(settings: Any) -> StarField:
         raise ValueError(f"cannot read the star catalogue {path!r}: {error.strerror}") from None
 
 
-def world_background(scene: bpy.types.Scene, mode: str = "AUTO") -> Any:
+def world_background(
+    scene: bpy.types.Scene, mode: str = "AUTO", warnings: list[str] | None = None
+) -> Any:
     """The ``background=`` for core.Scene: "procedural", an rgba tuple or a Background.
 
     ``mode``: 'PROCEDURAL', 'STARS' (point stars: point_stars), 'WORLD' (texture or colour
     of the world, black without one) or
     'AUTO' (the world's environment texture or plain colour; the procedural sky when the
-    scene has no world, or a world whose nodes SymRay cannot read).
+    scene has no world, or a world whose nodes SymRay cannot read). An environment image
+    without pixels is magenta, as in Cycles, with a warning appended to ``warnings``.
     """
     if mode == "PROCEDURAL":
         return "procedural"
@@ -107,7 +130,7 @@ def world_background(scene: bpy.types.Scene, mode: str = "AUTO") -> Any:
         strength = float(strength_socket.default_value)
     color = node.inputs["Color"]
     if color.is_linked:
-        environment = _environment(color.links[0].from_node, strength)
+        environment = _environment(color.links[0].from_node, strength, warnings)
         if environment is not None:
             return environment
         return "procedural" if mode == "AUTO" else (0.0, 0.0, 0.0, 1.0)

@@ -323,3 +323,90 @@ def test_exr_paths_that_are_accepted(scene, helpers, rendered, tmp_path):
         scene.symray.exr_path = str(tmp_path / path)
         assert bpy.ops.symray.render() == {"FINISHED"}
         assert set(written) <= set(os.listdir(tmp_path))
+
+
+@pytest.mark.parametrize(
+    "prop, value, match",
+    [
+        ("star_brightness", -1.0, "Star Brightness must be a finite number in [0, 1e+06], got -1"),
+        ("star_brightness", math.nan, "Star Brightness must be a finite number in [0, 1e+06]"),
+        ("star_count", -5, "Stars must be an integer >= 0, got -5"),
+        ("star_seed", -2, "Seed must be an integer >= 0, got -2"),
+    ],
+)
+def test_point_star_settings_are_named_as_in_the_panel(
+    scene, helpers, rendered, prop, value, match
+):
+    """Values a .blend or a script writes past the properties' ranges are refused naming
+    the setting (not the core's flux_zero, count or seed) (issue 45, point 10)."""
+    scene.symray.background = "STARS"
+    scene.symray[prop] = value
+    message = _fails(helpers, scene, rendered, match)
+    assert "flux_zero" not in message
+
+
+def test_a_magnitude_beyond_any_star_names_the_catalogue_not_the_disk(
+    scene, helpers, rendered, tmp_path
+):
+    """A catalogue magnitude of -1000 (its flux beyond 32-bit floats) is refused naming the
+    file and line, not blamed on Disk Brightness (issue 45, point 10)."""
+    catalogue = tmp_path / "stars.csv"
+    catalogue.write_text("ra,dec,mag\n90,0,1\n0,0,-1000\n\n")
+    scene.symray.background = "STARS"
+    scene.symray.star_catalog = str(catalogue)
+    message = _fails(helpers, scene, rendered, "stars.csv, line 3: magnitude -1000")
+    assert "Disk Brightness" not in message
+
+
+def test_a_nan_spin_of_a_hole_names_spin(addon, scene, helpers, rendered):
+    """A hole object's NaN Spin is reported as Spin's, not as "Size must be a finite number
+    > 0" (its rg, computed from both, was NaN) (issue 45, point 11)."""
+    scene.symray.model = "OBJECTS"
+    scene.cursor.location = (0.0, 0.0, 0.0)
+    assert bpy.ops.symray.add_black_hole(size=0.5, disk=False) == {"FINISHED"}
+    hole = bpy.context.active_object
+    hole.symray["spin"] = math.nan  # as a .blend can hold it (the property lets NaN by)
+    hole.update_tag()  # an ID property written directly tags nothing
+    message = _fails(helpers, scene, rendered, "Spin a/M must be a finite number, got nan")
+    assert "Size" not in message
+
+
+def test_an_image_name_longer_than_blender_keeps_is_refused(scene, helpers, rendered):
+    """Blender cuts names at 255 bytes (63 before 5.0): a longer Image name would never
+    find its image again and packed a new one at every render (issue 45, point 12)."""
+    longest = bpy.types.ID.bl_rna.properties["name"].length_max - 1
+    images = len(bpy.data.images)
+    scene.symray.image_name = "x" * 300
+    for _ in range(2):  # no image made, none at a second render either
+        message = helpers.operator_error(lambda: bpy.ops.symray.render())
+        assert "SymRay › Output › Image is 300 bytes long" in message
+        assert f"at most {longest} bytes" in message
+        assert len(bpy.data.images) == images
+    np.testing.assert_array_equal(helpers.image_array("SymRay Result"), rendered)
+    scene.symray.image_name = "é" * (longest // 2)  # two bytes each: the longest kept
+    assert bpy.ops.symray.render() == {"FINISHED"}
+    assert bpy.ops.symray.render() == {"FINISHED"}
+    assert len(bpy.data.images) == images + 1
+
+
+@pytest.mark.parametrize(
+    "kind, match",
+    [
+        ("VELOCITY", "› SymRay Observer › Velocity (0.8, 0.8, 0) has speed 1.13137 c"),
+        ("ANIMATION", "(From Animation): the camera moves at 2.4 c"),
+    ],
+)
+def test_observer_messages_show_plain_numbers(addon, scene, helpers, rendered, kind, match):
+    """A camera at or above c is refused naming its setting with plain numbers, not numpy's
+    "(np.float64(0.8), ...)" (issue 45, point 13)."""
+    camera = scene.camera
+    camera.data.symray.kind = kind
+    camera.data.symray.velocity = (0.8, 0.8, 0.0)
+    camera.data.symray.speed_of_light = 10.0
+    camera.keyframe_insert("location", frame=1)
+    camera.location.x += 2.0  # 1 unit a frame at 24 fps: 24 units/s, 2.4 c at c = 10/s
+    camera.keyframe_insert("location", frame=3)
+    scene.render.fps, scene.render.fps_base = 24, 1.0
+    scene.frame_set(2)
+    message = _fails(helpers, scene, rendered, match)
+    assert "np.float64" not in message and "array(" not in message

@@ -148,6 +148,18 @@ def test_observers_that_cannot_be_are_refused_by_name():
     assert observer_motion("static", tracer, (6.0, 0.0, 0.0)) is None
 
 
+def test_a_refused_velocity_shows_plain_numbers():
+    """Numbers in the message as written, not numpy's "np.float64(1.0)" (issue 45)."""
+    camera = core.Camera.perspective((0, -10, 0), (0, 0, 0), (0, 0, 1), 40.0, 8, 6)
+    for bad in (np.array([1.0, 0.0, 0.0]), tuple(np.array([1.0, 0.0, 0.0]))):
+        with pytest.raises(ValueError) as info:
+            core.render(core.Scene(model=None), camera, observer=bad)
+        assert "velocity (1, 0, 0) has speed 1 c" in str(info.value)
+    with pytest.raises(ValueError) as info:
+        core.render(core.Scene(model=None), camera, observer=(np.float64(0.1), 0.2))
+    assert "got (0.1, 0.2)" in str(info.value) and "np." not in str(info.value)
+
+
 def test_a_black_bodys_colour_shifts_to_the_black_body_at_g_t():
     """shifted_colour of a black body's colour at T, seen with g, is the black body's at g T
     (chromaticity), its luminance × g³; g = 1 leaves any colour as it is."""

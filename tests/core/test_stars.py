@@ -222,3 +222,41 @@ def test_catalogues_are_read_and_refused_by_name(tmp_path):
     ortho = core.Camera.orthographic((0, -30, 0), (0, 0, 0), (0, 0, 1), 10.0, 8, 8)
     with pytest.raises(ValueError, match="point stars"):
         core.render(core.Scene(background=a), ortho, workers=1)
+
+
+def _catalogue(tmp_path, data: bytes, name: str = "stars.csv"):
+    path = tmp_path / name
+    path.write_bytes(data)
+    return path
+
+
+def test_a_catalogue_with_a_byte_order_mark_or_a_blank_last_line_is_read(tmp_path):
+    """Excel's "CSV UTF-8" starts with a byte-order mark, and many files end in a blank
+    line: both read as the plain file does (issue 45)."""
+    plain = StarField.from_csv(_catalogue(tmp_path, b"ra,dec,mag\n90,0,1\n0,90,2\n", "a.csv"))
+    for data in (
+        b"\xef\xbb\xbfra,dec,mag\r\n90,0,1\r\n0,90,2\r\n",
+        b"ra,dec,mag\n90,0,1\n0,90,2\n\n",
+        b"ra,dec,mag\n90,0,1\n\n0,90,2\n \n",
+    ):
+        field = StarField.from_csv(_catalogue(tmp_path, data))
+        np.testing.assert_array_equal(field.directions, plain.directions)
+        np.testing.assert_array_equal(field.magnitudes, plain.magnitudes)
+
+
+@pytest.mark.parametrize(
+    "data, message",
+    [
+        (b"ra,dec,mag\n90,0,1\n0,90,nan\n", r"bad\.csv, line 3: column 'mag' is nan, not a finite"),
+        (b"ra,dec,mag\n90,0,1\n\n0,inf,2\n", r"bad\.csv, line 4: column 'dec' is inf, not a fini"),
+        (b"ra,dec,mag\n90,0,-1000\n", r"bad\.csv, line 2: magnitude -1000 is brighter than -30"),
+        (b"ra,dec,mag\n90,0,1\n0,90,\xe9\n", r"bad\.csv, line 3: not UTF-8 text \(byte 0xe9\)"),
+        (b"ra,dec,mag\n90,0,1\n0,90\n", r"bad\.csv, line 3: column 'mag' is not a number"),
+    ],
+)
+def test_a_bad_catalogue_names_its_file_and_line(tmp_path, data, message):
+    """NaN or infinite numbers, a magnitude brighter than any star (its light overflows
+    32-bit floats: it was blamed on Disk Brightness), a file not in UTF-8: each refused
+    with the file and the line (issue 45)."""
+    with pytest.raises(ValueError, match=message):
+        StarField.from_csv(_catalogue(tmp_path, data, "bad.csv"))
