@@ -18,6 +18,7 @@ import bpy
 import numpy as np
 from mathutils.bvhtree import BVHTree
 
+from ..core.geometry.mesh import _morton
 from ..core.intersect import Hits, barycentric_gradients
 from .materials import MaterialSampler, material_sampler, unsupported_nodes
 from .objects import in_collections, rendering_collections
@@ -46,6 +47,31 @@ class BakedSurface:
 FLOAT32_SLACK = 4e-6
 """Distance (relative to the coordinates' size, 1 + max |x|) within which a float32
 BVHTree cannot tell which side of a surface a point is on: 30 float32 epsilons."""
+
+
+PART_BOXES = 16
+"""Boxes the clearances see at most (each box costs every traced step a slab test):
+beyond, objects share boxes (in the order of their centres along a Morton curve)."""
+
+
+def part_bounds(corners: np.ndarray, tri_object: np.ndarray) -> list[tuple]:
+    """(lo, hi, id) boxes of the objects whose triangles have ``corners`` (T, 3, 3) and ids
+    ``tri_object`` (T,): one per object, or PART_BOXES of neighbouring objects when there
+    are more (id -3, no object's own: a hit there counts as near the others)."""
+    ids, inverse = np.unique(tri_object, return_inverse=True)
+    lo = np.full((ids.size, 3), np.inf)
+    hi = np.full((ids.size, 3), -np.inf)
+    np.minimum.at(lo, inverse, corners.min(axis=1))
+    np.maximum.at(hi, inverse, corners.max(axis=1))
+    if ids.size <= PART_BOXES:
+        return [(lo[k], hi[k], int(ids[k])) for k in range(ids.size)]
+    centres = 0.5 * (lo + hi)
+    order = np.argsort(_morton(centres, centres.min(axis=0), centres.max(axis=0)), kind="stable")
+    boxes = []
+    for chunk in np.array_split(order, PART_BOXES):
+        own = int(ids[chunk[0]]) if chunk.size == 1 else -3
+        boxes.append((lo[chunk].min(axis=0), hi[chunk].max(axis=0), own))
+    return boxes
 
 
 class BVHIntersector:
@@ -78,6 +104,8 @@ class BVHIntersector:
         self.materials = list(materials)
         self.names = list(names)
         self.bounds = (self.vertices.min(axis=0), self.vertices.max(axis=0))
+        self.part_bounds = part_bounds(self.vertices[self.triangles], self.tri_object)
+        """(lo, hi, object id) of the objects (core.tracing.segments: clearances)."""
         tri = self.vertices[self.triangles]
         e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
         normal = np.cross(e1, e2)

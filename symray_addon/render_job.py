@@ -120,7 +120,8 @@ def prepare(
         center=tuple(where.center),
         axis=tuple(where.axis),
         rotation=where.rotation,
-        objects=[] if intersector is None else [intersector],
+        # the intersector itself, not a list: its hits keep their objects' own ids
+        objects=[] if intersector is None else intersector,
         background=background,
         disk=models.build_disk(settings),
     )

@@ -175,12 +175,21 @@ class SceneGeometry:
     def boxes(self) -> list[Bound]:
         """World (lo, hi, distance, object id) of each object (each member of a Group) and
         volume (core.tracing.clearance: the distance from a sphere or an annulus, else
-        None; the id its hits report, clearance.VOLUME_ID for a volume)."""
+        None; the id its hits report, clearance.VOLUME_ID for a volume). An intersector
+        that holds many objects (the add-on's meshes) and reports their ids itself gives
+        their boxes as ``part_bounds`` ((lo, hi, id) each; id -3 for a box of several):
+        a hit's clearance is then from every object but its own, not 0 from the box of
+        all of them (which made every hit a near miss, traced again, error pi)."""
         members = getattr(self.objects, "objects", [self.objects])
         ids = getattr(self.objects, "ids", [None] * len(members))
         boxes: list[Bound] = [(np.asarray(v.lo, float), np.asarray(v.hi, float), None, VOLUME_ID)
                               for v in self.volumes]  # fmt: skip
         for obj, oid in zip(members, ids, strict=True):
+            parts = getattr(obj, "part_bounds", None)
+            if parts is not None and oid is None:  # one intersector for many objects
+                boxes += [(np.asarray(lo, float), np.asarray(hi, float), None, int(part))
+                          for lo, hi, part in parts]  # fmt: skip
+                continue
             lo, hi = (np.asarray(x, float) for x in obj.bounds)
             if not np.any(lo > hi):
                 oid = getattr(obj, "object_id", -3) if oid is None else oid

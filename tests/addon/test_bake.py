@@ -455,7 +455,7 @@ def test_a_non_finite_vertex_is_left_out_of_the_bake(addon, scene, helpers):
     bake.clear_cache()
     job, result = _trace(addon, scene)
     assert len(job.warnings) == 1 and "'Broken'" in job.warnings[0], job.warnings
-    assert job.scene.objects[0].names == ["Ball"]
+    assert job.scene.objects.names == ["Ball"]
     bpy.data.objects.remove(bpy.data.objects["Broken"])
     want = _fresh(addon, scene)
     assert _hit(addon, want).sum() > 200
@@ -556,7 +556,7 @@ def test_a_faceless_curve_is_neither_baked_nor_drawn(addon, scene, helpers):
     baked = bake.stats["baked"]
     job, result = _trace(addon, scene)
     assert bake.stats["baked"] == baked  # Bake Lighting baked all there is
-    assert job.warnings == [] and job.scene.objects[0].names == ["Ball"]
+    assert job.warnings == [] and job.scene.objects.names == ["Ball"]
     bpy.data.objects.remove(bpy.data.objects["Path"])
     want = _fresh(addon, scene)
     assert _hit(addon, want).sum() > 200
@@ -575,7 +575,7 @@ def test_a_faceless_curve_in_the_factory_scene(addon, factory_scene):
     assert sorted(bake.bake_surfaces(factory_scene, bpy.context.evaluated_depsgraph_get())) == [
         "Cube"
     ]
-    assert job.scene.objects[0].names == ["Cube"]
+    assert job.scene.objects.names == ["Cube"]
 
 
 def test_text_is_drawn_once_with_its_bake(addon, scene, helpers):
@@ -590,7 +590,7 @@ def test_text_is_drawn_once_with_its_bake(addon, scene, helpers):
     addon.module("symray_addon.bake").clear_cache()
     job, result = _trace(addon, scene)
     assert job.warnings == []
-    assert job.scene.objects[0].names == ["Text"]
+    assert job.scene.objects.names == ["Text"]
     hit = _hit(addon, result)
     assert hit.sum() > 200
     red = result.rgba[hit][:, 0]
@@ -612,7 +612,7 @@ def test_edit_mode_is_kept_and_its_edits_are_rendered(addon, scene, helpers):
     addon.module("symray_addon.bake").clear_cache()
     job, result = _trace(addon, scene)
     assert ball.mode == "EDIT" and bpy.context.mode == "EDIT_MESH"
-    assert sorted(job.scene.objects[0].names) == ["Ball", "Box"]
+    assert sorted(job.scene.objects.names) == ["Ball", "Box"]
     bpy.ops.object.mode_set(mode="OBJECT")
     assert ball.data.vertices[0].co.z > 1.0  # the edit, now in the mesh
     want = _fresh(addon, scene)

@@ -184,7 +184,7 @@ def test_a_non_finite_vertex_leaves_out_only_its_object(addon, scene, helpers, b
     scene.symray.pass_ending = True
     job, result = _render(addon, scene)
     assert len(job.warnings) == 1 and "'Broken'" in job.warnings[0], job.warnings
-    assert job.scene.objects[0].names == ["Good"]
+    assert job.scene.objects.names == ["Good"]
     bpy.data.objects.remove(bpy.data.objects["Broken"])
     _job, want = _render(addon, scene)
     hit = want.passes["ending"] == addon.core.ENDING["hit"]
