@@ -42,6 +42,9 @@ class Medium(ExpressionHamiltonian):
         self.bounds = checks.check_box("medium bounds", bounds)
         self._index = ex.compile_expression(index, coords, parameters)
         self._index_program = ex.compile_program([index], coords, self.parameters)
+        self._kinks = [
+            ex.compile_expression(text, coords, parameters) for text in ex.kink_arguments(index)
+        ]
 
     def split_weight_soa(self, Q, derivatives: bool = True):
         """w(q) of the explicit split and its gradient (3, N) (None if not asked for):
@@ -75,6 +78,16 @@ class Medium(ExpressionHamiltonian):
         """The refractive index (the user's n, or the seed's literal n) at positions (3, N)."""
         n = self._index({"x": Q[0], "y": Q[1], "z": Q[2]})
         return np.broadcast_to(np.asarray(n, dtype=np.float64), (Q.shape[-1],))
+
+    def kinks_soa(self, Q) -> np.ndarray | None:
+        """(K, N) the values at positions (3, N) of the K expressions whose sign change is a
+        kink in n (the arguments of its abs(...)): where a ray crosses one, the tracer
+        splits its step there (core.tracing.stepping.Stepper.advance). None: n is smooth."""
+        if not self._kinks:
+            return None
+        env = {"x": Q[0], "y": Q[1], "z": Q[2]}
+        n = Q.shape[-1]
+        return np.stack([np.broadcast_to(np.asarray(f(env), float), (n,)) for f in self._kinks])
 
     def physical_index_soa(self, Q) -> np.ndarray:
         """The physical refractive index at positions (3, N) (literal form: n^(-1/2))."""

@@ -40,7 +40,7 @@ from .disklight import DiskLight
 from .regions import BoxRegion, Region, SphereRegion, region_for
 from .scene import DISK_ID, ENDING, Scene
 from .segments import RayResults, SceneGeometry
-from .stepping import OFF_CONE, OFF_CONE_STEPS, SPLITS, RayCapture, Stepper, ray_capture_test
+from .stepping import OFF_CONE, OFF_CONE_STEPS, RayCapture, Stepper, ray_capture_test
 from .steps import (
     default_method,
     default_step,
@@ -453,7 +453,7 @@ class Tracer:
 
         def step(batch: Batch):
             assert self.stepper is not None  # a curved scene's tracer has one
-            return self.stepper.step(batch.systems["K"], batch.state, batch.arrays["h"], SPLITS)
+            return self.stepper.advance(batch.systems["K"], batch.state, batch.arrays["h"])
 
         def events(batch: Batch, taken: int, start, ok, shell) -> np.ndarray:
             return self._step_events(batch, taken, start, ok, shell, out)
