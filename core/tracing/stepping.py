@@ -76,7 +76,7 @@ class Stepper:
         if before is None:
             return new, ok, shell
         with np.errstate(all="ignore"):
-            after = self.kinks(self.method.qp(new)[0])
+            after = self._kink_values(new)
             crossed = ok & np.any(np.sign(before) * np.sign(after) < 0, axis=0)
         rows = np.flatnonzero(crossed)
         if rows.size:
@@ -87,6 +87,13 @@ class Stepper:
                 a[..., rows] = b
             ok[rows], shell[rows] = ok_end, shell_end
         return new, ok, shell
+
+    def _kink_values(self, state: State) -> np.ndarray:
+        """(k, M) the model's kink expressions at the rays' positions in ``state``."""
+        assert self.kinks is not None
+        values = self.kinks(self.method.qp(state)[0])
+        assert values is not None  # a model with kinks has them everywhere
+        return values
 
     def _across(self, K: Any, state: State, h: Any, f0: np.ndarray, f1: np.ndarray):
         """The step h of rays crossing a kink ((k, M) values f0, f1 of the kinks at its ends)
@@ -105,7 +112,7 @@ class Stepper:
         for _ in range(KINK_ITERATIONS):
             mid, _, _ = self.step(K, state, u * h, 0)
             with np.errstate(all="ignore"):
-                fu = self.kinks(self.method.qp(mid)[0])[k, cols]  # type: ignore[index]
+                fu = self._kink_values(mid)[k, cols]
                 left = np.sign(fu) == np.sign(fa)
                 a, fa = np.where(left, u, a), np.where(left, fu, fa)
                 b, fb = np.where(left, b, u), np.where(left, fb, fu)
