@@ -42,9 +42,8 @@ class Medium(ExpressionHamiltonian):
         self.bounds = checks.check_box("medium bounds", bounds)
         self._index = ex.compile_expression(index, coords, parameters)
         self._index_program = ex.compile_program([index], coords, self.parameters)
-        self._kinks = [
-            ex.compile_expression(text, coords, parameters) for text in ex.kink_arguments(index)
-        ]
+        kinks = ex.kink_arguments(index)
+        self._kinks = ex.compile_program(kinks, coords, self.parameters) if kinks else None
 
     def split_weight_soa(self, Q, derivatives: bool = True):
         """w(q) of the explicit split and its gradient (3, N) (None if not asked for):
@@ -79,15 +78,21 @@ class Medium(ExpressionHamiltonian):
         n = self._index({"x": Q[0], "y": Q[1], "z": Q[2]})
         return np.broadcast_to(np.asarray(n, dtype=np.float64), (Q.shape[-1],))
 
-    def kinks_soa(self, Q) -> np.ndarray | None:
+    def kinks_soa(self, Q, derivatives: bool = False):
         """(K, N) the values at positions (3, N) of the K expressions whose sign change is a
         kink in n (the arguments of its abs(...)): where a ray crosses one, the tracer
-        splits its step there (core.tracing.stepping.Stepper.advance). None: n is smooth."""
-        if not self._kinks:
+        splits its step there (core.tracing.stepping.Stepper.advance); with
+        ``derivatives``, also their gradients (K, 3, N). None: n is smooth."""
+        if self._kinks is None:
             return None
-        env = {"x": Q[0], "y": Q[1], "z": Q[2]}
-        n = Q.shape[-1]
-        return np.stack([np.broadcast_to(np.asarray(f(env), float), (n,)) for f in self._kinks])
+        n_rays = Q.shape[-1]
+        env: dict[str, object] = {
+            name: (Dual.variable(Q[i], i) if derivatives else Q[i])
+            for i, name in enumerate(self.coords)
+        }
+        parts = [_value_and_partials(f, 3, n_rays, 0) for f in self._kinks.evaluate(env)]
+        values = np.stack([v for v, _ in parts])
+        return (values, np.stack([g for _, g in parts])) if derivatives else values
 
     def physical_index_soa(self, Q) -> np.ndarray:
         """The physical refractive index at positions (3, N) (literal form: n^(-1/2))."""

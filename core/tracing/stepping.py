@@ -50,6 +50,10 @@ KINK_ITERATIONS, KINK_SHARE, KINK_GAP = 8, 1e-10, 1e-7
 where the method's own partial step meets it by the secant method (at most KINK_ITERATIONS
 partial steps, until u moves by under KINK_SHARE), then is taken again as three steps:
 to u - KINK_GAP, across (2 KINK_GAP of the step), and on to its end."""
+KINK_HALVINGS = 6
+"""A step whose path dips across a kink and back is halved at most this deep (1/64)."""
+DIP_POINTS = np.linspace(0.0, 1.0, 17)[1:-1]
+"""Where a step's cubic of a kink's value is read for a dip across it (_dips)."""
 
 
 class Stepper:
@@ -61,37 +65,56 @@ class Stepper:
             model, "kinks_soa", None
         )
 
-    def advance(self, K: Any, state: State, h: Any) -> tuple[State, np.ndarray, np.ndarray]:
+    def advance(
+        self, K: Any, state: State, h: Any, depth: int = 0
+    ) -> tuple[State, np.ndarray, np.ndarray]:
         """``step`` (with its retries), where the model has kinks (a jump in its force's
         slope: ``kinks_soa``, the arguments of abs in a medium's n) those steps crossing
         one split at the crossing, on the method's own path (``_across``): a splitting's
         kick samples the force on one side of a kink for the whole step, an error first
         order in the step and erratic in where the kink falls, which the error pass's run
         at twice the step cannot estimate (Luneburg's lens with n = 1 outside r = 1: 1e-3
-        at every tolerance; issue 50). Each piece is then smooth, of the method's order."""
+        at every tolerance; issue 50). Each piece is then smooth, of the method's order. A
+        step whose ends lie on one side but whose path dips across (the cubic through its
+        ends' values and slopes: a ray grazing a lens's edge) is taken as two halves, each
+        advanced so (up to KINK_HALVINGS deep)."""
         new, ok, shell = self.step(K, state, h)
-        if self.kinks is None:
-            return new, ok, shell
-        before = self.kinks(self.method.qp(state)[0])
-        if before is None:
+        if self.kinks is None or self.kinks(self.method.qp(state)[0][:3]) is None:
             return new, ok, shell
         with np.errstate(all="ignore"):
-            after = self._kink_values(new)
-            crossed = ok & np.any(np.sign(before) * np.sign(after) < 0, axis=0)
+            f0, d0 = self._kink_slopes(K, state, h)
+            f1, d1 = self._kink_slopes(K, new, h)
+            crossed = ok & np.any(np.sign(f0) * np.sign(f1) < 0, axis=0)
+            dipped = ok & ~crossed & _dips(f0, d0, f1, d1) & (depth < KINK_HALVINGS)
         rows = np.flatnonzero(crossed)
         if rows.size:
             sub = tuple(a[..., rows] for a in state)
             end, ok_end, shell_end = self._across(K.subset(rows), sub, take(h, rows),
-                                                  before[:, rows], after[:, rows])  # fmt: skip
-            for a, b in zip(new, end, strict=True):
-                a[..., rows] = b
-            ok[rows], shell[rows] = ok_end, shell_end
+                                                  f0[:, rows], f1[:, rows])  # fmt: skip
+            _put(new, ok, shell, rows, end, ok_end, shell_end)
+        rows = np.flatnonzero(dipped)
+        if rows.size:
+            Kd, half = K.subset(rows), 0.5 * take(h, rows)
+            mid, ok_mid, _ = self.advance(Kd, tuple(a[..., rows] for a in state), half, depth + 1)
+            end, ok_end, shell_end = self.advance(Kd, mid, half, depth + 1)
+            _put(new, ok, shell, rows, end, ok_mid & ok_end, shell_end)
         return new, ok, shell
+
+    def _kink_slopes(self, K: Any, state: State, h: Any) -> tuple[np.ndarray, np.ndarray]:
+        """(k, M) the kinks' values at the rays' positions in ``state`` and their slopes
+        along the step h (d/du of the value at the fraction u: h grad f . dq/dtau)."""
+        assert self.kinks is not None
+        Q, P = self.method.qp(state)
+        found = self.kinks(Q[:3], derivatives=True)  # type: ignore[call-arg]
+        assert found is not None
+        values, grad = found
+        _, dp = K.gradient_soa(Q, P, wrt="p")
+        return values, np.einsum("kim,im->km", grad, dp[:3]) * h
 
     def _kink_values(self, state: State) -> np.ndarray:
         """(k, M) the model's kink expressions at the rays' positions in ``state``."""
         assert self.kinks is not None
-        values = self.kinks(self.method.qp(state)[0])
+        values = self.kinks(self.method.qp(state)[0][:3])
         assert values is not None  # a model with kinks has them everywhere
         return values
 
@@ -180,3 +203,20 @@ class Stepper:
             if self.captured is not None:
                 off &= ~self.captured(Q, P)
         return off
+
+
+def _dips(f0: np.ndarray, d0: np.ndarray, f1: np.ndarray, d1: np.ndarray) -> np.ndarray:
+    """(M,) whether the cubic Hermite through a step's kink values f0, f1 (k, M) with slopes
+    d0, d1 along the step changes sign inside it, its ends on one side: a dip across."""
+    u = DIP_POINTS[:, None, None]
+    h00, h10 = (1 + 2 * u) * (1 - u) ** 2, u * (1 - u) ** 2
+    h01, h11 = u * u * (3 - 2 * u), u * u * (u - 1)
+    cubic = h00 * f0 + h10 * d0 + h01 * f1 + h11 * d1  # (points, k, M)
+    return np.any(np.any(np.sign(cubic) * np.sign(f0) < 0, axis=0), axis=0)
+
+
+def _put(new: State, ok, shell, rows, end: State, ok_end, shell_end) -> None:
+    """In place: the rays ``rows`` of a step's (state, ok, shell) replaced."""
+    for a, b in zip(new, end, strict=True):
+        a[..., rows] = b
+    ok[rows], shell[rows] = ok_end, shell_end
