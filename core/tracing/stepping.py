@@ -67,7 +67,7 @@ class Stepper:
 
     def advance(
         self, K: Any, state: State, h: Any, depth: int = 0
-    ) -> tuple[State, np.ndarray, np.ndarray]:
+    ) -> tuple[State, np.ndarray, np.ndarray, np.ndarray]:
         """``step`` (with its retries), where the model has kinks (a jump in its force's
         slope: ``kinks_soa``, the arguments of abs in a medium's n) those steps crossing
         one split at the crossing, on the method's own path (``_across``): a splitting's
@@ -77,14 +77,19 @@ class Stepper:
         at every tolerance; issue 50). Each piece is then smooth, of the method's order. A
         step whose ends lie on one side but whose path dips across (the cubic through its
         ends' values and slopes: a ray grazing a lens's edge) is taken as two halves, each
-        advanced so (up to KINK_HALVINGS deep)."""
+        advanced so (up to KINK_HALVINGS deep). -> (state, ok, |H - H0|, the kinks each ray
+        crossed (M,) int64: bit k for kink k; the sampler interpolates no block whose rays
+        crossed different kinks: the image's map has a kink between them)."""
         new, ok, shell = self.step(K, state, h)
+        crossings = np.zeros(ok.shape, dtype=np.int64)
         if self.kinks is None or self.kinks(self.method.qp(state)[0][:3]) is None:
-            return new, ok, shell
+            return new, ok, shell, crossings
         with np.errstate(all="ignore"):
             f0, d0 = self._kink_slopes(K, state, h)
             f1, d1 = self._kink_slopes(K, new, h)
-            crossed = ok & np.any(np.sign(f0) * np.sign(f1) < 0, axis=0)
+            change = np.sign(f0) * np.sign(f1) < 0
+            crossed = ok & np.any(change, axis=0)
+            crossings[crossed] = _bits(change[:, crossed])
             dipped = ok & ~crossed & _dips(f0, d0, f1, d1) & (depth < KINK_HALVINGS)
         rows = np.flatnonzero(crossed)
         if rows.size:
@@ -95,10 +100,12 @@ class Stepper:
         rows = np.flatnonzero(dipped)
         if rows.size:
             Kd, half = K.subset(rows), 0.5 * take(h, rows)
-            mid, ok_mid, _ = self.advance(Kd, tuple(a[..., rows] for a in state), half, depth + 1)
-            end, ok_end, shell_end = self.advance(Kd, mid, half, depth + 1)
+            sub = tuple(a[..., rows] for a in state)
+            mid, ok_mid, _, first = self.advance(Kd, sub, half, depth + 1)
+            end, ok_end, shell_end, second = self.advance(Kd, mid, half, depth + 1)
             _put(new, ok, shell, rows, end, ok_mid & ok_end, shell_end)
-        return new, ok, shell
+            crossings[rows] = first | second
+        return new, ok, shell, crossings
 
     def _kink_slopes(self, K: Any, state: State, h: Any) -> tuple[np.ndarray, np.ndarray]:
         """(k, M) the kinks' values at the rays' positions in ``state`` and their slopes
@@ -132,6 +139,7 @@ class Stepper:
         a, fa = np.zeros(m), f0[k, cols]
         b, fb = np.ones(m), f1[k, cols]
         u = u_lin[k, cols]
+        done = np.zeros(m, dtype=bool)
         for _ in range(KINK_ITERATIONS):
             mid, _, _ = self.step(K, state, u * h, 0)
             with np.errstate(all="ignore"):
@@ -141,7 +149,8 @@ class Stepper:
                 b, fb = np.where(left, b, u), np.where(left, fb, fu)
                 nxt = a - fa * (b - a) / (fb - fa)
             nxt = np.where(np.isfinite(nxt) & (nxt > a) & (nxt < b), nxt, 0.5 * (a + b))
-            done = np.abs(nxt - u) < KINK_SHARE
+            nxt = np.where(done, u, nxt)  # a ray there stays there
+            done |= np.abs(nxt - u) < KINK_SHARE
             u = nxt
             if done.all():
                 break
@@ -220,3 +229,9 @@ def _put(new: State, ok, shell, rows, end: State, ok_end, shell_end) -> None:
     for a, b in zip(new, end, strict=True):
         a[..., rows] = b
     ok[rows], shell[rows] = ok_end, shell_end
+
+
+def _bits(change: np.ndarray) -> np.ndarray:
+    """(M,) int64 with bit k set where kink k changed sign ((k, M) bool; the first 63)."""
+    weights = np.left_shift(np.int64(1), np.arange(min(change.shape[0], 63), dtype=np.int64))
+    return (change[: weights.size] * weights[:, None]).sum(axis=0).astype(np.int64)

@@ -446,14 +446,18 @@ class Tracer:
              "h0": np.broadcast_to(np.asarray(h, dtype=np.float64), rows.shape).copy(),
              "heading": D / np.linalg.norm(D, axis=0),  # the last chord's direction
              "streak": np.zeros(rows.size, dtype=np.int64),  # steps in a row off the cone
-             "watch": np.ones(rows.size, dtype=bool) if watch is None else watch},
+             "watch": np.ones(rows.size, dtype=bool) if watch is None else watch,
+             "kinks": np.zeros(rows.size, dtype=np.int64)},  # the model's kinks crossed
         )  # fmt: skip
         if shares is not None:
             batch.arrays["axial"] = shares
 
         def step(batch: Batch):
             assert self.stepper is not None  # a curved scene's tracer has one
-            return self.stepper.advance(batch.systems["K"], batch.state, batch.arrays["h"])
+            K, h = batch.systems["K"], batch.arrays["h"]
+            state, ok, shell, crossings = self.stepper.advance(K, batch.state, h)
+            batch.arrays["kinks"] |= crossings
+            return state, ok, shell
 
         def events(batch: Batch, taken: int, start, ok, shell) -> np.ndarray:
             return self._step_events(batch, taken, start, ok, shell, out)
@@ -464,6 +468,7 @@ class Tracer:
         idx, X_last = batch.arrays["idx"], batch.arrays["X"]
         out.ending[idx] = ENDING["max_steps"]
         out.steps[idx] = taken
+        out.kinks[idx] = batch.arrays["kinks"]
         Q, P = self.method.qp(batch.state)
         out.position[idx] = self._to_world(X_last.T)
         self._finish_energy(out, idx, Q, P, batch.arrays["H0"])
@@ -557,6 +562,7 @@ class Tracer:
             ended |= leaving
         if ended.any():
             out.steps[idx[ended]] = taken
+            out.kinks[idx[ended]] = arrays["kinks"][ended]
             self._finish_energy(out, idx[ended], Q[:, ended], P[:, ended], arrays["H0"][ended])
         arrays["X"] = X
         return ended
