@@ -48,8 +48,9 @@ within it differently in every pixel, farthest-first; ``FIRST_SAMPLES`` first, t
 where those disagree), and so does, with all its samples, a traced pixel whose ray passed
 an object within the footprint (a thin strip or a small sphere between the samples); each
 point is shaded by interpolation inside an accepted block or by a traced ray elsewhere;
-its colour is their filter-weighted mean (box over the pixel, or Blackman-Harris of width
-``filter_size`` as in Cycles). Other pixels keep their centre's colour.
+its colour is their mean with its centre's colour (box over the pixel, or Blackman-Harris of
+width ``filter_size`` as in Cycles, importance-sampled: filter_samples). Other pixels keep
+their centre's colour.
 """
 
 from __future__ import annotations
