@@ -912,8 +912,9 @@ class Tracer:
         of 1e-3 px, erratic in the step, 3x above the estimate on 1.4 % of the pixels; a
         Maxwell fish-eye's box, where n is 0.62: first order in the step, and the run at
         twice the step, leaving at the same step end, estimated 1e-7 of it, issue 50); at
-        the boundary every run leaves at the same place. A medium's ray leaving where its
-        index jumps (``Medium.face_jump``) is failed. -> (M,) bool: the rows done (where
+        the boundary every run leaves at the same place. A medium's ray leaving its box where
+        its index jumps (``Medium.face_jump``) is failed (an unbounded medium's sphere is
+        not its box: its rays go on straight there, as before). -> (M,) bool: the rows done (where
         the crossing did not converge the step's end stands: ``_escape``)."""
         region = self.region
         assert region is not None
@@ -928,8 +929,9 @@ class Tracer:
         if not ok.any():
             return done
         rows = cols[ok]
-        jump = getattr(self.model, "face_jump", None)
-        bad = np.zeros(rows.size, dtype=bool) if jump is None else jump(crossing[:, ok])
+        bad = np.zeros(rows.size, dtype=bool)
+        if isinstance(region, BoxRegion) and hasattr(self.model, "face_jump"):  # a medium's box
+            bad = self.model.face_jump(crossing[:, ok])
         if bad.any():  # an interface the medium's box cuts: no plausible colour
             out.ending[idx[rows[bad]]] = ENDING["failed"]
             out.position[idx[rows[bad]]] = self._to_world(crossing[:, ok][:, bad].T)

@@ -204,3 +204,13 @@ def test_fish_eye_error_pass_within_3x_of_the_truth():
             within = big & (est >= truth / 3) & (est <= 3 * truth)
         assert within.sum() >= 0.9 * big.sum(), (tol, within.sum(), big.sum())
         assert under.sum() <= 0.02 * seen.sum(), (tol, under.sum())
+
+
+def test_an_unbounded_medium_leaves_its_sphere_as_before():
+    """A medium without bounds (its region a sphere, not a box): its rays leave the sphere
+    straight on wherever n is there, never failed for a jump (the box's rule is the box's)."""
+    scene = core.Scene(model=hm.medium("1 + 0.02*z"))
+    origins = np.array([[0.0, -10.0, 0.5], [0.0, -10.0, 0.5]])
+    directions = np.array([[0.0, 1.0, 0.0], [0.0, 0.8, 0.6]])
+    out = Tracer(scene, TraceOptions(tolerance=1e-6), extent=10.0).trace(origins, directions)
+    assert np.all(out.ending == core.ENDING["escaped"])
