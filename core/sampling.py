@@ -48,9 +48,9 @@ within it differently in every pixel, farthest-first; ``FIRST_SAMPLES`` first, t
 where those disagree), and so does, with all its samples, a traced pixel whose ray passed
 an object within the footprint (a thin strip or a small sphere between the samples); each
 point is shaded by interpolation inside an accepted block or by a traced ray elsewhere;
-its colour is their mean with its centre's colour (box over the pixel, or Blackman-Harris of
-width ``filter_size`` as in Cycles, importance-sampled: filter_samples). Other pixels keep
-their centre's colour.
+its colour is their mean (box over the pixel, or Blackman-Harris of width ``filter_size`` as
+in Cycles, importance-sampled: filter_samples), with the centre's colour as one more sample
+where none shows it. Other pixels keep their centre's colour.
 """
 
 from __future__ import annotations
@@ -1097,29 +1097,32 @@ class TileSampler:
 
     def _supersample(self, nodes: _Nodes, blocks: _Blocks, busy, differs, near, centre,
                      cancel):  # fmt: skip
-        """Filter-weighted colour (K, 4) of the ``busy`` pixels (h, w mask) from their
-        centre's colour ``centre`` (K, 4), one sample of weight 1 (what Preview shows: a
-        sub-pixel image the centre's ray hit keeps its share; its 16 samples missed tiny
+        """Filter-weighted colour (K, 4) of the ``busy`` pixels (h, w mask) from up to
+        ``samples`` points each (interpolated where a block allows, traced elsewhere): the
+        first FIRST_SAMPLES; the rest where those disagree with each other or with the
+        centre's colour ``centre`` (K, 4) by > AA_CONTRAST, where a pixel and a neighbour it
+        differs from both looked uniform (_edge_unseen), or where the centre's ray passed
+        an object's bounds within the filter's footprint (``near``: a thin object or a star
+        between the samples). Where no sample shows what the centre shows (within
+        AA_CONTRAST), the centre's colour counts as one more sample: a sub-pixel image the
+        centre's ray hit keeps a share (Preview shows it whole; 16 samples missed tiny
         images near a Kerr hole's photon ring that the centre hit, which kept 2-14 % of
-        their light, issue 50), and up to ``samples`` points each (interpolated where a
-        block allows, traced elsewhere): the first FIRST_SAMPLES; the rest where those
-        disagree with each other or the centre by > AA_CONTRAST, where a pixel and a
-        neighbour it differs from both looked uniform (_edge_unseen), or where the centre's
-        ray passed an object's bounds within the filter's footprint (``near``: a thin
-        object or a star between the samples). The pixels go in groups of at most
-        SAMPLE_POINTS points (_pixel_groups)."""
+        their light, issue 50); elsewhere the samples alone, unbiased. The pixels go in
+        groups of at most SAMPLE_POINTS points (_pixel_groups)."""
         pj, pi = np.nonzero(busy)
         count = self.samples
         first = min(FIRST_SAMPLES, count)
-        total, spread = centre.astype(np.float64).copy(), np.zeros(pj.size)
-        norm = np.ones(pj.size)  # the centre's weight: one sample's (filter_samples)
+        total, spread = np.zeros((pj.size, 4)), np.zeros(pj.size)
+        norm, seen = np.zeros(pj.size), np.zeros(pj.size, dtype=bool)
         for rows in _pixel_groups(pj.size, first):
             colour, weight = self._sample(
                 nodes, blocks, pj[rows], pi[rows], slice(0, first), cancel
             )
-            total[rows] += np.einsum("pkc,pk->pc", colour, weight)
-            norm[rows] += weight.sum(axis=1)
-            spread[rows] = np.max(np.abs(colour - centre[rows, None, :]), axis=(1, 2))
+            total[rows] = np.einsum("pkc,pk->pc", colour, weight)
+            norm[rows] = weight.sum(axis=1)
+            apart = np.max(np.abs(colour - centre[rows, None, :]), axis=2)
+            spread[rows] = np.max(apart, axis=1)
+            seen[rows] = np.any(apart <= AA_CONTRAST, axis=1)
         uniform = np.ones(busy.shape, dtype=bool)
         uniform[pj, pi] = spread <= AA_CONTRAST
         more = ~uniform[pj, pi] | _edge_unseen(differs, uniform)[pj, pi] | near[pj, pi]
@@ -1132,6 +1135,10 @@ class TileSampler:
                     rest, weight = self._sample(nodes, blocks, pj[at], pi[at], ks, cancel)
                     total[at] += np.einsum("pkc,pk->pc", rest, weight)
                     norm[at] += weight.sum(axis=1)
+                    near_centre = np.max(np.abs(rest - centre[at, None, :]), axis=2)
+                    seen[at] |= np.any(near_centre <= AA_CONTRAST, axis=1)
+        total[~seen] += centre[~seen]  # the centre's own, one sample's weight (filter_samples)
+        norm[~seen] += 1.0
         return total / norm[:, None]
 
     def _sample(self, nodes: _Nodes, blocks: _Blocks, pj, pi, ks: slice, cancel):
