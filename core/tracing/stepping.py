@@ -52,6 +52,9 @@ partial steps, until u moves by under KINK_SHARE), then is taken again as three 
 to u - KINK_GAP, across (2 KINK_GAP of the step), and on to its end."""
 KINK_HALVINGS = 6
 """A step whose path dips across a kink and back is halved at most this deep (1/64)."""
+KINK_LEVELS = 8
+"""A step's pieces are searched for further crossings (a grazing ray in, out and in again
+within one step) at most this deep; deeper, a piece is taken as it comes."""
 DIP_POINTS = np.linspace(0.0, 1.0, 17)[1:-1]
 """Where a step's cubic of a kink's value is read for a dip across it (_dips)."""
 
@@ -90,13 +93,16 @@ class Stepper:
             change = np.sign(f0) * np.sign(f1) < 0
             crossed = ok & np.any(change, axis=0)
             crossings[crossed] = _bits(change[:, crossed])
+            crossed &= depth < KINK_LEVELS  # deeper: taken as it comes
             dipped = ok & ~crossed & _dips(f0, d0, f1, d1) & (depth < KINK_HALVINGS)
         rows = np.flatnonzero(crossed)
         if rows.size:
             sub = tuple(a[..., rows] for a in state)
-            end, ok_end, shell_end = self._across(K.subset(rows), sub, take(h, rows),
-                                                  f0[:, rows], f1[:, rows])  # fmt: skip
+            end, ok_end, shell_end, more = self._across(
+                K.subset(rows), sub, take(h, rows), f0[:, rows], f1[:, rows], depth
+            )
             _put(new, ok, shell, rows, end, ok_end, shell_end)
+            crossings[rows] |= more
         rows = np.flatnonzero(dipped)
         if rows.size:
             Kd, half = K.subset(rows), 0.5 * take(h, rows)
@@ -125,10 +131,15 @@ class Stepper:
         assert values is not None  # a model with kinks has them everywhere
         return values
 
-    def _across(self, K: Any, state: State, h: Any, f0: np.ndarray, f1: np.ndarray):
+    def _across(
+        self, K: Any, state: State, h: Any, f0: np.ndarray, f1: np.ndarray, depth: int
+    ) -> tuple[State, np.ndarray, np.ndarray, np.ndarray]:
         """The step h of rays crossing a kink ((k, M) values f0, f1 of the kinks at its ends)
         as three: to where the method's partial step meets the kink crossed first (the
-        secant method on the fraction u of the step), across it, and on to the end."""
+        secant method on the fraction u of the step), across it, and on to the end; the
+        pieces before and after advanced as steps are (``advance``: a grazing ray may cross
+        in, out and in again within one step). -> as ``advance``, with the kinks crossed
+        in the pieces before and after."""
         assert self.kinks is not None
         m = f0.shape[1]
         change = np.sign(f0) * np.sign(f1) < 0
@@ -156,10 +167,10 @@ class Stepper:
                 break
         lo = np.clip(u - KINK_GAP, 0.0, 1.0)
         hi = np.clip(u + KINK_GAP, 0.0, 1.0)
-        first, ok1, _ = self.step(K, state, lo * h)
+        first, ok1, _, before = self.advance(K, state, lo * h, depth + 1)
         second, ok2, _ = self.step(K, first, (hi - lo) * h)
-        end, ok3, shell = self.step(K, second, (1.0 - hi) * h)
-        return end, ok1 & ok2 & ok3, shell
+        end, ok3, shell, after = self.advance(K, second, (1.0 - hi) * h, depth + 1)
+        return end, ok1 & ok2 & ok3, shell, before | after
 
     def step(
         self, K: PoincareTransformed, state: State, h: Any, splits: int = SPLITS
