@@ -405,6 +405,20 @@ class Program:
         return [out.evaluate(env) for out in self.outputs]
 
 
+def kink_arguments(text: str) -> list[str]:
+    """The arguments of every ``abs(...)`` in ``text`` (already checked: compile it first),
+    as text: where each changes sign the expression has a kink (a jump in its slope)."""
+    tree = _parse(text)
+    return [
+        ast.unparse(node.args[0])
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Call)
+        and isinstance(node.func, ast.Name)
+        and node.func.id == "abs"
+        and len(node.args) == 1
+    ]
+
+
 def compile_program(
     outputs: Sequence[str],
     variables: Sequence[str],

@@ -13,6 +13,16 @@ from .base import _value_and_partials
 from .expression import ExpressionHamiltonian
 from .medium_split import OpticalSplit
 
+FACE_JUMP = 5e-3
+"""A medium's box holds all of its index's variation: outside it light travels straight in
+vacuum (n = 1). Where the physical index at the box's faces differs from 1 by more than
+FACE_JUMP (relative) the box cuts an interface the medium does not declare: a ray leaving
+there is failed (``face_jump``), and a box whose faces jump everywhere is refused before
+tracing (``check_faces``). Below it the jump is taken as none: the seed's mirages, whose
+air is 1.002-1.003 at their boxes' tops (their layers' own contrast), render as before."""
+FACE_SAMPLES = 16
+"""``check_faces`` reads the index on a FACE_SAMPLES x FACE_SAMPLES grid on each face."""
+
 
 class Medium(ExpressionHamiltonian):
     """Light in a medium of refractive index n(x, y, z) (optical Hamiltonian)."""
@@ -32,6 +42,8 @@ class Medium(ExpressionHamiltonian):
         self.bounds = checks.check_box("medium bounds", bounds)
         self._index = ex.compile_expression(index, coords, parameters)
         self._index_program = ex.compile_program([index], coords, self.parameters)
+        kinks = ex.kink_arguments(index)
+        self._kinks = ex.compile_program(kinks, coords, self.parameters) if kinks else None
 
     def split_weight_soa(self, Q, derivatives: bool = True):
         """w(q) of the explicit split and its gradient (3, N) (None if not asked for):
@@ -65,6 +77,53 @@ class Medium(ExpressionHamiltonian):
         """The refractive index (the user's n, or the seed's literal n) at positions (3, N)."""
         n = self._index({"x": Q[0], "y": Q[1], "z": Q[2]})
         return np.broadcast_to(np.asarray(n, dtype=np.float64), (Q.shape[-1],))
+
+    def kinks_soa(self, Q, derivatives: bool = False):
+        """(K, N) the values at positions (3, N) of the K expressions whose sign change is a
+        kink in n (the arguments of its abs(...)): where a ray crosses one, the tracer
+        splits its step there (core.tracing.stepping.Stepper.advance); with
+        ``derivatives``, also their gradients (K, 3, N). None: n is smooth."""
+        if self._kinks is None:
+            return None
+        n_rays = Q.shape[-1]
+        env: dict[str, object] = {
+            name: (Dual.variable(Q[i], i) if derivatives else Q[i])
+            for i, name in enumerate(self.coords)
+        }
+        parts = [_value_and_partials(f, 3, n_rays, 0) for f in self._kinks.evaluate(env)]
+        values = np.stack([v for v, _ in parts])
+        return (values, np.stack([g for _, g in parts])) if derivatives else values
+
+    def physical_index_soa(self, Q) -> np.ndarray:
+        """The physical refractive index at positions (3, N) (literal form: n^(-1/2))."""
+        n = self.index_soa(Q)
+        with np.errstate(all="ignore"):
+            return 1.0 / np.sqrt(n) if self.literal else n
+
+    def face_jump(self, Q) -> np.ndarray:
+        """(N,) whether the index jumps at the box's faces at positions (3, N): the physical
+        index differs from the vacuum outside by more than FACE_JUMP (or is not finite)."""
+        n = self.physical_index_soa(Q)
+        with np.errstate(all="ignore"):
+            return ~(np.abs(n - 1.0) <= FACE_JUMP)
+
+    def check_faces(self, points) -> None:
+        """ValueError naming the jump where the index jumps (``face_jump``) at every one of
+        ``points`` (3, N) on the box's faces: every ray would leave through an interface
+        the box cuts (a Maxwell fish-eye 2/(1 + r^2/4) in a box of +-3: n 0.26-0.62 there)."""
+        jumps = self.face_jump(points)
+        if not jumps.all():
+            return
+        with np.errstate(all="ignore"):
+            n = self.physical_index_soa(points)
+        lo, hi = np.nanmin(n), np.nanmax(n)
+        raise ValueError(
+            f"refractive index '{self.index_text}' jumps at the medium's box: its physical "
+            f"index on the box's faces is {lo:.3g} to {hi:.3g}, but outside the box light "
+            "travels in vacuum (n = 1), and the box cuts an interface the medium does not "
+            "have; make n reach 1 at the box (e.g. n = 1 outside a lens's radius, written "
+            "with abs) or enlarge the box to where it does"
+        )
 
     def check_index(self, points) -> None:
         """Raise ValueError if n is not a positive finite number at the given (N, 3) points."""

@@ -40,6 +40,10 @@ class Region:
         """Rays (M,) at X (3, M), coming from X_prev, that have left the region."""
         raise NotImplementedError
 
+    def exit_time(self, X: np.ndarray, V: np.ndarray) -> np.ndarray:
+        """(M,) t where the line X + t V (3, M) leaves the region outwards (NaN: never)."""
+        raise NotImplementedError
+
 
 class SphereRegion(Region):
     """A ball of radius R about the model's centre."""
@@ -73,6 +77,14 @@ class SphereRegion(Region):
         away = X[0] * (X[0] - X_prev[0]) + X[1] * (X[1] - X_prev[1]) + X[2] * (X[2] - X_prev[2])
         return (r2 > self.radius**2) & (away > 0)
 
+    def exit_time(self, X: np.ndarray, V: np.ndarray) -> np.ndarray:
+        """The outward crossing of the sphere: the quadratic's larger root."""
+        a = np.einsum("im,im->m", V, V)
+        b = np.einsum("im,im->m", X, V)
+        c = np.einsum("im,im->m", X, X) - self.radius * self.radius
+        with np.errstate(all="ignore"):
+            return (-b + np.sqrt(b * b - a * c)) / a
+
 
 class BoxRegion(Region):
     """An axis-aligned box [lo, hi] (a medium's bounds); its g(q) is never distance-scaled."""
@@ -95,6 +107,31 @@ class BoxRegion(Region):
     def left_soa(self, X: np.ndarray, X_prev: np.ndarray) -> np.ndarray:
         """Outside the box."""
         return ~np.all((X >= self.lo[:, None]) & (X <= self.hi[:, None]), axis=0)
+
+    def exit_time(self, X: np.ndarray, V: np.ndarray) -> np.ndarray:
+        """Where the line leaves the slabs' intersection: the nearest far face (from a point
+        past a face, a negative t back to it)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ta, tb = (self.lo[:, None] - X) / V, (self.hi[:, None] - X) / V
+        far = np.where(V == 0.0, np.inf, np.fmax(ta, tb))
+        t = np.min(far, axis=0)
+        return np.where(np.isfinite(t), t, np.nan)
+
+    def faces(self, count: int) -> np.ndarray:
+        """(3, 6 count^2) points on the box's faces: a count x count grid of cell centres
+        on each."""
+        u = (np.arange(count) + 0.5) / count
+        a, b = (g.ravel() for g in np.meshgrid(u, u))
+        points = []
+        for axis in range(3):
+            i, j = (k for k in range(3) if k != axis)
+            for end in (self.lo, self.hi):
+                P = np.empty((3, a.size))
+                P[axis] = end[axis]
+                P[i] = self.lo[i] + a * (self.hi[i] - self.lo[i])
+                P[j] = self.lo[j] + b * (self.hi[j] - self.lo[j])
+                points.append(P)
+        return np.concatenate(points, axis=1)
 
 
 def _start_points(

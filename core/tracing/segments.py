@@ -44,6 +44,9 @@ class RayResults:
     magnification: np.ndarray
     """(N,) where escaped, traced with tangents: |μ| of its image, the camera's solid angle
     over the sky's (core/tracing/differentials.py); NaN elsewhere."""
+    kinks: np.ndarray
+    """(N,) int64: bit k set where the ray crossed the model's kink k (a jump in the slope
+    of a medium's n: core.tracing.stepping.Stepper.advance); 0 for a smooth model."""
 
     @classmethod
     def empty(cls, n: int, origins: np.ndarray, directions: np.ndarray) -> RayResults:
@@ -66,6 +69,7 @@ class RayResults:
             doppler=np.ones(n),
             sky_jacobian=np.zeros((n, 0, 3)),
             magnification=np.full(n, np.nan),
+            kinks=np.zeros(n, dtype=np.int64),
         )
 
     def take(self, rows: slice | np.ndarray) -> RayResults:

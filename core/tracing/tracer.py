@@ -24,6 +24,7 @@ from .. import checks, integrators
 from ..charts import chart_for
 from ..geometry import Hits, segment_overlaps
 from ..integrators.batch import Batch, run_batch
+from ..models.medium import FACE_SAMPLES
 from ..motion import Motion
 from ..observer import medium_momenta, spacetime_momenta
 from . import dense
@@ -36,10 +37,10 @@ from .differentials import (
     unit_directional,
 )
 from .disklight import DiskLight
-from .regions import Region, SphereRegion, region_for
+from .regions import BoxRegion, Region, SphereRegion, region_for
 from .scene import DISK_ID, ENDING, Scene
 from .segments import RayResults, SceneGeometry
-from .stepping import OFF_CONE, OFF_CONE_STEPS, SPLITS, RayCapture, Stepper, ray_capture_test
+from .stepping import OFF_CONE, OFF_CONE_STEPS, RayCapture, Stepper, ray_capture_test
 from .steps import (
     default_method,
     default_step,
@@ -158,6 +159,8 @@ def plan_trace(scene: Scene, options: TraceOptions, extent: float = 1.0) -> Trac
     if scene.disk is not None:  # the disk's hits need the rays' momenta: inside
         extent = max(extent, scene.disk.cartesian_radii()[1])
     region = region_for(model, options.tolerance, extent, radius)
+    if isinstance(region, BoxRegion) and hasattr(model, "check_faces"):
+        model.check_faces(region.faces(FACE_SAMPLES))  # an interface the box cuts: refused
     constant, largest = rule_bounds(
         method, region.scaled(model), error_constant(method, model, system),
         form_calibration(model).largest_step,
@@ -443,14 +446,18 @@ class Tracer:
              "h0": np.broadcast_to(np.asarray(h, dtype=np.float64), rows.shape).copy(),
              "heading": D / np.linalg.norm(D, axis=0),  # the last chord's direction
              "streak": np.zeros(rows.size, dtype=np.int64),  # steps in a row off the cone
-             "watch": np.ones(rows.size, dtype=bool) if watch is None else watch},
+             "watch": np.ones(rows.size, dtype=bool) if watch is None else watch,
+             "kinks": np.zeros(rows.size, dtype=np.int64)},  # the model's kinks crossed
         )  # fmt: skip
         if shares is not None:
             batch.arrays["axial"] = shares
 
         def step(batch: Batch):
             assert self.stepper is not None  # a curved scene's tracer has one
-            return self.stepper.step(batch.systems["K"], batch.state, batch.arrays["h"], SPLITS)
+            K, h = batch.systems["K"], batch.arrays["h"]
+            state, ok, shell, crossings = self.stepper.advance(K, batch.state, h)
+            batch.arrays["kinks"] |= crossings
+            return state, ok, shell
 
         def events(batch: Batch, taken: int, start, ok, shell) -> np.ndarray:
             return self._step_events(batch, taken, start, ok, shell, out)
@@ -461,6 +468,7 @@ class Tracer:
         idx, X_last = batch.arrays["idx"], batch.arrays["X"]
         out.ending[idx] = ENDING["max_steps"]
         out.steps[idx] = taken
+        out.kinks[idx] = batch.arrays["kinks"]
         Q, P = self.method.qp(batch.state)
         out.position[idx] = self._to_world(X_last.T)
         self._finish_energy(out, idx, Q, P, batch.arrays["H0"])
@@ -554,6 +562,7 @@ class Tracer:
             ended |= leaving
         if ended.any():
             out.steps[idx[ended]] = taken
+            out.kinks[idx[ended]] = arrays["kinks"][ended]
             self._finish_energy(out, idx[ended], Q[:, ended], P[:, ended], arrays["H0"][ended])
         arrays["X"] = X
         return ended
@@ -889,37 +898,49 @@ class Tracer:
 
     @property
     def _cut_at_boundary(self) -> bool:
-        """Whether rays leave the region where they cross its sphere (``_leave_at_boundary``):
-        models without a mass, whose field beyond the region no far field stands for."""
-        return self.mass == 0.0 and isinstance(self.region, SphereRegion)
+        """Whether rays leave the region where they cross its boundary
+        (``_leave_at_boundary``): models without a mass (user metrics' spheres, media's
+        boxes), whose field beyond the region no far field stands for."""
+        return self.mass == 0.0
 
     def _leave_at_boundary(self, idx, cols, X_prev, X, ends: _StepEnds, out) -> np.ndarray:
-        """The rays of the batch rows ``cols``, past the region's sphere at this step's end,
-        leave it where the method itself crosses the sphere (``_StepEnds.crossing``), along
+        """The rays of the batch rows ``cols``, past the region's boundary at this step's
+        end, leave it where the method itself crosses it (``_StepEnds.crossing``), along
         their velocity there, straight on. A model without a mass has no far field for the
         rest of its field: a ray leaving at its step's end took in the field up to there,
         which the step's size decided (benchmarks/honesty.py user_metric at 1 px: errors
-        of 1e-3 px, erratic in the step, 3x above the estimate on 1.4 % of the pixels);
-        at the sphere every run leaves at the same radius. -> (M,) bool: the rows done
-        (where the crossing did not converge the step's end stands: ``_escape``)."""
-        assert isinstance(self.region, SphereRegion)  # _cut_at_boundary
-        radius = self.region.radius
+        of 1e-3 px, erratic in the step, 3x above the estimate on 1.4 % of the pixels; a
+        Maxwell fish-eye's box, where n is 0.62: first order in the step, and the run at
+        twice the step, leaving at the same step end, estimated 1e-7 of it, issue 50); at
+        the boundary every run leaves at the same place. A medium's ray leaving its box where
+        its index jumps (``Medium.face_jump``) is failed (an unbounded medium's sphere is
+        not its box: its rays go on straight there, as before). -> (M,) bool: the rows done (where
+        the crossing did not converge the step's end stands: ``_escape``)."""
+        region = self.region
+        assert region is not None
         done = np.zeros(X.shape[1], dtype=bool)
-        d = X[:, cols] - X_prev[:, cols]
-        with np.errstate(all="ignore"):
-            u = _sphere_exit(X_prev[:, cols], d, radius)
+        u = region.exit_time(X_prev[:, cols], X[:, cols] - X_prev[:, cols])
         crossing, ok, V = ends.crossing(
             cols, np.clip(np.nan_to_num(u, nan=1.0), 0.0, 1.0),
-            lambda todo, Xt, Vt: _sphere_exit(Xt, Vt, radius) * Vt, with_velocity=True,
+            lambda todo, Xt, Vt: region.exit_time(Xt, Vt) * Vt, with_velocity=True,
             strict=True,
         )  # fmt: skip
         ok &= np.isfinite(V).all(axis=0) & (np.linalg.norm(V, axis=0) > 0)
-        if ok.any():
-            rows = cols[ok]
-            D = (V[:, ok] / np.linalg.norm(V[:, ok], axis=0)).T @ self.rotation.T
-            world = self._to_world(crossing[:, ok].T)
-            self._straight(idx[rows], world, D, out, self._to_world(ends.camera[:, rows].T))
-            done[rows] = True
+        if not ok.any():
+            return done
+        rows = cols[ok]
+        bad = np.zeros(rows.size, dtype=bool)
+        if isinstance(region, BoxRegion) and hasattr(self.model, "face_jump"):  # a medium's box
+            bad = self.model.face_jump(crossing[:, ok])
+        if bad.any():  # an interface the medium's box cuts: no plausible colour
+            out.ending[idx[rows[bad]]] = ENDING["failed"]
+            out.position[idx[rows[bad]]] = self._to_world(crossing[:, ok][:, bad].T)
+        go = ~bad
+        D = (V[:, ok][:, go] / np.linalg.norm(V[:, ok][:, go], axis=0)).T @ self.rotation.T
+        world = self._to_world(crossing[:, ok][:, go].T)
+        eye = self._to_world(ends.camera[:, rows[go]].T)
+        self._straight(idx[rows[go]], world, D, out, eye)
+        done[rows] = True
         return done
 
     def _escape(self, rows, Q, P, world, out: RayResults, eye, tangents=(), shares=None):
@@ -997,15 +1018,6 @@ def _bends(paths: _NearPaths | None, n: int) -> tuple[np.ndarray, np.ndarray, np
         R[:, paths.rows] = paths.X0 - paths.X1 + paths.h * paths.V1
         slack[paths.rows] = paths.deviation / (paths.pieces * paths.pieces)
     return P, R, slack
-
-
-def _sphere_exit(X: np.ndarray, V: np.ndarray, radius: float) -> np.ndarray:
-    """(M,) t of the outward crossing X + t V of the sphere |x| = radius (NaN: none): the
-    larger root."""
-    a = np.einsum("im,im->m", V, V)
-    b = np.einsum("im,im->m", X, V)
-    c = np.einsum("im,im->m", X, X) - radius * radius
-    return (-b + np.sqrt(b * b - a * c)) / a
 
 
 def _turn(X_prev: np.ndarray, X: np.ndarray, heading: np.ndarray) -> tuple:
