@@ -14,6 +14,7 @@ import bpy
 import numpy as np
 from mathutils import Euler
 
+from ..core.mipmap import flip_rows
 from ..core.sky import Background
 from ..core.stars import FLUX_ZERO, StarField
 from .materials import image_pixels, node_tree_of
@@ -61,7 +62,7 @@ def _environment(node: bpy.types.Node, strength: float) -> Background | None:
     pixels = image_pixels(node.image)
     if pixels is None:
         return None
-    top_first = np.ascontiguousarray(pixels[::-1])
+    top_first = flip_rows(pixels)  # in place: a big sky is held once (issue 45.7)
     interpolation = "closest" if node.interpolation == "Closest" else "linear"
     return Background(
         top_first, strength=strength, matrix=_mapping_matrix(node), interpolation=interpolation
