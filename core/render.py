@@ -762,8 +762,12 @@ def _scene_extent(scene: Scene, camera) -> float:
     annulus = scene.disk_annulus()
     if annulus is not None:
         bounds.append(annulus.bounds)
-    for lo, hi in bounds:
-        corners = box_corners(lo, hi)
-        if np.all(np.isfinite(corners)):
-            far = max(far, float(np.max(np.linalg.norm(corners - scene.center, axis=1))))
+    if bounds:  # every box's corners at once (M, 8, 3)
+        boxes = np.array([np.asarray(b, np.float64).reshape(2, 3) for b in bounds])
+        pick = box_corners((0, 0, 0), (1, 1, 1)).astype(bool)  # (8, 3): hi where True
+        corners = np.where(pick, boxes[:, 1:2, :], boxes[:, 0:1, :])
+        finite = np.all(np.isfinite(corners), axis=(1, 2))
+        if finite.any():
+            distance = np.linalg.norm(corners[finite] - scene.center, axis=2)
+            far = max(far, float(np.max(distance)))
     return float(max(far, 1e-9))

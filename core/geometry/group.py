@@ -42,7 +42,8 @@ class Group:
         )
         if len(self.ids) != len(self.objects):
             raise ValueError("ids must have one entry per object")
-        lo, hi = _member_bounds(self.objects)
+        self.member_bounds = lo, hi = _member_bounds(self.objects)
+        """(lo, hi) (M, 3): each member's bounds."""
         if np.isnan(lo).any() or np.isnan(hi).any():
             k = int(np.flatnonzero(np.isnan(lo).any(axis=1) | np.isnan(hi).any(axis=1))[0])
             raise ValueError(f"object {k} has NaN bounds (non-finite vertices?)")
