@@ -1,7 +1,8 @@
 """Many objects and huge skies (issue 45, points 6 and 7): a benchmark, not a test.
 
     PYTHONPATH=. python benchmarks/scale.py [--counts 100,1000,10000,100000]
-        [--size 160x120] [--baseline DIR] [--timeout 300] [--env 16384x8192] [--csv PATH]
+        [--size 160x120] [--models flat,schwarzschild] [--baseline DIR] [--timeout 300]
+        [--env 16384x8192] [--only spheres,env] [--csv PATH]
 
 - ``spheres``: N small spheres (N = 10^2 .. 10^5) in a shell 4 < r < 12 around the origin,
   their radius 11.8 / sqrt(N) (about one sphere's cross-section along a ray through the
@@ -120,7 +121,7 @@ def spheres(args) -> list[dict]:
     rows = []
     print(f"spheres at {width}x{height}, one worker; seconds and microseconds per traced ray")
     print(f"{'model':14s} {'objects':>8s} {'this':>20s} {'baseline':>20s}")
-    for model in ("flat", "schwarzschild"):
+    for model in args.models.split(","):
         for count in counts:
             flags = ["spheres", str(count), model, str(width), str(height)]
             new = run_child(ROOT, flags, args.timeout)
@@ -178,6 +179,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--counts", default="100,1000,10000,100000")
     parser.add_argument("--size", default="160x120")
+    parser.add_argument("--models", default="flat,schwarzschild", help="flat and/or schwarzschild")
     parser.add_argument("--baseline", default=None, help="a checkout of the original commit")
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds per run at most")
     parser.add_argument("--env", default="16384x8192", help="sky size WxH; 0: skip")

@@ -42,7 +42,7 @@ class Group:
         )
         if len(self.ids) != len(self.objects):
             raise ValueError("ids must have one entry per object")
-        self.member_bounds = lo, hi = _member_bounds(self.objects)
+        self.member_bounds = lo, hi = member_bounds(self.objects)
         """(lo, hi) (M, 3): each member's bounds."""
         if np.isnan(lo).any() or np.isnan(hi).any():
             k = int(np.flatnonzero(np.isnan(lo).any(axis=1) | np.isnan(hi).any(axis=1))[0])
@@ -87,11 +87,11 @@ class Group:
         return out
 
 
-def _member_bounds(objects: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi) (M, 3) of every member's bounds."""
+def member_bounds(objects: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) (M, 3) of every intersector's bounds, at once."""
     if not objects:
         return np.zeros((0, 3)), np.zeros((0, 3))
-    boxes = np.array([np.asarray(o.bounds, np.float64).reshape(2, 3) for o in objects])
+    boxes = np.array([o.bounds for o in objects], dtype=np.float64).reshape(-1, 2, 3)
     return boxes[:, 0], boxes[:, 1]
 
 
