@@ -54,18 +54,51 @@ def wrap_index(i: np.ndarray, n: int, mode: str) -> np.ndarray:
     return np.clip(i, 0, n - 1)
 
 
+HALVE_BAND = 1 << 21
+"""Values of a halving computed at once (float64): a big image's pyramid is built band by
+band of rows, never as a float64 copy of a whole level."""
+
+
 def halve(image: np.ndarray, wrap: tuple[str, str] = SKY_WRAP) -> np.ndarray:
     """An image (h, w, c) at half its size per side (rounded up): the mean of each 2×2
     block, an odd width (height) padded by the texel that follows its last by ``wrap`` (x, y):
-    the first column (row) where it repeats, else the last."""
+    the first column (row) where it repeats, else the last. Means are taken in float64 and
+    kept in the image's float type, at least float32 (HALVE_BAND values at a time)."""
     h, w = image.shape[:2]
+    rows, columns = (h + 1) // 2, (w + 1) // 2
+    out = np.empty((rows, columns, *image.shape[2:]), np.result_type(image.dtype, np.float32))
+    band = max(1, HALVE_BAND // max(1, out[0].size))
+    for start in range(0, rows, band):
+        stop = min(rows, start + band)
+        out[start:stop] = _halve_rows(image, 2 * start, 2 * stop, wrap)
+    return out
+
+
+def _halve_rows(image: np.ndarray, first: int, end: int, wrap: tuple[str, str]) -> np.ndarray:
+    """``halve`` of the image's rows [first, end) (float64; ``end`` past the last row of an
+    odd height pads it)."""
+    h, w = image.shape[:2]
+    part = image[first : min(end, h)]
+    if h > 1 and end > h:
+        part = np.concatenate([part, image[wrap_index(np.array([h]), h, wrap[1])]], axis=0)
     if w > 1 and w % 2:
-        image = np.concatenate([image, image[:, wrap_index(np.array([w]), w, wrap[0])]], axis=1)
-    if h > 1 and h % 2:
-        image = np.concatenate([image, image[wrap_index(np.array([h]), h, wrap[1])]], axis=0)
-    h, w = image.shape[:2]
-    rows, columns = max(h // 2, 1), max(w // 2, 1)
-    return image.reshape(rows, h // rows, columns, w // columns, -1).mean(axis=(1, 3))
+        part = np.concatenate([part, part[:, wrap_index(np.array([w]), w, wrap[0])]], axis=1)
+    ph, pw = part.shape[:2]
+    rows, columns = max(ph // 2, 1), max(pw // 2, 1)
+    blocks = part.reshape(rows, ph // rows, columns, pw // columns, -1)
+    return blocks.mean(axis=(1, 3), dtype=np.float64)
+
+
+def flip_rows(image: np.ndarray, band: int = 256) -> np.ndarray:
+    """``image`` (h, ...) with its rows reversed, in place (``band`` rows of each end
+    swapped at a time: no second copy of a big image); returns it."""
+    h = image.shape[0]
+    for top in range(0, h // 2, band):
+        stop = min(top + band, h // 2)
+        upper = image[top:stop].copy()
+        image[top:stop] = image[h - stop : h - top][::-1]
+        image[h - stop : h - top] = upper[::-1]
+    return image
 
 
 def bilinear(

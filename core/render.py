@@ -28,6 +28,7 @@ from . import sampling as sampling_module
 from . import workers as workers_module
 from .blackbody import XYZ_FROM_RGB
 from .geometry import Intersector
+from .geometry.group import member_bounds
 from .geometry.hits import box_corners
 from .imageio import FAILED_COLOR
 from .integrators import Splitting
@@ -766,13 +767,16 @@ def _scene_extent(scene: Scene, camera) -> float:
     """Largest distance from the model's centre to the camera or to any object's bounds."""
     far = np.linalg.norm(camera.frame.position - scene.center)
     objects = scene.objects
-    bounds = [objects.bounds] if isinstance(objects, Intersector) else [o.bounds for o in objects]
-    bounds += [(v.lo, v.hi) for v in scene.volumes]
+    lo, hi = member_bounds([objects] if isinstance(objects, Intersector) else list(objects))
+    extra = [(v.lo, v.hi) for v in scene.volumes]
     annulus = scene.disk_annulus()
     if annulus is not None:
-        bounds.append(annulus.bounds)
-    for lo, hi in bounds:
-        corners = box_corners(lo, hi)
-        if np.all(np.isfinite(corners)):
-            far = max(far, float(np.max(np.linalg.norm(corners - scene.center, axis=1))))
+        extra.append(annulus.bounds)
+    more = np.array([np.asarray(box, np.float64).reshape(2, 3) for box in extra]).reshape(-1, 2, 3)
+    boxes = np.concatenate([np.stack([lo, hi], axis=1), more])
+    pick = box_corners((0, 0, 0), (1, 1, 1)).astype(bool)  # (8, 3): hi where True
+    corners = np.where(pick, boxes[:, 1:2, :], boxes[:, 0:1, :])  # every box's (M, 8, 3)
+    finite = np.all(np.isfinite(corners), axis=(1, 2))
+    if finite.any():
+        far = max(far, float(np.max(np.linalg.norm(corners[finite] - scene.center, axis=2))))
     return float(max(far, 1e-9))

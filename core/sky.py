@@ -343,7 +343,9 @@ class Background:
             return lambda d: procedural_sky(d, grid=grid, stars=stars, star_size=star_size), None
         if callable(spec):
             return spec, None
-        arr = np.asarray(spec, dtype=np.float64)
+        arr = np.asarray(spec)  # a float image keeps its type: no float64 copy of a big sky
+        if not np.issubdtype(arr.dtype, np.floating):
+            arr = arr.astype(np.float64)
         if arr.ndim == 1 and arr.shape[0] in (3, 4):
             return lambda d: np.broadcast_to(arr, (d.shape[0], arr.shape[0])), None
         if arr.ndim == 3 and arr.shape[2] in (3, 4):

@@ -14,6 +14,7 @@ import bpy
 import numpy as np
 from mathutils import Euler
 
+from ..core.mipmap import flip_rows
 from ..core.sky import Background
 from ..core.stars import FLUX_ZERO, StarField
 from .materials import MISSING_TEXTURE_COLOR, image_pixels, node_tree_of
@@ -72,7 +73,8 @@ def _environment(node: bpy.types.Node, strength: float, warnings: list[str] | No
             f"{projection.replace('_', ' ').title()} projection: SymRay reads Equirectangular "
             "environment images only; set the node's projection to Equirectangular"
         )
-    top_first = np.ascontiguousarray(pixels[::-1, :, :3])  # RGB: the sky is opaque
+    # rows flipped in place (a big sky is held once: issue 45.7); RGB: the sky is opaque
+    top_first = flip_rows(pixels)[:, :, :3]
     interpolation = "closest" if node.interpolation == "Closest" else "linear"
     return Background(
         top_first, strength=strength, matrix=_mapping_matrix(node), interpolation=interpolation

@@ -6,20 +6,10 @@ from typing import Any
 
 import numpy as np
 
+from .boxtree import morton
 from .hits import _INF, slab_entry
 from .primitives import _Primitive
 from .textures import _rgba
-
-
-def _morton(points: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-    """30-bit Morton codes of points (N, 3) quantised to a 1024^3 grid over [lo, hi]."""
-    span = np.where(hi > lo, hi - lo, 1.0)
-    q = np.clip(((points - lo) / span * 1023.0).astype(np.int64), 0, 1023)
-    code = np.zeros(points.shape[0], dtype=np.int64)
-    for bit in range(10):
-        for axis in range(3):
-            code |= ((q[:, axis] >> bit) & 1) << (3 * bit + axis)
-    return code
 
 
 def barycentric_gradients(e1: np.ndarray, e2: np.ndarray) -> np.ndarray:
@@ -68,7 +58,7 @@ class TriangleMesh(_Primitive):
         if not np.all(np.isfinite(v)):
             raise ValueError("vertices must be finite")
         tri = v[f]  # (F, 3, 3)
-        order = np.argsort(_morton(tri.mean(axis=1), v.min(axis=0), v.max(axis=0)), kind="stable")
+        order = np.argsort(morton(tri.mean(axis=1), v.min(axis=0), v.max(axis=0)), kind="stable")
         self.face_index = order  # sorted position -> original face index
         tri = tri[order]
         self.v0, self.e1, self.e2 = tri[:, 0], tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]

@@ -77,6 +77,39 @@ class _Primitive:
         raise NotImplementedError
 
 
+def sphere_hits(a: np.ndarray, b: np.ndarray, center: Any, radius: Any, radius2: Any) -> tuple:
+    """(rows, t, position, normal, uv) of the segments a -> b (N, 3) that hit the sphere of
+    ``center`` (3,) or (N, 3), ``radius`` and its square ``radius2`` (numbers or (N,): the
+    square as Python's ``radius**2``, which numpy's differs from in the last bit at times):
+    one sphere, or one per segment (core.geometry.group's batches), by the same
+    arithmetic per segment."""
+    d = b - a
+    m = a - center
+    qa = np.einsum("ij,ij->i", d, d)
+    qb = np.einsum("ij,ij->i", d, m)  # half of the linear coefficient
+    qc = np.einsum("ij,ij->i", m, m) - radius2
+    disc = qb * qb - qa * qc
+    ok = (disc >= 0) & (qa > 0)
+    sq = np.sqrt(np.where(ok, disc, 0.0))
+    q = -(qb + np.copysign(sq, qb))  # stable roots: q / qa and qc / q
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r1, r2 = q / qa, qc / q
+    t0, t1 = np.fmin(r1, r2), np.fmax(r1, r2)
+    t = np.where((t0 >= 0) & (t0 <= 1), t0, np.where((t1 >= 0) & (t1 <= 1), t1, np.nan))
+    rows = np.flatnonzero(ok & np.isfinite(t))
+    t = t[rows]
+    p = a[rows] + t[:, None] * d[rows]
+    if np.ndim(center) == 2:
+        center, radius = center[rows], radius[rows, None]
+    n = (p - center) / radius
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    uv = np.stack([
+        0.5 + np.arctan2(n[:, 1], n[:, 0]) / (2 * np.pi),
+        0.5 + np.arcsin(np.clip(n[:, 2], -1, 1)) / np.pi,
+    ], axis=1)  # fmt: skip
+    return rows, t, p, n, uv
+
+
 # -- analytic primitives ---------------------------------------------------------------------
 
 
@@ -96,29 +129,7 @@ class Sphere(_Primitive):
         self.bounds = (self.center - radius, self.center + radius)
 
     def _hit(self, a, b):
-        d = b - a
-        m = a - self.center
-        qa = np.einsum("ij,ij->i", d, d)
-        qb = np.einsum("ij,ij->i", d, m)  # half of the linear coefficient
-        qc = np.einsum("ij,ij->i", m, m) - self.radius**2
-        disc = qb * qb - qa * qc
-        ok = (disc >= 0) & (qa > 0)
-        sq = np.sqrt(np.where(ok, disc, 0.0))
-        q = -(qb + np.copysign(sq, qb))  # stable roots: q / qa and qc / q
-        with np.errstate(divide="ignore", invalid="ignore"):
-            r1, r2 = q / qa, qc / q
-        t0, t1 = np.fmin(r1, r2), np.fmax(r1, r2)
-        t = np.where((t0 >= 0) & (t0 <= 1), t0, np.where((t1 >= 0) & (t1 <= 1), t1, np.nan))
-        rows = np.flatnonzero(ok & np.isfinite(t))
-        t = t[rows]
-        p = a[rows] + t[:, None] * d[rows]
-        n = (p - self.center) / self.radius
-        n /= np.linalg.norm(n, axis=1, keepdims=True)
-        uv = np.stack([
-            0.5 + np.arctan2(n[:, 1], n[:, 0]) / (2 * np.pi),
-            0.5 + np.arcsin(np.clip(n[:, 2], -1, 1)) / np.pi,
-        ], axis=1)  # fmt: skip
-        return rows, t, p, n, uv, None
+        return (*sphere_hits(a, b, self.center, self.radius, self.radius**2), None)
 
     def _uv_derivatives(self, p, n, dp, part):
         dn = dp / self.radius  # the unit normal's derivatives

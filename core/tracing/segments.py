@@ -200,6 +200,13 @@ class SceneGeometry:
                 boxes.append((lo, hi, shape_distance(obj), oid))
         return boxes
 
+    def box_count(self) -> int:
+        """How many boxes ``boxes`` lists, from a Group's member bounds where it has them."""
+        bounds = getattr(self.objects, "member_bounds", None)
+        if bounds is None:
+            return len(self.boxes())
+        return len(self.volumes) + int(np.count_nonzero(~np.any(bounds[0] > bounds[1], axis=1)))
+
     def local_boxes(self, to_local: Any) -> list[tuple[np.ndarray, np.ndarray]]:
         """(lo, hi) in local coordinates of each object's and volume's box (boxes)."""
         out = []

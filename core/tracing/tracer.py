@@ -220,9 +220,8 @@ class Tracer:
             self.disk = self._disk_light(scene)
         self.stepper = Stepper(self.method, self.model, self.captured)
         self._near = self.geometry.local_box(self._to_local)
-        boxes = self.geometry.local_boxes(self._to_local)
-        if self._near is not None and 1 < len(boxes) <= NEAR_BOXES:
-            self._near_boxes = boxes
+        if self._near is not None and 1 < self.geometry.box_count() <= NEAR_BOXES:
+            self._near_boxes = self.geometry.local_boxes(self._to_local)
         if scene.disk is not None:  # the disk's inner edge, or a nearer object
             self._clear = clear_radius(self.geometry.boxes(), np.asarray(scene.center, float))
 

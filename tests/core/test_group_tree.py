@@ -1,0 +1,181 @@
+"""The Group's broad phase (issue 45.6: a BVH over objects) against the brute force it
+replaces: every member asked in turn about the segments whose bounds overlap its box."""
+
+from dataclasses import fields
+
+import numpy as np
+import pytest
+
+import core
+from core.geometry import group as group_module
+from core.intersect import Disk, Group, Hits, Plane, Sphere, TriangleMesh, checker, segment_overlaps
+
+RNG = np.random.default_rng(4545)
+
+
+def brute_force(objects, ids, a, b, footprint=None):
+    """The original Group.intersect: each member in turn, nearer hits kept (an earlier
+    member wins a tie: strict <)."""
+    out = Hits.miss(a.shape[0])
+    for obj, oid in zip(objects, ids, strict=True):
+        rows = np.flatnonzero(segment_overlaps(a, b, *obj.bounds))
+        if rows.size == 0:
+            continue
+        if footprint is not None and getattr(obj, "filters", False):
+            hits = obj.intersect(a[rows], b[rows], footprint[rows])
+        else:
+            hits = obj.intersect(a[rows], b[rows])
+        out.merge(rows, hits, oid)
+    return out
+
+
+def assert_same(h: Hits, ref: Hits) -> None:
+    """Every field bit for bit."""
+    for f in fields(Hits):
+        assert np.array_equal(getattr(h, f.name), getattr(ref, f.name)), f.name
+
+
+def _mesh(centre, size, rng):
+    """A closed octahedron: faces meet at edges and corners (ties between faces)."""
+    v = np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0], [0, 0, 1], [0, 0, -1]], float)
+    f = [[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]]
+    return TriangleMesh(centre + size * v, f, color=rng.uniform(0, 1, 4))
+
+
+def mixed_scene(count=600, rng=RNG):
+    """Many small spheres (plain, textured, twins at one place for exact ties), thin
+    rectangles (axis-aligned: a box of zero thickness), an infinite plane, annuli,
+    meshes and a nested group; ids mixed with None (the member's own)."""
+    centres = rng.uniform(-6, 6, (count, 3))
+    objects = [Sphere(c, rng.uniform(0.02, 0.4), color=rng.uniform(0, 1, 4), object_id=7)
+               for c in centres]  # fmt: skip
+    for k in (3, 9):  # an equal sphere at the same place, another colour and id
+        objects.append(Sphere(objects[k].center, objects[k].radius, color=(1, 0, 0, 1)))
+        objects[-1].twin = objects[k]
+    objects += [Sphere(c, 0.3, color=checker(4, 4)) for c in rng.uniform(-6, 6, (20, 3))]
+    objects += [Plane(rng.uniform(-5, 5, 3), np.eye(3)[k % 3], extent=(1.5, 0.7), object_id=3)
+                for k in range(12)]  # fmt: skip
+    objects += [
+        Plane(rng.uniform(-5, 5, 3), rng.normal(size=3), extent=(1, 2), color=checker(3, 3))
+    ]
+    objects += [Plane((0, 0, -5.5), (0, 0, 1), color=checker(8, 8))]  # infinite bounds
+    objects += [Disk(rng.uniform(-5, 5, 3), rng.normal(size=3), 0.1, 0.6) for _ in range(6)]
+    objects += [_mesh(rng.uniform(-5, 5, 3), 0.5, rng) for _ in range(4)]
+    objects += [Group([Sphere(rng.uniform(-5, 5, 3), 0.2) for _ in range(12)], ids=[None] * 12)]
+    ids = [None if k % 5 == 0 else 100 + k for k in range(len(objects))]
+    order = rng.permutation(len(objects))  # kinds interleaved in the list
+    return [objects[k] for k in order], [ids[k] for k in order]
+
+
+def segments(rng=RNG, n=6000):
+    """Short and long, zero-length, grazing and straight-to-far segments."""
+    a = rng.uniform(-7, 7, (n, 3))
+    b = a + rng.normal(size=(n, 3)) * rng.choice([0.3, 2.0, 20.0], size=(n, 1))
+    b[:200] = a[:200]  # zero length
+    b[200:400] = a[200:400] + 1e12 * rng.normal(size=(200, 3))  # a straight ray's cast
+    return a, b
+
+
+def grazing(objects, rng=RNG):
+    """Segments along the faces of the members' boxes and tangent to spheres."""
+    a, b = [], []
+    for obj in objects[:300]:
+        lo, hi = (np.asarray(x, float) for x in obj.bounds)
+        if not np.all(np.isfinite(lo) & np.isfinite(hi)):
+            continue
+        axis = rng.integers(3)
+        p = rng.uniform(lo, hi)
+        p[axis] = hi[axis]  # on the box's face
+        d = rng.normal(size=3)
+        d[axis] = 0.0
+        a += [p - d, hi, lo]
+        b += [p + d, hi + np.eye(3)[axis], lo - 1e-300]
+        if isinstance(obj, Sphere):
+            n = rng.normal(size=3)
+            n /= np.linalg.norm(n)
+            t = np.cross(n, rng.normal(size=3))
+            touch = obj.center + obj.radius * n
+            a += [touch - t]
+            b += [touch + t]
+    return np.array(a), np.array(b)
+
+
+def test_tree_equals_brute_force_on_mixed_scenes():
+    objects, ids = mixed_scene()
+    group = Group(objects, ids=ids)
+    assert group._broad is not None  # the tree is in use
+    a, b = segments()
+    ga, gb = grazing(objects)
+    a, b = np.concatenate([a, ga]), np.concatenate([b, gb])
+    h = group.intersect(a, b)
+    ref = brute_force(objects, ids, a, b)
+    assert_same(h, ref)
+    assert_same(group.intersect_each(a, b), ref)
+    assert ref.hit.sum() > 1000 and (ref.object_id == 7).any()  # the test sees hits
+    for twin in (k for k, o in enumerate(objects) if getattr(o, "twin", None) is not None):
+        first = min(twin, objects.index(objects[twin].twin))  # exact ties: the earlier wins
+        tied = objects[twin].intersect(a, b).hit & (ref.t == objects[twin].intersect(a, b).t)
+        assert tied.any()
+        expect = objects[first].object_id if ids[first] is None else ids[first]
+        assert np.all(h.object_id[tied] == expect)
+
+
+def test_tree_equals_brute_force_with_footprints():
+    objects, ids = mixed_scene(count=200, rng=np.random.default_rng(7))
+    group = Group(objects, ids=ids)
+    assert group.filters
+    a, b = segments(np.random.default_rng(8), 3000)
+    footprint = np.random.default_rng(9).normal(scale=0.01, size=(a.shape[0], 2, 3))
+    assert_same(group.intersect(a, b, footprint), brute_force(objects, ids, a, b, footprint))
+
+
+@pytest.mark.parametrize("count", [9, 100, 5000])
+def test_many_small_spheres_equal_brute_force(count):
+    rng = np.random.default_rng(count)
+    centres = rng.uniform(-10, 10, (count, 3))
+    objects = [Sphere(c, 11.8 / np.sqrt(count), color=rng.uniform(0, 1, 4)) for c in centres]
+    ids = list(range(count))
+    a = np.tile([0.0, -30.0, 2.0], (4000, 1))
+    b = a + 1e12 * np.column_stack([rng.uniform(-0.4, 0.4, 4000), np.ones(4000),
+                                    rng.uniform(-0.4, 0.4, 4000)])  # fmt: skip
+    c, d = segments(rng, 4000)
+    a, b = np.concatenate([a, c * 1.5]), np.concatenate([b, d * 1.5])
+    h = Group(objects).intersect(a, b)
+    assert_same(h, brute_force(objects, ids, a, b))
+    assert h.hit.mean() > 0.2
+
+
+def test_windows_walk_long_segments_nearest_first(monkeypatch):
+    """Windows of one leaf (many per segment) find the same hits as one window for all."""
+    objects, ids = mixed_scene(count=400, rng=np.random.default_rng(3))
+    a, b = segments(np.random.default_rng(4), 3000)
+    ref = brute_force(objects, ids, a, b)
+    monkeypatch.setattr(core.geometry.boxtree, "WINDOW", 1)
+    assert_same(Group(objects, ids=ids).intersect(a, b), ref)
+
+
+def test_render_unchanged_by_the_tree(monkeypatch):
+    """Images of a sphere cloud through the tree equal those of the brute force, flat and
+    around a hole."""
+    rng = np.random.default_rng(45)
+    centres = rng.normal(size=(14, 3)) * 5
+    centres = centres[np.linalg.norm(centres, axis=1) > 3]  # 10 (> FEW), off the hole
+    spheres = [Sphere(c, 1.2, color=rng.uniform(0, 1, 4)) for c in centres]
+    assert len(spheres) > group_module.FEW
+    camera = core.Camera.perspective(position=(0, -25, 3), look_at=(0, 0, 0), up=(0, 0, 1),
+                                     fov_deg=45, width=12, height=8)  # fmt: skip
+    for model in (None, core.hamiltonians.schwarzschild(rg=1.0)):
+        scene = core.Scene(model=model, objects=spheres, background="procedural")
+        tree = core.render(scene, camera, workers=1)
+        with monkeypatch.context() as m:
+            m.setattr(group_module, "FEW", 10**9)
+            each = core.render(scene, camera, workers=1)
+        assert np.array_equal(tree.rgba, each.rgba)
+        assert np.array_equal(tree.passes["ending"], each.passes["ending"])
+        assert (tree.passes["ending"] == core.ENDING["hit"]).mean() > 0.1
+
+
+def test_few_members_are_asked_in_turn():
+    objects = [Sphere((k, 0, 0), 0.4) for k in range(group_module.FEW)]
+    assert Group(objects)._broad is None
+    assert Group([*objects, Sphere((9, 0, 0), 0.4)])._broad is not None
