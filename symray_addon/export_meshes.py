@@ -18,7 +18,7 @@ import bpy
 import numpy as np
 from mathutils.bvhtree import BVHTree
 
-from ..core.geometry.mesh import _morton
+from ..core.geometry.boxtree import morton
 from ..core.intersect import Hits, barycentric_gradients
 from .materials import MaterialSampler, material_sampler, unsupported_nodes
 from .objects import in_collections, rendering_collections
@@ -66,7 +66,7 @@ def part_bounds(corners: np.ndarray, tri_object: np.ndarray) -> list[tuple]:
     if ids.size <= PART_BOXES:
         return [(lo[k], hi[k], int(ids[k])) for k in range(ids.size)]
     centres = 0.5 * (lo + hi)
-    order = np.argsort(_morton(centres, centres.min(axis=0), centres.max(axis=0)), kind="stable")
+    order = np.argsort(morton(centres, centres.min(axis=0), centres.max(axis=0)), kind="stable")
     boxes = []
     for chunk in np.array_split(order, PART_BOXES):
         own = int(ids[chunk[0]]) if chunk.size == 1 else -3

@@ -256,3 +256,29 @@ def test_a_medium_of_index_one_renders_the_cube_as_flat_space_does(addon, factor
     flat, medium = faces("FLAT"), faces("MEDIUM")
     assert (flat >= 0).sum() > 400  # of 3072 pixels
     assert np.count_nonzero(medium != flat) <= 2, np.argwhere(medium != flat)  # grazing edges
+
+
+def test_part_bounds_one_box_per_object_then_shared(addon):
+    """The clearances see each object's own box (its hits then measure only the others);
+    past PART_BOXES objects, neighbours share a box (id -3: none's own), every triangle
+    inside its box."""
+    meshes = addon.module("symray_addon.export_meshes")
+    rng = np.random.default_rng(5)
+    for count in (3, meshes.PART_BOXES + 5):
+        centres = rng.uniform(-10, 10, (count, 3))
+        corners = centres[:, None, None, :] + rng.uniform(-0.5, 0.5, (count, 2, 3, 3))
+        corners = corners.reshape(-1, 3, 3)
+        tri_object = np.repeat(np.arange(count), 2)
+        boxes = meshes.part_bounds(corners, tri_object)
+        assert len(boxes) == min(count, meshes.PART_BOXES)
+        for k in range(count):
+            own = [b for b in boxes if b[2] == k]
+            inside = [
+                b for b in boxes
+                if np.all(corners[tri_object == k] >= b[0] - 1e-12)
+                and np.all(corners[tri_object == k] <= b[1] + 1e-12)
+            ]  # fmt: skip
+            assert inside  # every object lies in some box
+            if count <= meshes.PART_BOXES:
+                np.testing.assert_array_equal(own[0][0], corners[tri_object == k].min(axis=(0, 1)))
+                np.testing.assert_array_equal(own[0][1], corners[tri_object == k].max(axis=(0, 1)))
