@@ -174,13 +174,16 @@ def test_an_old_file_with_a_centre_object_renders_unchanged(addon, tmp_path):
         assert (settings.quality, settings.background) == ("FINAL", "PROCEDURAL")
         image = f12(scene, tmp_path, name)
         old = reference[name]
-        if name == "Scene":  # sampled as that version sampled it
-            # rtol 1e-4: rg's round trip through Size changes its last bit; 2 of 9216
-            # pixels then differ by 8e-5 relative (measured), every other by < 1e-5
-            np.testing.assert_allclose(image, old, rtol=1e-4, atol=1e-5)
-        else:  # since then the disk's smooth blocks are interpolated (within 0.25 px)
-            off = np.abs(image - old).max(axis=-1)
-            assert (off > 0.1).mean() <= 0.002  # issue 23's target (measured: 0; max 0.011)
+        # Since then Final's samples follow its filter (issue 50) and the disk's smooth
+        # blocks are interpolated within 0.25 px (issue 23). Pixels holding sub-pixel
+        # features (stars, the thin lensed arc) then differ: their share of the pixel depends
+        # on where the samples fall (measured, pixels off by > 0.1: Scene 0.87 %, Kerr 1.13 %,
+        # all on stars, the photon ring and the disk's rim; mean |difference| 2.1e-3 and
+        # 3.7e-3; mean brightness within 0.11 %). The picture and its light are the same:
+        off = np.abs(image - old).max(axis=-1)
+        assert (off > 0.1).mean() <= 0.015
+        assert np.abs(image - old).mean() < 5e-3
+        np.testing.assert_allclose(image[..., :3].mean(), old[..., :3].mean(), rtol=0.01)
         # the migrated settings are the old ones: the explicit model at the same Empty
         # renders the same image
         settings.model = "KERR" if name == "Kerr" else "SCHWARZSCHILD"
@@ -202,7 +205,8 @@ def test_add_medium_renders_its_box(addon, scene, helpers):
     medium.scale = (1.0, 2.0, 1.0)
     bpy.context.view_layer.update()
     settings = scene.symray
-    settings.refractive_index = "1 + 0.05*z"
+    # n reaches 1 at the box (a gradient such as 1 + 0.05*z would jump there: refused)
+    settings.refractive_index = "1 + 0.2*exp(-(x*x + y*y + z*z))"
     effective = addon.module("symray_addon.objects").effective(settings)
     assert (effective.model, effective.center) == ("MEDIUM", medium)
     assert effective.medium_min == (-3.0, -6.0, -3.0) and effective.medium_max == (3.0, 6.0, 3.0)
