@@ -8,6 +8,7 @@ from . import (
     blackbody,
     camera,
     checks,
+    cluster,
     dual,
     expressions,
     hamiltonians,
@@ -44,12 +45,14 @@ from .observer import (
 from .render import MAX_STEPS_COLOR, RenderResult, render
 from .sky import Background, equirect_lookup, procedural_sky
 from .stars import StarField
+from .sweep import sweep
 from .trace import ENDING, Scene
 
 __all__ = [
     "blackbody",
     "camera",
     "checks",
+    "cluster",
     "dual",
     "expressions",
     "hamiltonians",
@@ -90,6 +93,7 @@ __all__ = [
     "SingularMetricError",
     "RenderResult",
     "render",
+    "sweep",
     "Background",
     "StarField",
     "equirect_lookup",

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from . import checks
+from . import checks, cluster
 from . import sampling as sampling_module
 from . import workers as workers_module
 from .blackbody import XYZ_FROM_RGB
@@ -114,6 +114,7 @@ def render(
     on_tile: Callable[[tuple[int, int, int, int], RenderResult], None] | None = None,
     observer: Any = "static",
     shift_colours: bool = True,
+    client: Any = None,
 ) -> RenderResult:
     """Render ``scene`` seen by ``camera`` (docs/design.md, "Rendering in the core").
 
@@ -133,8 +134,13 @@ def render(
     camera), "infall" (falling from rest at infinity) or a 3-velocity (vx, vy, vz) (units of
     c, world axes) relative to the static one; ``shift_colours`` False keeps the colours
     (and the disk's g) of the static observer, with the moving one's aberration.
+    ``client`` (a dask.distributed Client, optional) runs the chunks as tasks on its
+    cluster (core.cluster); ``workers`` then defaults to the cluster's threads and sets
+    the tiling, so the image equals a local render's with the same ``workers``, bit for
+    bit. The disk's exposure probe stays local.
     """
     passes = _check_render_call(passes, chunk_size, workers, cores)
+    cluster_threads = cluster.check_client(client) if client is not None else None
     _check_sampling(tolerance_px, samples, pixel_filter, filter_size)
     check_observer(observer)
     pixel_angle = camera.pixel_angle(_camera_distance(scene, camera))
@@ -170,7 +176,7 @@ def render(
     image = _Buffers(n, with_error, camera.width, passes, pixel_angle)
     image.hold_stars(background, camera)
     image.camera, image.motion = camera, moving
-    kind, count = workers_module.choose(parallel, workers, n, cores)
+    kind, count = _where_chunks_run(parallel, workers, n, cores, cluster_threads)
     sampled = samples > 1 or (tolerance_px is not None and tracer.curved)
     if sampled:
         interpolation = interpolation if tracer.curved else 0.0
@@ -186,15 +192,16 @@ def render(
         tile_list = _tiles_for(camera, count)
         chunks = [(k, k + 1) for k in range(len(tile_list))]
         work = _tile_work(sampler, tile_list)
+        middles = [((t.x0 + t.x1) / 2, (t.y0 + t.y1) / 2) for t in tile_list]
     else:
-        # at least two chunks per worker (a small image still keeps every core busy), but
-        # not below _MIN_CHUNK rays: per-step work is Python overhead on small batches
-        size = max(_MIN_CHUNK, min(chunk_size, -(-n // (2 * count))))
-        chunks = [(s, min(s + size, n)) for s in range(0, n, size)]
+        chunks = _span_chunks(n, chunk_size, count)
         work = _span_work(tracer, camera, with_error, _far_field_error(tracer), with_tangents)
+        middles = [(camera.width / 2, (a + b) / 2 / camera.width) for a, b in chunks]
     cancelled = workers_module.CancelLatch(should_cancel)
     done = 0
-    for span, chunk in workers_module.run_chunks(work, chunks, kind, count, cancelled):
+    ranks = expected_cost_rank(camera, scene.center, middles) if kind == "dask" else None
+    on_cluster = (client, ranks) if ranks is not None else None
+    for span, chunk in workers_module.run_chunks(work, chunks, kind, count, cancelled, on_cluster):
         if chunk is None:
             continue
         done += image.store(span, chunk, background)
@@ -349,6 +356,38 @@ def _tile_work(sampler: TileSampler, tile_list):
         return None if cancel() else (tile_list[span[0]], part)
 
     return work
+
+
+def _where_chunks_run(parallel, workers, n, cores, cluster_threads) -> tuple[str, int]:
+    """-> (kind, worker count): workers_module.choose's, or ("dask", ``workers`` or the
+    cluster's threads) where there is a cluster (``cluster_threads`` not None)."""
+    if cluster_threads is not None:
+        workers_module.choose(parallel, workers, n, cores)  # the same arguments refused
+        return "dask", workers or cluster_threads
+    return workers_module.choose(parallel, workers, n, cores)
+
+
+def _span_chunks(n: int, chunk_size: int, count: int) -> list[tuple[int, int]]:
+    """The flat pixel spans of an image traced without sampling: at least two chunks per
+    worker (a small image still keeps every core busy), but not below _MIN_CHUNK rays
+    (per-step work is Python overhead on small batches)."""
+    size = max(_MIN_CHUNK, min(chunk_size, -(-n // (2 * count))))
+    return [(s, min(s + size, n)) for s in range(0, n, size)]
+
+
+def expected_cost_rank(camera, centre, middles: Sequence[tuple[float, float]]) -> list[int]:
+    """Each chunk's rank by its expected cost, the costliest highest: rays passing nearer
+    the scene's centre (its hole, lens or medium) bend more and take more steps. ``middles``:
+    each chunk's middle as an image point (x, y) in pixels."""
+    origins, directions = camera.rays_at(np.asarray(middles, dtype=np.float64))
+    towards = np.asarray(centre, dtype=np.float64) - origins
+    along = np.einsum("ij,ij->i", towards, directions)
+    miss = np.linalg.norm(towards - along[:, None] * directions, axis=1)
+    miss = np.where(along > 0, miss, np.linalg.norm(towards, axis=1))  # looking away
+    order = np.argsort(-miss, kind="stable")  # farthest first: rank 0
+    rank = np.empty(len(middles), dtype=np.int64)
+    rank[order] = np.arange(len(middles))
+    return rank.tolist()
 
 
 def _tiles_for(camera, workers: int) -> list[Tile]:

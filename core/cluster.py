@@ -1,0 +1,125 @@
+"""core.cluster: an image's chunks as tasks on a Dask cluster (``core.render(client=...)``).
+
+Dask (``distributed``) is optional: numpy stays SymRay's only requirement, and only a
+render handed a ``client`` imports it. The chunks' job (the tracer or the tile sampler,
+with the scene) is sent to the workers once (``Client.scatter``, to every worker); each
+chunk is then one small task naming it and a span, submitted most expensive first (its
+``priority``). Results come back as they finish, in the order they finish, into the
+caller's bounded buffers: the caller keeps at most what it has not stored yet.
+
+A worker lost mid-render costs its tasks a rerun elsewhere (Dask's scheduler reschedules
+them, up to its ``allowed-failures``); a task that raises stops the render with its error.
+A cancel (``should_cancel``) cancels the tasks not yet finished; a chunk already running
+finishes on its worker and is dropped. The workers import ``core`` (SymRay installed, or
+its folder on their ``PYTHONPATH``): only the job's data travels.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Callable, Iterator, Sequence
+from typing import Any
+
+INSTALL = "pip install 'dask[distributed]==2026.8.0'"
+"""What the error for a missing Dask says to run (the version the tests pin)."""
+_POLL_S = 0.05  # how often the caller checks for finished tasks and for a cancel
+_TOKENS = itertools.count()
+
+Span = tuple[int, int]
+
+
+def _distributed():
+    """The ``distributed`` module, or ImportError saying how to install it."""
+    try:
+        import distributed
+    except ImportError as exc:
+        raise ImportError(
+            f"core.render(client=...) runs on a Dask cluster and needs Dask's distributed "
+            f"scheduler, which is not installed here: {INSTALL}"
+        ) from exc
+    return distributed
+
+
+def check_client(client: Any) -> int:
+    """The threads of the cluster behind ``client`` (a distributed.Client); a clear error
+    before any work where Dask is missing, ``client`` is not a Client, or its cluster
+    cannot be reached or has no workers."""
+    distributed = _distributed()
+    if not isinstance(client, distributed.Client):
+        raise TypeError(f"client must be a dask.distributed Client, not {type(client).__name__}")
+    if client.status != "running":
+        raise ConnectionError(
+            f"the Dask client is not connected to its cluster (status '{client.status}'): "
+            "start it (Client(address)) or reconnect before rendering"
+        )
+    try:
+        threads = sum(client.nthreads().values())
+    except (OSError, TimeoutError) as exc:
+        raise ConnectionError(f"the Dask scheduler cannot be reached: {exc}") from exc
+    if threads < 1:
+        raise ConnectionError(
+            f"the Dask cluster at {client.scheduler.address} has no workers: start some "
+            "(dask worker <address>) before rendering"
+        )
+    return threads
+
+
+def _run_chunk(job: Callable[[Span, Callable[[], bool]], Any], span: Span) -> Any:
+    """On a worker: one chunk of the scattered job (its cancel is the task's own)."""
+    return job(span, _never)
+
+
+def _never() -> bool:
+    """A chunk on a worker is cancelled by its task, not from inside."""
+    return False
+
+
+def run_on_client(
+    client: Any,
+    job: Callable[[Span, Callable[[], bool]], Any],
+    spans: Sequence[Span],
+    priorities: Sequence[float],
+    cancelled: Callable[[], bool],
+) -> Iterator[tuple[Span, Any]]:
+    """Run job(span, cancel) for every span as Dask tasks (higher ``priorities`` first);
+    yield (span, result) as each finishes. Stops once ``cancelled()`` (the tasks not yet
+    finished are cancelled), and on a task's error (raised here, the rest cancelled)."""
+    distributed = _distributed()
+    token = next(_TOKENS)
+    [shared] = client.scatter([job], broadcast=True, hash=False)
+    futures = {
+        client.submit(
+            _run_chunk, shared, span, key=f"symray-{token}-{k}", priority=p, pure=False
+        ): span
+        for k, (span, p) in enumerate(zip(spans, priorities, strict=True))
+    }
+    finished = distributed.as_completed(list(futures))
+    try:
+        while futures:
+            if cancelled():
+                return
+            if not finished.has_ready():
+                time.sleep(_POLL_S)
+                continue
+            for future in finished.next_batch(block=False):
+                span, result = futures.pop(future), future.result()
+                del future  # the result lives in the caller's buffers, not on the cluster
+                yield span, result
+    finally:
+        if futures:
+            client.cancel(list(futures))
+        shared.release()
+
+
+def connect(address: str, timeout_s: float = 10.0) -> Any:
+    """A dask.distributed Client connected to the scheduler at ``address`` ("tcp://host:
+    8786"); ConnectionError naming the address where none answers within ``timeout_s``."""
+    distributed = _distributed()
+    try:
+        return distributed.Client(address, timeout=f"{timeout_s}s")
+    except (OSError, TimeoutError) as exc:
+        raise ConnectionError(
+            f"no Dask scheduler answers at {address} within {timeout_s:g} s ({exc}): start "
+            "one there (dask scheduler), or check the address and the firewall"
+        ) from exc
