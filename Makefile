@@ -13,7 +13,7 @@ PYTEST_FLAGS ?= -n 2 -q
 
 .PHONY: test test-main test-oldest lint venv venv311 clean extension render figures bench \
 	bench-quick stress bench-perf bench-memory bench-honesty bench-presets \
-	bench-viewport
+	bench-viewport bench-f12 bench-cluster
 
 test: lint test-main test-oldest
 
@@ -103,6 +103,19 @@ PRESETS_ARGS ?=
 bench-presets: extension
 	$(PY) tools/install_extension.py $(EXT_ZIP)
 	$(PY) benchmarks/presets.py $(PRESETS_ARGS)
+
+# F12 (bpy.ops.render.render) beside the add-on's own job (benchmarks/f12.py, issue 51):
+# F12_ARGS="--size 1920x1080 --scenes FACTORY,KERR_DISK".
+F12_ARGS ?= --size 1920x1080
+bench-f12: extension
+	$(PY) tools/install_extension.py $(EXT_ZIP)
+	$(PY) benchmarks/f12.py $(F12_ARGS)
+
+# A frame on the process pool beside the same frame on a Dask LocalCluster, and a 3x3
+# sweep (benchmarks/cluster.py, issue 49): CLUSTER_ARGS="--width 1920 --height 1080".
+CLUSTER_ARGS ?= --width 1920 --height 1080 --sweep out/sweep
+bench-cluster: venv
+	PYTHONPATH=. $(PY) benchmarks/cluster.py $(CLUSTER_ARGS)
 
 # The Rendered viewport's costs against issue 25's targets (benchmarks/viewport.py): the
 # Kerr-with-disk preset in a 960x540 view; VIEWPORT_ARGS="--size 1920x1080 --turns 1,5".

@@ -62,8 +62,10 @@ def _chunk(zip_path: Path, blend: Path, out: Path, start: int, end: int) -> subp
     user.mkdir(parents=True)
     env = {**os.environ, "BLENDER_USER_RESOURCES": str(user)}
     command = [sys.executable, str(CHUNK), str(zip_path), str(blend), str(out)]
-    return subprocess.Popen([*command, "--start", str(start), "--end", str(end)], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)  # fmt: skip
+    frames = ["--start", str(start), "--end", str(end)]
+    return subprocess.Popen(
+        [*command, *frames], env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
 
 
 def test_chunks_on_two_workers_are_the_frames_of_one_render(addon, extension_zip, tmp_path):
