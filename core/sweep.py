@@ -135,6 +135,8 @@ def sweep(
 
 def _render_point(make, params: Mapping[str, Any], options: Mapping[str, Any]) -> RenderResult:
     """Build one point's scene and camera and render it."""
+    if options.get("parallel") == "threads":  # on a cluster's worker (_on_cluster)
+        cluster.on_worker()
     for_render = {k: v for k, v in params.items() if k in _RENDER_KEYWORDS}
     scene, camera = make(**{k: v for k, v in params.items() if k not in _RENDER_KEYWORDS})
     return render(scene, camera, **{**options, **for_render})

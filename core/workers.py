@@ -297,7 +297,7 @@ def _start_processes(token: int, job, first: Span, workers: int, n_spans: int):
         stop = context.Event()
         _JOBS[token] = (job, stop)
         pool = ProcessPoolExecutor(
-            max_workers=min(workers, n_spans), mp_context=context, initializer=_keep_freed_memory
+            max_workers=min(workers, n_spans), mp_context=context, initializer=keep_freed_memory
         )
         with warnings.catch_warnings():
             # Python >= 3.12 warns when a process with threads forks: a lock another
@@ -319,7 +319,7 @@ def _start_processes(token: int, job, first: Span, workers: int, n_spans: int):
     return pool, {future: first}, stop
 
 
-def _keep_freed_memory() -> None:
+def keep_freed_memory() -> None:
     """In a worker process: let glibc's malloc keep freed memory for the next array.
 
     By default it returns the top of its heap to the OS once 2x its (adaptive) mmap
