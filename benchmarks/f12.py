@@ -10,7 +10,9 @@ Per scene, the same frame twice: through the engine as F12 renders it
 bake cache. Printed: both times and their ratio (issue 51's target: F12 within 1.1x of
 the core, at 1080p on 2 cores), and how often the engine pushed the frame to Blender's
 render window while tracing. Scenes: FACTORY is Blender's factory startup scene (cube,
-light, camera) with SymRay as the engine; a preset name (KERR_DISK, ...) is the factory
+light, camera) with SymRay as the engine; HOLE adds Add › Black Hole (with its disk, unlit)
+and FLOOR a 30 m plane under them (issue 51's target: FLOOR <= 2x HOLE at 960x540
+Preview, printed when both run); a preset name (KERR_DISK, ...) is the factory
 scene without its cube and with that preset applied (benchmarks/factory_scene.py).
 """
 
@@ -27,13 +29,18 @@ from factory_scene import MODULE, preset_scene
 
 def _scene(name: str, width: int, height: int) -> bpy.types.Scene:
     """The scene ``name`` at width x height, Preview, with its bake cache emptied."""
-    if name == "FACTORY":
+    if name in ("FACTORY", "HOLE", "FLOOR"):
         bpy.ops.wm.read_homefile(use_factory_startup=True)
         bpy.ops.preferences.addon_enable(module=MODULE)
         scene = bpy.context.scene
         scene.render.engine = "SYMRAY"
         scene.render.resolution_x, scene.render.resolution_y = width, height
         scene.render.resolution_percentage = 100
+        if name != "FACTORY":  # Add › Black Hole (with its disk) at the cursor, unlit
+            bpy.ops.symray.add_black_hole()
+            scene.symray.lighting = "UNLIT"
+        if name == "FLOOR":  # issue 51's floor: a 30 m plane under the hole and disk
+            bpy.ops.mesh.primitive_plane_add(size=30, location=(0.0, 0.0, -1.0))
     else:
         scene = preset_scene(name, width, height)
     importlib.import_module(f"{MODULE}.symray_addon.bake").clear_cache()
@@ -84,10 +91,14 @@ def main() -> None:
     print(
         f"{'scene':12s} {'core s':>8s} {'F12 s':>8s} {'F12/core':>9s} {'target':>7s} {'pushes':>7s}"
     )
+    seconds: dict[str, float] = {}
     for name in args.scenes.split(","):
         core_s = _core_seconds(name, width, height)
         f12_s, pushes = _f12_seconds(name, width, height)
         print(f"{name:12s} {core_s:8.1f} {f12_s:8.1f} {f12_s / core_s:9.2f} {1.1:7.1f} {pushes:7d}")
+        seconds[name] = core_s
+    if "HOLE" in seconds and "FLOOR" in seconds:
+        print(f"FLOOR / HOLE (core): {seconds['FLOOR'] / seconds['HOLE']:.2f}x (target <= 2x)")
 
 
 main()

@@ -106,6 +106,13 @@ class TriangleMesh(_Primitive):
         """Number of triangles."""
         return self.v0.shape[0]
 
+    def nearest_faces(self, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
+        """(rows, t, faces): the segments a -> b (N, 3) that hit, where along them (0..1)
+        and which face (index into the faces given), nearest first: the bare hit, without
+        colour or uv (the add-on's mesh intersector colours its own)."""
+        rows, t, *_, fi = self._hit(np.asarray(a, np.float64), np.asarray(b, np.float64))
+        return rows, t, self.face_index[fi]
+
     def _hit(self, a, b):
         n = a.shape[0]
         d = b - a
