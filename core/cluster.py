@@ -21,6 +21,8 @@ import time
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
 
+from .workers import keep_freed_memory
+
 INSTALL = "pip install 'dask[distributed]==2026.8.0'"
 """What the error for a missing Dask says to run (the version the tests pin)."""
 _POLL_S = 0.05  # how often the caller checks for finished tasks and for a cancel
@@ -82,8 +84,6 @@ def on_worker() -> None:
     against 2.1-3.2 s in SymRay's own worker processes)."""
     global _tuned
     if not _tuned:
-        from .workers import keep_freed_memory  # core.workers imports this module
-
         keep_freed_memory()
         _tuned = True
 

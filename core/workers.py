@@ -22,7 +22,7 @@ import sys
 import threading
 import time
 import warnings
-from collections.abc import Callable, Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import (
     FIRST_COMPLETED,
     Future,
@@ -33,8 +33,6 @@ from concurrent.futures import (
 from typing import Any, Self, TypeVar
 
 import numpy as np
-
-from . import cluster
 
 PARALLEL = ("auto", "processes", "threads")
 """How chunks run: "auto" = processes where fork exists and the image is big enough."""
@@ -169,12 +167,11 @@ def run_chunks(
     kind: str,
     workers: int,
     cancelled: CancelLatch,
-    on_cluster: tuple[Any, Sequence[int]] | None = None,
 ) -> Iterator[tuple[Span, T]]:
     """Run job(span, cancel) for every span; yield (span, result) as each one finishes.
 
-    ``kind`` and ``workers`` come from ``choose``, or kind "dask" with ``on_cluster``
-    (a dask.distributed Client, each span's priority: core.cluster). Threads and inline jobs poll
+    ``kind`` and ``workers`` come from ``choose`` (a Dask cluster's chunks run through
+    core.cluster.run_on_client instead). Threads and inline jobs poll
     ``cancelled`` themselves; worker processes get a shared event that the caller's
     thread sets once ``cancelled`` turns true. Stops yielding once cancelled (a job may
     return early when its cancel turns true); closing the iterator early stops the jobs.
@@ -183,10 +180,6 @@ def run_chunks(
     of results, whatever the image's size.
     """
     spans = list(spans)
-    if kind == "dask" and on_cluster is not None:
-        client, priorities = on_cluster
-        yield from cluster.run_on_client(client, job, spans, priorities, cancelled)
-        return
     if kind == "inline":
         for span in spans:
             if cancelled():
