@@ -13,7 +13,7 @@ PYTEST_FLAGS ?= -n 2 -q
 
 .PHONY: test test-main test-oldest lint venv venv311 clean extension render figures bench \
 	bench-quick stress bench-perf bench-memory bench-honesty bench-presets \
-	bench-viewport bench-f12 bench-cluster
+	bench-viewport bench-f12 bench-cluster bench-scaling
 
 test: lint test-main test-oldest
 
@@ -116,6 +116,12 @@ bench-f12: extension
 CLUSTER_ARGS ?= --width 1920 --height 1080 --sweep out/sweep
 bench-cluster: venv
 	PYTHONPATH=. $(PY) benchmarks/cluster.py $(CLUSTER_ARGS)
+
+# Per-tile times of a 1080p frame and the pool simulated at 1..32 workers
+# (benchmarks/scaling.py, issue 47): SCALING_ARGS="--quality preview --measure".
+SCALING_ARGS ?= --quality preview,final
+bench-scaling: venv
+	PYTHONPATH=. $(PY) benchmarks/scaling.py $(SCALING_ARGS)
 
 # The Rendered viewport's costs against issue 25's targets (benchmarks/viewport.py): the
 # Kerr-with-disk preset in a 960x540 view; VIEWPORT_ARGS="--size 1920x1080 --turns 1,5".

@@ -265,8 +265,8 @@ class _JobExposure:
         return (
             f"Auto Exposure: every frame of this animation uses frame {self.frame}'s disk "
             f"exposure {self.value:.3g}, so that the frames do not flicker (rendering frames "
-            "in separate jobs, as a farm does? Turn Auto Exposure off and set Exposure to "
-            "that value, so that every job uses it)"
+            "in separate jobs, as a farm does? Press Pin beside Auto Exposure, or set "
+            "Exposure to that value with Auto Exposure off, so that every job uses it)"
         )
 
     def clear(self) -> None:

@@ -209,7 +209,40 @@ class SYMRAY_OT_bake_lighting(bpy.types.Operator):
         return {"FINISHED"}
 
 
-CLASSES = (SYMRAY_OT_render, SYMRAY_OT_bake_lighting)
+class SYMRAY_OT_pin_exposure(bpy.types.Operator):
+    """Measure the disk's automatic exposure at this frame and keep it (Auto Exposure off):
+    every frame of an animation, and every job of a render farm, then uses the same"""
+
+    bl_idname = "symray.pin_exposure"
+    bl_label = "Pin Exposure"
+    bl_options = {"REGISTER", "UNDO"}
+
+    @classmethod
+    def poll(cls, context: bpy.types.Context) -> bool:
+        """Needs a scene whose disk has Auto Exposure on."""
+        settings = getattr(context.scene, "symray", None)
+        return settings is not None and settings.disk.auto_exposure
+
+    def execute(self, context: bpy.types.Context) -> set[str]:
+        """Probe the current frame as F12 would, and set Exposure to what it finds."""
+        scene = context.scene
+        try:
+            job = render_job.prepare(scene, context.evaluated_depsgraph_get())
+            value = render_job.auto_exposure(job)
+        except Exception as err:  # every failure is reported, whatever it is
+            self.report({"ERROR"}, render_job.failure_message(err))
+            return {"CANCELLED"}
+        if value is None:
+            self.report({"WARNING"}, "SymRay: this scene renders no accretion disk to expose")
+            return {"CANCELLED"}
+        disk = scene.symray.disk
+        disk.exposure, disk.auto_exposure = value, False
+        self.report({"INFO"}, f"SymRay: disk exposure pinned at {value:.4g} "
+                              f"(frame {scene.frame_current})")  # fmt: skip
+        return {"FINISHED"}
+
+
+CLASSES = (SYMRAY_OT_render, SYMRAY_OT_bake_lighting, SYMRAY_OT_pin_exposure)
 
 
 register, unregister = bpy.utils.register_classes_factory(CLASSES)

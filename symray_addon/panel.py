@@ -268,7 +268,10 @@ def disk_settings(layout: bpy.types.UILayout, scene: bpy.types.Scene) -> None:
     row = layout.row()
     row.active = disk.look == "CINEMATIC"
     row.prop(disk, "beaming")
-    layout.prop(disk, "auto_exposure")
+    row = layout.row()
+    row.prop(disk, "auto_exposure")
+    if disk.auto_exposure:  # keep this frame's for an animation or a farm
+        row.operator("symray.pin_exposure", text="Pin", icon="PINNED")
     row = layout.row()
     row.active = not disk.auto_exposure
     row.prop(disk, "exposure")

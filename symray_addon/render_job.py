@@ -20,6 +20,7 @@ import bpy
 import numpy as np
 
 from .. import core
+from ..core.render import disk_exposure
 from ..core.render import summary_text as render_summary_text
 from . import (
     bake,
@@ -182,6 +183,21 @@ def pin_exposure(job: RenderJob, exposure: float | None) -> bool:
     job.scene = copy.copy(job.scene)
     job.scene.disk = dataclasses.replace(disk, exposure=exposure)
     return True
+
+
+PROBE_OPTIONS = ("method", "step", "max_steps", "workers", "parallel", "cores", "observer",
+                 "shift_colours")  # fmt: skip
+"""The render options core.render's exposure probe takes (core.render.disk_exposure)."""
+
+
+def auto_exposure(job: RenderJob) -> float | None:
+    """The disk's automatic exposure for the job's frame, as its render would choose it
+    (core.render's probe, the same options); None without a disk of automatic exposure."""
+    disk = job.scene.disk
+    if disk is None or disk.exposure is not None:
+        return None
+    probe = {k: v for k, v in job.options.items() if k in PROBE_OPTIONS}
+    return float(disk_exposure(job.scene, job.camera, **probe).disk.exposure)
 
 
 def run(

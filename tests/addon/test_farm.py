@@ -10,6 +10,7 @@ from pathlib import Path
 
 import bpy
 import numpy as np
+import pytest
 
 from tests.addon.exr_output import exr_output
 
@@ -28,8 +29,8 @@ def _exr(path: Path) -> np.ndarray:
 
 
 def _farm_scene(path: Path) -> None:
-    """The factory scene with a Kerr hole and disk (the exposure set, as the README's
-    recipe says), the camera flying past and the hole's Size keyed, lit surfaces baked
+    """The factory scene with a Kerr hole and disk (its exposure pinned at frame 1, as the
+    README's recipe says), the camera flying past and the hole's Size keyed, lit surfaces baked
     (the factory cube under its light); saved to ``path``."""
     bpy.ops.wm.read_homefile(use_factory_startup=True)
     scene = bpy.context.scene
@@ -42,8 +43,6 @@ def _farm_scene(path: Path) -> None:
     scene.cursor.location = (0.0, 6.0, 0.0)
     assert bpy.ops.symray.add_black_hole(size=0.5, spin=0.6, disk=True) == {"FINISHED"}
     hole = bpy.context.active_object
-    scene.symray.disk.auto_exposure = False  # the recipe: one exposure for every chunk
-    scene.symray.disk.exposure = 1.5
     camera = bpy.data.objects["Camera"]
     for frame, x, size in ((1, 7.4, 0.5), (FRAMES, 3.0, 0.8)):
         camera.location.x = x
@@ -51,6 +50,8 @@ def _farm_scene(path: Path) -> None:
         hole.symray.size = size
         hole.symray.keyframe_insert("size", frame=frame)
     scene.frame_start, scene.frame_end = 1, FRAMES
+    scene.frame_set(1)
+    assert bpy.ops.symray.pin_exposure() == {"FINISHED"}  # the recipe: one exposure for all
     exr_output(scene)
     scene.render.use_file_extension = True
     bpy.ops.wm.save_as_mainfile(filepath=str(path))
@@ -88,3 +89,25 @@ def test_chunks_on_two_workers_are_the_frames_of_one_render(addon, extension_zip
         np.testing.assert_array_equal(_exr(chunk), whole[f], err_msg=f"frame {f}")
     assert np.abs(whole[1] - whole[FRAMES]).max() > 0.1
     assert not (tmp_path / "first" / f"frame_{3:04d}.exr").exists()
+
+
+def test_pin_exposure_keeps_what_the_frame_chose(addon, factory_scene):
+    """Pin Exposure: Auto Exposure off, Exposure what this frame's render chose, and the
+    render with it the automatic one's (to the float32 the setting holds); then there is
+    nothing left to pin."""
+    scene = factory_scene
+    scene.render.resolution_x, scene.render.resolution_y = 48, 27
+    scene.symray.quality, scene.symray.lighting = "PREVIEW", "UNLIT"
+    scene.cursor.location = (0.0, 6.0, 0.0)
+    assert bpy.ops.symray.add_black_hole(size=0.5, spin=0.6, disk=True) == {"FINISHED"}
+    job = addon.module("symray_addon.render_job")
+    auto = job.run(job.prepare(scene, bpy.context.evaluated_depsgraph_get()))
+    chosen = auto.summary["disk_exposure"]
+    assert bpy.ops.symray.pin_exposure() == {"FINISHED"}
+    disk = scene.symray.disk
+    assert not disk.auto_exposure
+    assert disk.exposure == pytest.approx(chosen, rel=1e-6) and chosen != 1.0
+    pinned = job.run(job.prepare(scene, bpy.context.evaluated_depsgraph_get()))
+    assert pinned.summary["disk_exposure"] == pytest.approx(chosen, rel=1e-6)
+    np.testing.assert_allclose(pinned.rgba, auto.rgba, rtol=1e-5, atol=1e-6)
+    assert not bpy.ops.symray.pin_exposure.poll()
