@@ -18,3 +18,16 @@ def exr_output(scene: Any, path: Path | str | None = None) -> None:
     if path is not None:
         scene.render.filepath = str(path)
         scene.render.use_file_extension = False
+
+
+def read_exr(path: Path | str):
+    """Pixels of an EXR file as (h, w, 4) float32, row 0 at the top (read by Blender)."""
+    import bpy
+    import numpy as np
+
+    image = bpy.data.images.load(str(path))
+    w, h = image.size
+    flat = np.empty(w * h * 4, dtype=np.float32)
+    image.pixels.foreach_get(flat)
+    bpy.data.images.remove(image)
+    return flat.reshape(h, w, 4)[::-1]

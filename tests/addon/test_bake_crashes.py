@@ -17,26 +17,16 @@ from pathlib import Path
 import bpy
 import numpy as np
 
-from tests.addon.exr_output import exr_output
+from tests.addon.exr_output import exr_output, read_exr
 
 JOB = Path(__file__).with_name("animation_job.py")
-
-
-def _exr(path: Path) -> np.ndarray:
-    """Pixels of an EXR file as (h, w, 4), row 0 at the top."""
-    image = bpy.data.images.load(str(path))
-    w, h = image.size
-    flat = np.empty(w * h * 4, dtype=np.float32)
-    image.pixels.foreach_get(flat)
-    bpy.data.images.remove(image)
-    return flat.reshape(h, w, 4)[::-1]
 
 
 def _f12(scene, path: Path) -> np.ndarray:
     """An F12 still of ``scene`` (its engine) as linear RGBA."""
     exr_output(scene, path)
     assert bpy.ops.render.render(write_still=True) == {"FINISHED"}
-    return _exr(path)
+    return read_exr(path)
 
 
 def _diffuse_factory(scene) -> None:
@@ -200,11 +190,11 @@ def test_animation_bakes_every_frame_without_crashing(addon, extension_zip, tmp_
         extension_zip, tmp_path, "--frames", "3", "--stills", "1,3", "--unlit", "3"
     )
     assert report["baked_in_animation"] == 3 and report["scenes"] == 1
-    frames = [_exr(out / f"frame_{k:04d}.exr") for k in (1, 2, 3)]
+    frames = [read_exr(out / f"frame_{k:04d}.exr") for k in (1, 2, 3)]
     for k in (1, 3):
-        still = _exr(out / f"still_{k:04d}.exr")
+        still = read_exr(out / f"still_{k:04d}.exr")
         np.testing.assert_allclose(frames[k - 1], still, atol=1e-4)
-    unlit = _exr(out / "unlit_0003.exr")
+    unlit = read_exr(out / "unlit_0003.exr")
     cube = np.abs(unlit[..., :3] - unlit[0, 0, :3]).max(axis=-1) > 0.01
     assert cube.sum() > 20
     assert np.abs(frames[2][..., :3] - unlit[..., :3])[cube].mean() > 0.1

@@ -12,20 +12,10 @@ import bpy
 import numpy as np
 import pytest
 
-from tests.addon.exr_output import exr_output
+from tests.addon.exr_output import exr_output, read_exr
 
 CHUNK = Path(__file__).with_name("farm_chunk.py")
 FRAMES = 4
-
-
-def _exr(path: Path) -> np.ndarray:
-    """Pixels of an EXR file as (h, w, 4), row 0 at the top."""
-    image = bpy.data.images.load(str(path))
-    w, h = image.size
-    flat = np.empty(w * h * 4, dtype=np.float32)
-    image.pixels.foreach_get(flat)
-    bpy.data.images.remove(image)
-    return flat.reshape(h, w, 4)[::-1]
 
 
 def _farm_scene(path: Path) -> None:
@@ -83,10 +73,10 @@ def test_chunks_on_two_workers_are_the_frames_of_one_render(addon, extension_zip
     for name, job in jobs.items():
         output, _ = job.communicate(timeout=400)
         assert job.returncode == 0, f"{name}: {output[-3000:]}"
-    whole = {f: _exr(tmp_path / "whole" / f"frame_{f:04d}.exr") for f in range(1, FRAMES + 1)}
+    whole = {f: read_exr(tmp_path / "whole" / f"frame_{f:04d}.exr") for f in range(1, FRAMES + 1)}
     for f in range(1, FRAMES + 1):
         chunk = tmp_path / ("first" if f <= 2 else "second") / f"frame_{f:04d}.exr"
-        np.testing.assert_array_equal(_exr(chunk), whole[f], err_msg=f"frame {f}")
+        np.testing.assert_array_equal(read_exr(chunk), whole[f], err_msg=f"frame {f}")
     assert np.abs(whole[1] - whole[FRAMES]).max() > 0.1
     assert not (tmp_path / "first" / f"frame_{3:04d}.exr").exists()
 

@@ -46,6 +46,25 @@ def dopri5_exit(model, q0: np.ndarray, d0: np.ndarray) -> tuple[np.ndarray, np.n
     return q, v / np.linalg.norm(v)
 
 
+def _through_the_box(model, half: float, wall_y: float, n: int, spread: float, tilt: float,
+                     seed: int):  # fmt: skip
+    """(origins, directions, traced): ``n`` rays from 3 before the box (+-``half``), about
+    along +y (offsets within ``spread``, directions tilted by ~``tilt``), traced at 1e-5 rad
+    onto a wall at y = ``wall_y``."""
+    wall = core.Plane((0, wall_y, 0), (0, -1, 0), (1, 1, 1, 1), u_axis=(1, 0, 0),
+                      extent=(1e3, 1e3))  # fmt: skip
+    rng = np.random.default_rng(seed)
+    origins = np.column_stack(
+        [rng.uniform(-spread, spread, n), np.full(n, -half - 3.0), rng.uniform(-spread, spread, n)]
+    )
+    directions = np.tile([0.0, 1.0, 0.0], (n, 1)) + rng.normal(0.0, tilt, (n, 3))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    out = Tracer(core.Scene(model=model, objects=[wall]), TraceOptions(tolerance=1e-5)).trace(
+        origins, directions
+    )
+    return origins, directions, out
+
+
 def test_kinks_crossed_where_scipy_stops_at_them():
     """Luneburg's lens with n = 1 outside r = 1 (a kink in n there, written with abs): rays
     through it leave its box (+-1.5) as scipy's DOP853 says, stopped at the kink and at the
@@ -54,17 +73,7 @@ def test_kinks_crossed_where_scipy_stops_at_them():
     index = "sqrt(2 - ((x*x + y*y + z*z) + 1 - abs((x*x + y*y + z*z) - 1))/2)"
     half, wall_y = 1.5, 3.5
     model = hm.medium(index, bounds=((-half,) * 3, (half,) * 3))
-    wall = core.Plane((0, wall_y, 0), (0, -1, 0), (1, 1, 1, 1), u_axis=(1, 0, 0),
-                      extent=(1e3, 1e3))  # fmt: skip
-    rng = np.random.default_rng(2)
-    origins = np.column_stack(
-        [rng.uniform(-0.6, 0.6, 6), np.full(6, -half - 3.0), rng.uniform(-0.6, 0.6, 6)]
-    )
-    directions = np.tile([0.0, 1.0, 0.0], (6, 1)) + rng.normal(0.0, 0.03, (6, 3))
-    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
-    out = Tracer(core.Scene(model=model, objects=[wall]), TraceOptions(tolerance=1e-5)).trace(
-        origins, directions
-    )
+    origins, directions, out = _through_the_box(model, half, wall_y, 6, 0.6, 0.03, seed=2)
     checked = 0
     for k in range(6):
         t_in = (-half - origins[k, 1]) / directions[k, 1] + 1e-9
@@ -117,17 +126,7 @@ def test_a_ray_leaves_a_medium_box_at_its_face():
     2 units beyond agree to 1e-6 (before: 2e-5 to 7e-5 at 1e-5 rad, the ray leaving at its
     first step end past the face, bent by the index there)."""
     model = hm.medium(GAUSS, bounds=((-HALF,) * 3, (HALF,) * 3))
-    wall = core.Plane((0, WALL, 0), (0, -1, 0), (1, 1, 1, 1), u_axis=(1, 0, 0),
-                      extent=(1e3, 1e3))  # fmt: skip
-    rng = np.random.default_rng(1)
-    origins = np.column_stack(
-        [rng.uniform(-0.8, 0.8, 8), np.full(8, -HALF - 3.0), rng.uniform(-0.8, 0.8, 8)]
-    )
-    directions = np.tile([0.0, 1.0, 0.0], (8, 1)) + rng.normal(0.0, 0.05, (8, 3))
-    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
-    out = Tracer(core.Scene(model=model, objects=[wall]), TraceOptions(tolerance=1e-5)).trace(
-        origins, directions
-    )
+    origins, directions, out = _through_the_box(model, HALF, WALL, 8, 0.8, 0.05, seed=1)
     assert np.all(out.ending == core.ENDING["hit"])
     for k in range(8):
         t_in = (-HALF - origins[k, 1]) / directions[k, 1] + 1e-9
