@@ -31,7 +31,7 @@ _TOKENS = itertools.count()
 Span = tuple[int, int]
 
 
-def _distributed():
+def require_dask():
     """The ``distributed`` module, or ImportError saying how to install it."""
     try:
         import distributed
@@ -47,7 +47,7 @@ def check_client(client: Any) -> int:
     """The threads of the cluster behind ``client`` (a distributed.Client); a clear error
     before any work where Dask is missing, ``client`` is not a Client, or its cluster
     cannot be reached or has no workers."""
-    distributed = _distributed()
+    distributed = require_dask()
     if not isinstance(client, distributed.Client):
         raise TypeError(f"client must be a dask.distributed Client, not {type(client).__name__}")
     if client.status != "running":
@@ -103,7 +103,7 @@ def run_on_client(
     """Run job(span, cancel) for every span as Dask tasks (higher ``priorities`` first);
     yield (span, result) as each finishes. Stops once ``cancelled()`` (the tasks not yet
     finished are cancelled), and on a task's error (raised here, the rest cancelled)."""
-    distributed = _distributed()
+    distributed = require_dask()
     token = next(_TOKENS)
     [shared] = client.scatter([job], broadcast=True, hash=False)
     futures = {
@@ -133,7 +133,7 @@ def run_on_client(
 def connect(address: str, timeout_s: float = 10.0) -> Any:
     """A dask.distributed Client connected to the scheduler at ``address`` ("tcp://host:
     8786"); ConnectionError naming the address where none answers within ``timeout_s``."""
-    distributed = _distributed()
+    distributed = require_dask()
     try:
         return distributed.Client(address, timeout=f"{timeout_s}s")
     except (OSError, TimeoutError) as exc:

@@ -146,9 +146,9 @@ def render(
     pixel_angle = camera.pixel_angle(_camera_distance(scene, camera))
     options = _trace_options(method, tolerance, tolerance_px, pixel_angle, step, max_steps)
     start_time = time.perf_counter()
-    probe = {"method": method, "step": step, "max_steps": max_steps, "workers": workers,
-             "parallel": parallel, "cores": cores, "should_cancel": should_cancel,
-             "observer": observer, "shift_colours": shift_colours}  # fmt: skip
+    values = (method, step, max_steps, workers, parallel, cores, should_cancel, observer,
+              shift_colours)  # fmt: skip
+    probe = dict(zip(PROBE_OPTIONS, values, strict=True))
     scene = disk_exposure(scene, camera, **probe)
     extent = _scene_extent(scene, camera)
     tracer = tracer_for_camera(scene, options, extent, camera.frame.position)
@@ -225,6 +225,22 @@ def _trace_options(method, tolerance, tolerance_px, pixel_angle, step, max_steps
     if tolerance_px is not None:
         tolerance = TRACE_SHARE * tolerance_px * pixel_angle
     return TraceOptions(method=method, tolerance=tolerance, step=step, max_steps=max_steps)
+
+
+PROBE_OPTIONS = ("method", "step", "max_steps", "workers", "parallel", "cores", "should_cancel",
+                 "observer", "shift_colours")  # fmt: skip
+"""core.render's options that its exposure probe takes too (disk_exposure's keywords)."""
+
+
+def auto_exposure(scene: Scene, camera, **options: Any) -> float | None:
+    """The automatic exposure core.render(scene, camera, **options) gives the scene's disk
+    (its summary's ``disk_exposure``), without the render; None without a disk of automatic
+    exposure. ``options``: any of core.render's (those outside PROBE_OPTIONS are ignored)."""
+    if scene.disk is None or scene.disk.exposure is not None:
+        return None
+    probe = {name: value for name, value in options.items() if name in PROBE_OPTIONS}
+    disk = disk_exposure(scene, camera, **probe).disk
+    return None if disk is None or disk.exposure is None else float(disk.exposure)
 
 
 def disk_exposure(scene: Scene, camera, **probe: Any) -> Scene:

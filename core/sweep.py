@@ -145,7 +145,7 @@ def _render_point(make, params: Mapping[str, Any], options: Mapping[str, Any]) -
 def _on_cluster(client, make, todo: Sequence[Point], options) -> Iterator[tuple[Point, Any]]:
     """Each point rendered as a task on ``client``'s cluster (one worker thread each);
     yields (point, result) as they finish; the rest cancelled if the caller stops."""
-    distributed = cluster._distributed()
+    distributed = cluster.require_dask()
     # in the task's own thread (threads: workers=N tiles the image as N local processes do)
     options = {"workers": 1, **options, "parallel": "threads"}
     futures = {client.submit(_render_point, make, p.params, options, pure=False): p for p in todo}

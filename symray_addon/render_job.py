@@ -20,7 +20,7 @@ import bpy
 import numpy as np
 
 from .. import core
-from ..core.render import disk_exposure
+from ..core.render import auto_exposure as core_auto_exposure
 from ..core.render import summary_text as render_summary_text
 from . import (
     bake,
@@ -185,19 +185,11 @@ def pin_exposure(job: RenderJob, exposure: float | None) -> bool:
     return True
 
 
-PROBE_OPTIONS = ("method", "step", "max_steps", "workers", "parallel", "cores", "observer",
-                 "shift_colours")  # fmt: skip
-"""The render options core.render's exposure probe takes (core.render.disk_exposure)."""
-
-
 def auto_exposure(job: RenderJob) -> float | None:
     """The disk's automatic exposure for the job's frame, as its render would choose it
-    (core.render's probe, the same options); None without a disk of automatic exposure."""
-    disk = job.scene.disk
-    if disk is None or disk.exposure is not None:
-        return None
-    probe = {k: v for k, v in job.options.items() if k in PROBE_OPTIONS}
-    return float(disk_exposure(job.scene, job.camera, **probe).disk.exposure)
+    (core.render.auto_exposure with the job's options); None without a disk of automatic
+    exposure."""
+    return core_auto_exposure(job.scene, job.camera, **job.options)
 
 
 def run(

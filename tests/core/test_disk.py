@@ -753,3 +753,24 @@ def test_look_refusals():
         with pytest.raises(ValueError, match="disk exposure"):
             core.AccretionDisk(exposure=exposure)
     assert core.AccretionDisk(exposure=None).exposure is None
+
+
+def test_auto_exposure_is_the_renders_own_choice():
+    """core.render.auto_exposure (the add-on's Pin Exposure) gives the exposure the render
+    with the same options chooses (its summary's), options outside the probe's ignored;
+    None where there is nothing to choose (a set exposure, no disk)."""
+    from core.render import auto_exposure
+
+    M = 0.25
+    scene = core.Scene(
+        model=hm.kerr(rg=2 * M, a=0.6 * M, chart="kerr_schild"),
+        disk=core.AccretionDisk(r_out=4.3, exposure=None, look="cinematic"),
+    )
+    cam = _view(70.0, 64, 36)
+    options = {"tolerance_px": 1.0, "workers": 1, "parallel": "threads"}
+    out = core.render(scene, cam, **options)
+    assert auto_exposure(scene, cam, samples=4, **options) == out.summary["disk_exposure"]
+    assert out.summary["disk_exposure"] != 1.0
+    fixed = dataclasses.replace(scene, disk=dataclasses.replace(scene.disk, exposure=2.0))
+    assert auto_exposure(fixed, cam) is None
+    assert auto_exposure(dataclasses.replace(scene, disk=None), cam) is None
