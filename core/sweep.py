@@ -129,17 +129,22 @@ def sweep(
         _write_table(folder, [rows[k] for k in sorted(rows)])
         if on_image is not None:
             on_image(point, rows[point.index])
-    _write_table(folder, [rows[k] for k in sorted(rows)])
+    if not todo:  # nothing rendered: the table as the records say
+        _write_table(folder, [rows[k] for k in sorted(rows)])
     return [rows[k] for k in sorted(rows)]
 
 
 def _render_point(make, params: Mapping[str, Any], options: Mapping[str, Any]) -> RenderResult:
     """Build one point's scene and camera and render it."""
-    if options.get("parallel") == "threads":  # on a cluster's worker (_on_cluster)
-        cluster.on_worker()
     for_render = {k: v for k, v in params.items() if k in _RENDER_KEYWORDS}
     scene, camera = make(**{k: v for k, v in params.items() if k not in _RENDER_KEYWORDS})
     return render(scene, camera, **{**options, **for_render})
+
+
+def _render_on_worker(make, params, options) -> RenderResult:
+    """A task on a cluster's worker: _render_point, the worker's memory kept (on_worker)."""
+    cluster.on_worker()
+    return _render_point(make, params, options)
 
 
 def _on_cluster(client, make, todo: Sequence[Point], options) -> Iterator[tuple[Point, Any]]:
@@ -148,7 +153,9 @@ def _on_cluster(client, make, todo: Sequence[Point], options) -> Iterator[tuple[
     distributed = cluster.require_dask()
     # in the task's own thread (threads: workers=N tiles the image as N local processes do)
     options = {"workers": 1, **options, "parallel": "threads"}
-    futures = {client.submit(_render_point, make, p.params, options, pure=False): p for p in todo}
+    futures = {
+        client.submit(_render_on_worker, make, p.params, options, pure=False): p for p in todo
+    }
     try:
         for future in distributed.as_completed(list(futures)):
             point = futures.pop(future)
