@@ -85,6 +85,13 @@ this of bilinear over it (_smooth_magnification): |μ| to ~1 %."""
 FINEST = 4
 """Pixels per side of the finest block tried: every pixel of a block refused at this size
 is traced (one round instead of two more: each round costs a batch's per-step overhead)."""
+DENSE_MARGIN = 2.0
+"""Nodes traced densely record their clearance within DENSE_MARGIN pixels of the objects
+(at the farthest box, as the blocks' margin: core.render._watch_margin), not a coarsest
+block's: what they need it for is a near miss (NEAR_MISS x their error) and a traced
+pixel's footprint (_supersample). Dense: every node of a block refused at FINEST, every
+node where nothing is interpolated, and every retrace (blocks are chosen by then); a
+clearance watched 32 pixels wide was 45 % of thin_front's time at 96 x 54."""
 AA_CONTRAST = 0.03
 """A pixel is supersampled where its colour differs from a neighbour's by more than this
 (largest channel difference, linear RGB) or its ending does."""
@@ -367,6 +374,7 @@ class TileSampler:
     ) -> None:
         self.tracer, self.camera, self.background, self.shade = tracer, camera, background, shade
         self._colour_tracer = tracer.without_clearance()  # for sub-pixel samples (_sample)
+        self._dense_tracer = tracer.watching(tracer.clearance_margin * DENSE_MARGIN / STRIDE)
         self.interpolation = float(interpolation)  # radians; 0: trace every pixel
         self.samples = int(samples)
         self.unit = stratified_points(self.samples)  # (S, 2), jittered per pixel
@@ -374,6 +382,7 @@ class TileSampler:
         extent = 1.0 if pixel_filter == "box" else filter_size
         self.footprint = extent / math.sqrt(2)  # pixels from the centre to its corners
         self.with_error = with_error and tracer.curved
+        self.step = tracer.step  # a node's first run's (retraces halve it)
         self.far_field = far_field  # error of escaped rays beyond the region, radians
         self.pixel_angle = pixel_angle  # radians (core.Camera.pixel_angle)
         self.budget = budget  # radians: a traced ray's integration error above it is redone
@@ -391,25 +400,28 @@ class TileSampler:
         companion: bool = True,
         step: float | None = None,
         node: bool = True,
+        dense: bool = False,
     ) -> tuple[RayResults, np.ndarray, np.ndarray | None]:
         """Trace camera rays through image points xy (M, 2) at ``step`` (default: the
         tracer's) -> (rays, seen directions, and with the error pass (and ``companion``)
         their Richardson error in radians from a companion run at COMPANION_RATIO x the
         step; sub-pixel samples need none: the pass reports pixel centres). Nodes (``node``)
         carry ray differentials where the sampler takes them; other points (samples) no
-        clearance (Tracer.without_clearance: their colour is all the sampler takes)."""
+        clearance (Tracer.without_clearance: their colour is all the sampler takes); nodes
+        traced ``dense`` (no block will interpolate them) record it a pixel wide."""
         origins, directions = self.camera.rays_at(xy)
+        node_tracer = self._dense_tracer if dense else self.tracer
         n = xy.shape[0]
         self.rays += n if step is None else 0
+        step = step or self.step
         seen = self.camera.direction_tangents(xy) if self.with_tangents and node else None
         if not (self.with_error and companion):
-            tracer = self.tracer if node else self._colour_tracer  # a sample's colour alone
+            tracer = node_tracer if node else self._colour_tracer  # a sample's colour alone
             rays = tracer.trace(origins, directions, step=step, cancel=cancel, tangents=seen)
             return rays, seen_direction(rays, origins), None
-        step = step or self.tracer.step
         assert step is not None
         if seen is None:  # one batch: the companion shares the main run's per-step overhead
-            both = self.tracer.trace(
+            both = node_tracer.trace(
                 np.concatenate([origins, origins]),
                 np.concatenate([directions, directions]),
                 step=np.repeat([step, COMPANION_RATIO * step], n),
@@ -419,16 +431,16 @@ class TileSampler:
             rays, coarse = both.take(slice(0, n)), both.take(slice(n, None))
         else:  # the companion needs no differentials: a batch of its own costs less than
             # carrying them through its half of a shared batch (benchmarks/frame.py)
-            rays = self.tracer.trace(origins, directions, step=step, cancel=cancel, tangents=seen)
-            coarse = self.tracer.trace(
+            rays = node_tracer.trace(origins, directions, step=step, cancel=cancel, tangents=seen)
+            coarse = node_tracer.trace(
                 origins, directions, step=COMPANION_RATIO * step, cancel=cancel,
                 clearance=np.zeros(n, dtype=bool),
             )  # fmt: skip
         self.error_rays += n
         assert self.tracer.order is not None  # a companion run: the scene is curved
         error = richardson_error(rays, coarse, origins, self.tracer.order)
-        error = self._doubted(error, rays.steps, coarse.steps)
         seen = rays.ending != ENDING["captured"]  # the shadow's inside has no direction
+        error = np.where(seen, self._doubted(error, rays.steps, coarse.steps), error)
         error = np.where(seen, np.maximum(error, self._bound(step)), error)
         return rays, seen_direction(rays, origins), error
 
@@ -449,23 +461,29 @@ class TileSampler:
     def _doubted(self, error: np.ndarray, steps: np.ndarray, other_steps: np.ndarray):
         """``error`` raised above the retrace budget where the two runs it compares took
         about as many steps (shared_steps) and agree within DOUBT_BELOW x the budget:
-        Richardson then compared a run with itself."""
+        Richardson then compared a run with itself. Not asked of captured rays (by
+        _trace_points): the shadow's inside has no direction to be wrong, its runs agree
+        exactly whatever their steps, and a ray near its edge circles the photon orbit in
+        steps of its own (a flip shows as one); doubted, every captured ray of a camera at
+        3 rg was traced again (benchmarks/honesty.py orbit_disk: 2 error runs an image ray)."""
         shared = shared_steps(steps, other_steps) & (error < DOUBT_BELOW * self.budget)
         if not math.isfinite(self.budget):
             return error
         return np.where(shared, np.maximum(error, DOUBTED * self.budget), error)
 
-    def _trace_nodes(self, nodes: _Nodes, jj: np.ndarray, ii: np.ndarray, origin, cancel):
-        """Trace the untraced nodes among (jj, ii) (flat index arrays) and store them."""
+    def _trace_nodes(self, nodes: _Nodes, jj: np.ndarray, ii: np.ndarray, origin, cancel,
+                     dense: bool = False):  # fmt: skip
+        """Trace the untraced nodes among (jj, ii) (flat index arrays) and store them
+        (``dense``: no block will interpolate them; _trace_points)."""
         flat = np.unique(jj * nodes.traced.shape[1] + ii)
         jj, ii = np.divmod(flat, nodes.traced.shape[1])
         todo = ~nodes.traced[jj, ii]
         jj, ii = jj[todo], ii[todo]
         if jj.size == 0:
             return
-        rays, seen, error = self._trace_points(self._image_xy(jj, ii), cancel)
+        rays, seen, error = self._trace_points(self._image_xy(jj, ii), cancel, dense=dense)
         self._store(nodes, jj, ii, rays, seen, error)
-        nodes.loose[jj, ii] = error is not None and self._bound_applies(self.tracer.step)
+        nodes.loose[jj, ii] = error is not None and self._bound_applies(self.step)
 
     def _store(self, nodes: _Nodes, jj, ii, rays: RayResults, seen, error) -> None:
         """Record traced rays at the nodes (jj, ii); ``error`` is the integration's."""
@@ -557,7 +575,7 @@ class TileSampler:
         not traced again: it keeps its flip's error whatever later runs find, and further
         halvings, agreeing too, only cost (the Kerr board's ~1800 flips per 1080p tile, at
         the shadow's edge, took all RETRACE rounds: 10 % of its time)."""
-        step = self.tracer.step
+        step = self.step
         settled = np.zeros_like(nodes.traced)  # flips whose retrace ended as before
         for _ in range(RETRACE if self.with_error else 0):
             err = nodes.integration
@@ -570,7 +588,7 @@ class TileSampler:
             assert step is not None
             step /= COMPANION_RATIO
             xy = self._image_xy(jj, ii)
-            rays, seen, _ = self._trace_points(xy, cancel, companion=False, step=step)
+            rays, seen, _ = self._trace_points(xy, cancel, companion=False, step=step, dense=True)
             assert self.tracer.order is not None  # a companion run: the scene is curved
             origins, _ = self.camera.rays_at(xy)
             apart = seen_apart(
@@ -602,7 +620,7 @@ class TileSampler:
         blocks = _Blocks(ny - 1, nx - 1)
         if s == 1:
             jj, ii = np.mgrid[0:ny, 0:nx]
-            self._trace_nodes(nodes, jj.ravel(), ii.ravel(), origin, cancel)
+            self._trace_nodes(nodes, jj.ravel(), ii.ravel(), origin, cancel, dense=True)
         else:
             self._refine(nodes, blocks, s, (h + 1, w + 1), origin, cancel)
         self._retrace(nodes, cancel)
@@ -630,7 +648,7 @@ class TileSampler:
                 dj, di = (a.ravel() for a in np.mgrid[0 : s + 1, 0 : s + 1])
                 jj, ii = (sj[:, None] + dj).ravel(), (si[:, None] + di).ravel()
                 inside = (jj <= last[0]) & (ii <= last[1])
-                self._trace_nodes(nodes, jj[inside], ii[inside], origin, cancel)
+                self._trace_nodes(nodes, jj[inside], ii[inside], origin, cancel, dense=True)
                 return
             bj = np.concatenate([sj, sj, sj + half, sj + half])
             bi = np.concatenate([si, si + half, si, si + half])
