@@ -29,10 +29,21 @@ def brute_force(objects, ids, a, b, footprint=None):
     return out
 
 
+UV_ROUNDING = 1e-12
+"""Texture coordinates agree to this, the other fields bit for bit: a sphere's uv comes from
+arctan2 / arccos, whose numpy 1.26 SIMD loops round the last bit differently by the length
+of the batch a hit is computed in (the tree's windows and the brute force's batches differ);
+CI on Blender 4.2 saw uv differ so while every hit, t and object agreed."""
+
+
 def assert_same(h: Hits, ref: Hits) -> None:
-    """Every field bit for bit."""
+    """Every field bit for bit (uv to UV_ROUNDING)."""
     for f in fields(Hits):
-        assert np.array_equal(getattr(h, f.name), getattr(ref, f.name)), f.name
+        got, want = getattr(h, f.name), getattr(ref, f.name)
+        if f.name == "uv":
+            assert np.allclose(got, want, rtol=0, atol=UV_ROUNDING, equal_nan=True), f.name
+        else:
+            assert np.array_equal(got, want), f.name
 
 
 def _mesh(centre, size, rng):
