@@ -489,7 +489,9 @@ def compare(name: str, ref: Any, run: Any, tolerance_px: float, eye) -> dict:
         "est_median_px": float(np.median(est[seen])) if seen.any() else 0.0,
         "failed": int(summary["failed"]),
         "rays_per_px": summary["rays"] / summary["pixels"],
-        "companions": summary.get("error_rays", 0) / max(summary["rays"], 1),
+        "companions": summary.get("companion_rays", 0) / max(summary["rays"], 1),
+        "retraces": (summary.get("error_rays", 0) - summary.get("companion_rays", 0))
+        / max(summary["rays"], 1),
         "seconds": summary["time_s"],
         "reference_s": ref.seconds,
     }
@@ -517,6 +519,7 @@ COLUMNS = (
     ("dense_s", "dense s", "{:>7.1f}"),
     ("x_dense", "x dense <=1.1", "{:>13.2f}"),
     ("companions", "comp/ray <=0.3", "{:>14.2f}"),
+    ("retraces", "retrace/ray", "{:>11.2f}"),
 )
 
 

@@ -72,7 +72,12 @@ TRACE_SHARE = 0.5
 TILES_PER_WORKER = 2
 """Tiles per worker (core.render's bands, _tiles_for): the work of a frame is rarely even
 over its rows (the hole, the photon ring), and a worker with a second tile to take
-evens it out; each tile costs a few batches' per-step overhead."""
+evens it out; each tile costs a few batches' per-step overhead ..."""
+TILE_ROUNDS = 6
+"""... so a worker gets a second tile only where each keeps at least the pixels of
+TILE_ROUNDS rounds (sampling.ROUND_RAYS each: TileSampler._refine's, retraces and
+centres) at the ~0.5 rays a pixel most scenes trace (benchmarks/honesty.py at 160 x
+120)."""
 PROBE_SCALE = 1 / 8
 """Automatic disk exposure: the probe render's size per side, relative to the frame's
 (rounded up: the Rendered viewport's first level, core.viewport, is this probe) ..."""
@@ -424,8 +429,9 @@ def costliest_first(chunks: list, ranks: Sequence[int]) -> list:
 
 def _tiles_for(camera, workers: int) -> list[Tile]:
     """The image's tiles: bands of whole rows (the width split only past MAX_TILE_PIXELS),
-    TILES_PER_WORKER per worker, of equal height, at most MAX_TILE_PIXELS each (a band's
-    lattice may run past its last row: only blocks reaching the band are refined). Every
+    TILES_PER_WORKER per worker (one where a tile would be under TILE_ROUNDS' pixels), of
+    equal height, at most MAX_TILE_PIXELS each (a band's lattice may run past its last
+    row: only blocks reaching the band are refined). Every
     round of a tile's quadtree is one batch, whose per-step overhead is paid per round
     whatever its size: fewer, larger tiles cost less, more balance the workers better
     (the Kerr board at 1080p Preview, traced in one process: 4 tiles 15 s, 16 tiles 22 s,
@@ -433,7 +439,9 @@ def _tiles_for(camera, workers: int) -> list[Tile]:
     w, h, stride = camera.width, camera.height, sampling_module.STRIDE
     most = sampling_module.MAX_TILE_PIXELS
     cols = w if w * (2 * stride - 1) <= most else stride * max(2, most // (2 * stride**2)) - 1
-    bands = max(TILES_PER_WORKER * workers, math.ceil(h * cols / most))
+    least = max(1, 2 * TILE_ROUNDS * sampling_module.ROUND_RAYS)  # pixels a tile
+    per_worker = min(TILES_PER_WORKER, max(1, w * h // (workers * least)))
+    bands = max(per_worker * workers, math.ceil(h * cols / most))
     bands = min(bands, math.ceil(h / (stride - 1)))  # bands of at least STRIDE - 1 rows
     return tiles(w, h, cols, math.ceil(h / bands))
 
@@ -582,7 +590,8 @@ class _Buffers:
         """The passes of core.passes.OPTIONAL asked for: only those are held."""
         self.width = width
         self.rays = 0
-        self.error_rays = 0
+        self.error_rays = 0  # companions and retraces
+        self.companion_rays = 0  # the error pass's companion runs
         self.energy_max: float | None = None  # over pixels with a finite error, not captured
         self.passes: dict[str, np.ndarray] = {}
         """The stored passes (core.passes.STORED) by name, (n,) or (n, channels)."""
@@ -636,6 +645,7 @@ class _Buffers:
         self.rays += b - a
         if error is not None:
             self.error_rays += b - a
+            self.companion_rays += b - a
         failed = rays.ending == ENDING["failed"]
         self.error[a:b][failed] = np.inf
         self._energy(slice(a, b), rays.energy_error)
@@ -653,6 +663,7 @@ class _Buffers:
         self._energy(idx, part.energy)
         self.rays += part.rays
         self.error_rays += part.error_rays
+        self.companion_rays += part.companion_rays
         return idx.size
 
     def part(self, span, chunk, passes) -> tuple[tuple[int, int, int, int], RenderResult]:
@@ -752,6 +763,7 @@ class _Buffers:
             "rays": self.rays,
             "pixels": int(np.count_nonzero(traced)),
             "error_rays": self.error_rays,
+            "companion_rays": self.companion_rays,
             "steps": int(self.passes["steps"].sum()),
             "failed": counts["failed"],
             # errs is a copy: the median may sort it in place (no second full-frame one)

@@ -85,6 +85,19 @@ this of bilinear over it (_smooth_magnification): |μ| to ~1 %."""
 FINEST = 4
 """Pixels per side of the finest block tried: every pixel of a block refused at this size
 is traced (one round instead of two more: each round costs a batch's per-step overhead)."""
+ROUND_RAYS = 1500
+"""What one round of tracing (a batch) costs beyond its rays, in rays: each step of a
+batch pays numpy's per-call overhead whatever its size (measured at 160 x 120, one
+worker: a round of 65 rays took as long as 1500-3700 more rays of a large one, thin_front
+and stars). _refine weighs rounds against rays with it: how far down the quadtree the
+first round traces at once (_first_lattice), and where tracing every remaining node of a
+tile's refused blocks in one round costs less than refining them (_refine). A constant,
+not a timing: the same scene gives the same image on any machine."""
+MARGIN_BLOCKS = 2.0
+"""A node records its clearance within MARGIN_BLOCKS x the largest block it may be
+interpolated in (_node_margin; a block is accepted where its rays keep clear by its width
+times the sky's magnification over it: twice leaves room for a magnification of 2, the
+coarsest block's margin (core.render._watch_margin) bounds it anyway)."""
 DENSE_MARGIN = 2.0
 """Nodes traced densely record their clearance within DENSE_MARGIN pixels of the objects
 (at the farthest box, as the blocks' margin: core.render._watch_margin), not a coarsest
@@ -317,7 +330,8 @@ class TileResult:
     its pass's type: the pixel centre's (error: +inf where failed)."""
     energy: np.ndarray  # (h, w) |H - H0|
     rays: int
-    error_rays: int
+    error_rays: int  # companions and retraces
+    companion_rays: int = 0  # the error pass's companion runs alone
 
 
 class _Nodes:
@@ -345,6 +359,7 @@ class _Nodes:
         self.flipped = np.zeros(shape, dtype=bool)  # two of its runs ended on different things
         self.near = np.zeros(shape, dtype=bool)  # missed an object by under NEAR_MISS x its error
         self.loose = np.zeros(shape, dtype=bool)  # its companion ran past the rule's range
+        self.pending = np.zeros(shape, dtype=bool)  # traced, its error not judged yet (_settle)
         self.magnification = np.full(shape, np.nan)  # |μ| where it sees the sky (with tangents)
         self.transmittance = np.ones(shape)  # through volumes and a translucent disk
         # d(direction) / d(image x, y) where it sees the sky (RayResults.sky_jacobian)
@@ -374,7 +389,6 @@ class TileSampler:
     ) -> None:
         self.tracer, self.camera, self.background, self.shade = tracer, camera, background, shade
         self._colour_tracer = tracer.without_clearance()  # for sub-pixel samples (_sample)
-        self._dense_tracer = tracer.watching(tracer.clearance_margin * DENSE_MARGIN / STRIDE)
         self.interpolation = float(interpolation)  # radians; 0: trace every pixel
         self.samples = int(samples)
         self.unit = stratified_points(self.samples)  # (S, 2), jittered per pixel
@@ -390,17 +404,18 @@ class TileSampler:
         self.with_magnification = magnification  # the pass: blocks where ln |μ| is bilinear
         self._origin = (0, 0)  # image (row, column) of the current tile's node (0, 0)
         self.rays = 0
-        self.error_rays = 0
+        self.error_rays = 0  # companions and retraces
+        self.companion_rays = 0
 
     # --- tracing nodes -----------------------------------------------------------------
     def _trace_points(
         self,
         xy: np.ndarray,
         cancel,
-        companion: bool = True,
+        companion: bool | np.ndarray = True,
         step: float | None = None,
         node: bool = True,
-        dense: bool = False,
+        margin: np.ndarray | float = 1.0,
     ) -> tuple[RayResults, np.ndarray, np.ndarray | None]:
         """Trace camera rays through image points xy (M, 2) at ``step`` (default: the
         tracer's) -> (rays, seen directions, and with the error pass (and ``companion``)
@@ -408,41 +423,86 @@ class TileSampler:
         step; sub-pixel samples need none: the pass reports pixel centres). Nodes (``node``)
         carry ray differentials where the sampler takes them; other points (samples) no
         clearance (Tracer.without_clearance: their colour is all the sampler takes); nodes
-        traced ``dense`` (no block will interpolate them) record it a pixel wide."""
+        record it within ``margin`` of the tracer's (a share, one or per point:
+        _node_margin). ``companion`` may name the points (M,) bool that get one: the
+        others' error is NaN."""
         origins, directions = self.camera.rays_at(xy)
-        node_tracer = self._dense_tracer if dense else self.tracer
         n = xy.shape[0]
+        share = np.broadcast_to(np.asarray(margin, np.float64), (n,))
         self.rays += n if step is None else 0
         step = step or self.step
         seen = self.camera.direction_tangents(xy) if self.with_tangents and node else None
+        if not isinstance(companion, bool):
+            return self._trace_some_companions(xy, cancel, companion, share, seen)
         if not (self.with_error and companion):
-            tracer = node_tracer if node else self._colour_tracer  # a sample's colour alone
-            rays = tracer.trace(origins, directions, step=step, cancel=cancel, tangents=seen)
+            tracer = self.tracer if node else self._colour_tracer  # a sample's colour alone
+            rays = tracer.trace(origins, directions, step=step, cancel=cancel, tangents=seen,
+                                clearance=share if node else None)  # fmt: skip
             return rays, seen_direction(rays, origins), None
         assert step is not None
         if seen is None:  # one batch: the companion shares the main run's per-step overhead
-            both = node_tracer.trace(
+            both = self.tracer.trace(
                 np.concatenate([origins, origins]),
                 np.concatenate([directions, directions]),
                 step=np.repeat([step, COMPANION_RATIO * step], n),
                 cancel=cancel,
-                clearance=np.repeat([True, False], n),  # the companion's is never read
+                clearance=np.concatenate([share, np.zeros(n)]),  # the companion's: unread
             )
             rays, coarse = both.take(slice(0, n)), both.take(slice(n, None))
         else:  # the companion needs no differentials: a batch of its own costs less than
             # carrying them through its half of a shared batch (benchmarks/frame.py)
-            rays = node_tracer.trace(origins, directions, step=step, cancel=cancel, tangents=seen)
-            coarse = node_tracer.trace(
+            rays = self.tracer.trace(origins, directions, step=step, cancel=cancel,
+                                     tangents=seen, clearance=share)  # fmt: skip
+            coarse = self.tracer.trace(
                 origins, directions, step=COMPANION_RATIO * step, cancel=cancel,
                 clearance=np.zeros(n, dtype=bool),
             )  # fmt: skip
         self.error_rays += n
+        self.companion_rays += n
+        error = self._companion_error(rays, coarse, origins, step)
+        return rays, seen_direction(rays, origins), error
+
+    def _trace_some_companions(self, xy, cancel, with_companion, share, seen):
+        """_trace_points of the points xy whose companion is ``with_companion`` (M,) bool
+        (in one batch with theirs where there are no differentials); the rest's error NaN."""
+        origins, directions = self.camera.rays_at(xy)
+        some = np.flatnonzero(with_companion)
+        n, step = xy.shape[0], self._first_step
+        if seen is None:
+            both = self.tracer.trace(
+                np.concatenate([origins, origins[some]]),
+                np.concatenate([directions, directions[some]]),
+                step=np.repeat([step, COMPANION_RATIO * step], [n, some.size]),
+                cancel=cancel, clearance=np.concatenate([share, np.zeros(some.size)]),
+            )  # fmt: skip
+            rays, coarse = both.take(slice(0, n)), both.take(slice(n, None))
+        else:
+            rays = self.tracer.trace(origins, directions, step=step, cancel=cancel,
+                                     tangents=seen, clearance=share)  # fmt: skip
+            coarse = self.tracer.trace(origins[some], directions[some],
+                                       step=COMPANION_RATIO * step, cancel=cancel,
+                                       clearance=np.zeros(some.size))  # fmt: skip
+        self.error_rays += some.size
+        self.companion_rays += some.size
+        error = np.full(n, np.nan)
+        error[some] = self._companion_error(rays.take(some), coarse, origins[some], step)
+        return rays, seen_direction(rays, origins), error
+
+    def _companion_error(self, rays: RayResults, coarse: RayResults, origins, step: float):
+        """(M,) the error of ``rays`` run at ``step`` from their companion ``coarse``
+        (Richardson; doubted where both took the same steps; at least the rule's bound
+        where the companion ran past its range); captured rays neither."""
         assert self.tracer.order is not None  # a companion run: the scene is curved
         error = richardson_error(rays, coarse, origins, self.tracer.order)
         seen = rays.ending != ENDING["captured"]  # the shadow's inside has no direction
         error = np.where(seen, self._doubted(error, rays.steps, coarse.steps), error)
-        error = np.where(seen, np.maximum(error, self._bound(step)), error)
-        return rays, seen_direction(rays, origins), error
+        return np.where(seen, np.maximum(error, self._bound(step)), error)
+
+    @property
+    def _first_step(self) -> float:
+        """A node's first run's step (the tracer's), where there is one: a curved scene's."""
+        assert self.step is not None
+        return self.step
 
     def _bound(self, step: float) -> float:
         """The least error a run at ``step`` reports from its companion: where the companion
@@ -472,21 +532,97 @@ class TileSampler:
         return np.where(shared, np.maximum(error, DOUBTED * self.budget), error)
 
     def _trace_nodes(self, nodes: _Nodes, jj: np.ndarray, ii: np.ndarray, origin, cancel,
-                     dense: bool = False):  # fmt: skip
+                     dense: bool = False, defer: bool = False):  # fmt: skip
         """Trace the untraced nodes among (jj, ii) (flat index arrays) and store them
-        (``dense``: no block will interpolate them; _trace_points)."""
+        (``dense``: no block will interpolate them; _trace_points). ``defer``: only the
+        anchors (_anchors) get a companion now, the others' error waits for _settle."""
         flat = np.unique(jj * nodes.traced.shape[1] + ii)
         jj, ii = np.divmod(flat, nodes.traced.shape[1])
         todo = ~nodes.traced[jj, ii]
         jj, ii = jj[todo], ii[todo]
         if jj.size == 0:
             return
-        rays, seen, error = self._trace_points(self._image_xy(jj, ii), cancel, dense=dense)
-        self._store(nodes, jj, ii, rays, seen, error)
+        margin = _node_margin(jj, ii, dense)
+        companion = ~self._spare(nodes, jj, ii) if defer and self.with_error else True
+        xy = self._image_xy(jj, ii)
+        rays, seen, error = self._trace_points(xy, cancel, companion, margin=margin)
+        self._record(nodes, jj, ii, rays, seen)
         nodes.loose[jj, ii] = error is not None and self._bound_applies(self.step)
+        if error is not None and not isinstance(companion, bool):
+            nodes.pending[jj, ii] = ~companion
+            jj, ii, error = jj[companion], ii[companion], error[companion]
+        self._judge(nodes, jj, ii, error)
+
+    def _from_anchors(self, nodes: _Nodes, jj, ii):
+        """What the anchors at the corners of the nodes (jj, ii)'s ANCHOR cells say of
+        their errors -> (agree, estimate, like): ``agree`` where all four are traced,
+        judged, finite, no flip or near miss, end alike (escaped, captured, on one object,
+        across the same kinks: the error is smooth across the cell) and keep clear of the
+        geometry by more than a companion's error could move a ray (_clear_of) unless
+        captured; ``estimate`` their largest error (0 if captured); ``like``: the corner
+        whose ending the node must share (its (j, i))."""
+        ny, nx = nodes.traced.shape
+        cj, ci = jj - jj % ANCHOR, ii - ii % ANCHOR
+        agree, estimate = np.ones(jj.size, dtype=bool), np.zeros(jj.size)
+        least = np.full(jj.size, np.inf)
+        for dj in (0, ANCHOR):
+            for di in (0, ANCHOR):
+                aj, ai = np.minimum(cj + dj, ny - 1), np.minimum(ci + di, nx - 1)
+                agree &= (aj == cj + dj) & (ai == ci + di) & nodes.traced[aj, ai]
+                agree &= ~nodes.pending[aj, ai] & ~nodes.flipped[aj, ai] & ~nodes.near[aj, ai]
+                agree &= np.isfinite(nodes.integration[aj, ai]) & (nodes.integration[aj, ai] < FLIP)
+                agree &= nodes.ending[aj, ai] == nodes.ending[cj, ci]
+                agree &= nodes.object_id[aj, ai] == nodes.object_id[cj, ci]
+                agree &= nodes.kinks[aj, ai] == nodes.kinks[cj, ci]
+                estimate = np.maximum(estimate, nodes.integration[aj, ai])
+                least = np.minimum(least, nodes.clearance[aj, ai])
+        captured = nodes.ending[cj, ci] == ENDING["captured"]
+        estimate = np.where(captured, 0.0, estimate)
+        agree &= (least >= self._clear_of(estimate)) | captured
+        return agree, estimate, (cj, ci)
+
+    def _clear_of(self, estimate: np.ndarray) -> np.ndarray:
+        """The clearance (radians) a node of error ``estimate`` needs for its companion to
+        be spared: more than the companion's error could move it (NEAR_MISS x
+        COMPANION_RATIO^order x the estimate: a thin object between anchors) and
+        DENSE_MARGIN pixels (benchmarks/honesty.py thin_front at 1 px: 5 flips estimated
+        under a pixel with the first alone)."""
+        assert self.tracer.order is not None  # an error pass: the scene is curved
+        reach = NEAR_MISS * COMPANION_RATIO**self.tracer.order
+        return np.maximum(reach * estimate, DENSE_MARGIN * self.pixel_angle)
+
+    def _spare(self, nodes: _Nodes, jj, ii) -> np.ndarray:
+        """(M,) bool: the nodes (jj, ii), not traced yet, whose companion is spared for now
+        (_trace_nodes' ``defer``): not anchors, and their anchors agree (_from_anchors)."""
+        return ~_anchors(jj, ii) & self._from_anchors(nodes, jj, ii)[0]
+
+    def _settle(self, nodes: _Nodes) -> tuple[np.ndarray, np.ndarray]:
+        """Judge the pending nodes (traced without their companion: _spare) by their
+        anchors' largest error where they end as their anchors do and keep as clear of
+        the geometry (_from_anchors; captured as they are: the shadow's inside has no
+        error, and a camera at 3 rg in a disk's plane sees it through rays of clearance
+        0) -> (jj, ii) the others: their companions run with the first retraces."""
+        jj, ii = np.nonzero(nodes.pending)
+        if jj.size == 0:
+            return jj, ii
+        agree, estimate, (cj, ci) = self._from_anchors(nodes, jj, ii)
+        nodes.pending[:] = False
+        like = (nodes.ending[jj, ii] == nodes.ending[cj, ci]) & agree
+        like &= nodes.object_id[jj, ii] == nodes.object_id[cj, ci]
+        like &= nodes.kinks[jj, ii] == nodes.kinks[cj, ci]
+        captured = nodes.ending[jj, ii] == ENDING["captured"]
+        like &= (nodes.clearance[jj, ii] >= self._clear_of(estimate)) | captured
+        self._judge(nodes, jj[like], ii[like], estimate[like])
+        return jj[~like], ii[~like]
 
     def _store(self, nodes: _Nodes, jj, ii, rays: RayResults, seen, error) -> None:
-        """Record traced rays at the nodes (jj, ii); ``error`` is the integration's."""
+        """Record traced rays at the nodes (jj, ii) and judge them; ``error`` is the
+        integration's."""
+        self._record(nodes, jj, ii, rays, seen)
+        self._judge(nodes, jj, ii, error)
+
+    def _record(self, nodes: _Nodes, jj, ii, rays: RayResults, seen) -> None:
+        """Record traced rays at the nodes (jj, ii)."""
         nodes.traced[jj, ii] = True
         nodes.direction[jj, ii] = seen
         nodes.ending[jj, ii] = rays.ending
@@ -513,19 +649,24 @@ class TileSampler:
         if on_disk.size:
             radius = self.tracer.scene.disk_radius(rays.position[on_disk])
             nodes.radius[jj[on_disk], ii[on_disk]] = radius
+
+    def _judge(self, nodes: _Nodes, jj, ii, error) -> None:
+        """The recorded nodes (jj, ii)'s errors from their integration's (``error``, None:
+        0): flips, near misses (traced again), near edges, the far field."""
         err = np.zeros(jj.size) if error is None else error
         nodes.flipped[jj, ii] |= err >= FLIP  # once two runs ended apart, it stays a flip
         err = np.where(nodes.flipped[jj, ii], np.maximum(err, FLIP), err)
         nodes.integration[jj, ii] = err  # a flip is traced again (RETRACE), as a near miss
-        near_miss = rays.clearance < NEAR_MISS * err  # it may have hit something
+        near_miss = nodes.clearance[jj, ii] < NEAR_MISS * err  # it may have hit something
         nodes.near[jj, ii] = near_miss  # traced again (_retrace); a near edge is not: its
         # retrace, agreeing, would report it clear of the edge whatever the truth
-        near_miss |= self._near_edge(rays, jj, ii, err)  # it may have missed its object
-        far = np.where(escaped, self.far_field, 0.0)
+        near_miss |= self._near_edge(nodes, jj, ii, err)  # it may have missed its object
+        ending = nodes.ending[jj, ii]
+        far = np.where(ending == ENDING["escaped"], self.far_field, 0.0)
         err = np.where(near_miss, np.maximum(err, FLIP), err + far)
-        nodes.error[jj, ii] = np.where(rays.ending == ENDING["failed"], np.inf, err)
+        nodes.error[jj, ii] = np.where(ending == ENDING["failed"], np.inf, err)
 
-    def _near_edge(self, rays: RayResults, jj, ii, err: np.ndarray) -> np.ndarray:
+    def _near_edge(self, nodes: _Nodes, jj, ii, err: np.ndarray) -> np.ndarray:
         """(M,) which rays that hit an object pass within NEAR_MISS x their error of its
         edge (they may have missed it). The error, as seen from the camera at the hit's
         distance, is a move across the ray; on the surface (its tangent plane, from a cast
@@ -533,12 +674,14 @@ class TileSampler:
         its trace (at most EDGE_STRETCH times: grazing). Segments along the hitting chord
         through the four points so moved, EDGE_REACH x their move long either side, must
         each meet the same object first."""
-        rows = np.flatnonzero((rays.ending == ENDING["hit"]) & (err > 0) & np.isfinite(err))
-        out = np.zeros(rays.ending.shape, dtype=bool)
+        ending = nodes.ending[jj, ii]
+        rows = np.flatnonzero((ending == ENDING["hit"]) & (err > 0) & np.isfinite(err))
+        out = np.zeros(ending.shape, dtype=bool)
         if rows.size == 0:
             return out
         origins, _ = self.camera.rays_at(self._image_xy(jj[rows] * 1.0, ii[rows] * 1.0))
-        p, t, own = rays.position[rows], rays.tangent[rows], rays.object_id[rows]
+        j, i = jj[rows], ii[rows]
+        p, t, own = nodes.position[j, i], nodes.tangent[j, i], nodes.object_id[j, i]
         move = NEAR_MISS * err[rows] * np.linalg.norm(p - origins, axis=1)
         reach = (EDGE_REACH * move)[:, None] * t
         found = self.tracer.geometry.cast(p - reach, p + reach)
@@ -560,7 +703,7 @@ class TileSampler:
         out[rows] = ~(found.hit & (found.object_id == own) & same)
         return out
 
-    def _retrace(self, nodes: _Nodes, cancel) -> None:
+    def _retrace(self, nodes: _Nodes, cancel, unsure=None) -> None:
         """Trace the nodes whose integration error exceeds ``budget`` again at half the
         step, their previous run the companion, up to RETRACE times (all of a tile's at
         once: each run costs a batch's per-step overhead), and the near misses
@@ -574,21 +717,28 @@ class TileSampler:
         truth (thin_front: quiet flips). A flip whose retrace ended as its last run did is
         not traced again: it keeps its flip's error whatever later runs find, and further
         halvings, agreeing too, only cost (the Kerr board's ~1800 flips per 1080p tile, at
-        the shadow's edge, took all RETRACE rounds: 10 % of its time)."""
+        the shadow's edge, took all RETRACE rounds: 10 % of its time). The ``unsure``
+        nodes (jj, ii) (_settle) have their companions in the first round's batch: they
+        are judged by them and join the later rounds."""
         step = self.step
         settled = np.zeros_like(nodes.traced)  # flips whose retrace ended as before
+        unsure = (np.zeros(0, int), np.zeros(0, int)) if unsure is None else unsure
         for _ in range(RETRACE if self.with_error else 0):
             err = nodes.integration
             budget = np.where(nodes.loose, LOOSE_SHARE * self.budget, self.budget)
             again = ((np.isfinite(err) & (err > budget)) | nodes.near) & ~settled
             nodes.loose[:] = False  # a later round's step is not half the first run's
             jj, ii = np.nonzero(nodes.traced & again)
-            if jj.size == 0 or (cancel is not None and cancel()):
+            if (jj.size == 0 and unsure[0].size == 0) or (cancel is not None and cancel()):
                 return
-            assert step is not None
+            assert step is not None  # an error pass: the scene is curved
             step /= COMPANION_RATIO
             xy = self._image_xy(jj, ii)
-            rays, seen, _ = self._trace_points(xy, cancel, companion=False, step=step, dense=True)
+            rays = self._retrace_batch(nodes, xy, step, unsure, cancel)
+            unsure = (np.zeros(0, int), np.zeros(0, int))
+            if jj.size == 0:
+                continue
+            seen = seen_direction(rays, self.camera.rays_at(xy)[0])
             assert self.tracer.order is not None  # a companion run: the scene is curved
             origins, _ = self.camera.rays_at(xy)
             apart = seen_apart(
@@ -600,8 +750,38 @@ class TileSampler:
             )
             error = _richardson(apart, rays.ending, alike, self.tracer.order)
             settled[jj, ii] = alike & nodes.flipped[jj, ii]
-            self.error_rays += jj.size
             self._store(nodes, jj, ii, rays, seen, error)
+
+    def _retrace_batch(self, nodes: _Nodes, xy, step: float, unsure, cancel) -> RayResults:
+        """The retraces of the points xy at ``step`` (returned), in one batch with the
+        companions of the ``unsure`` nodes (jj, ii) where there are no differentials
+        (a retrace carries them), which are judged by them."""
+        uj, ui = unsure
+        n, margin = xy.shape[0], DENSE_MARGIN / STRIDE
+        self.error_rays += n + uj.size
+        self.companion_rays += uj.size
+        if self.with_tangents:
+            rays = self._trace_points(xy, cancel, companion=False, step=step, margin=margin)[0]
+            points = self._image_xy(uj, ui)
+        else:
+            points = np.concatenate([xy, self._image_xy(uj, ui)])
+        origins, directions = self.camera.rays_at(points)
+        counts = [points.shape[0] - uj.size, uj.size]
+        traced = self.tracer.trace(
+            origins, directions, cancel=cancel,
+            step=np.repeat([step, COMPANION_RATIO * self._first_step], counts),
+            clearance=np.repeat([margin, 0.0], counts),
+        )  # fmt: skip
+        if not self.with_tangents:
+            rays, traced = traced.take(slice(0, n)), traced.take(slice(n, None))
+        if uj.size:
+            rest = origins[origins.shape[0] - uj.size :]
+            error = self._companion_error(
+                _node_rays(nodes, uj, ui, rest), traced, rest, self._first_step
+            )
+            self._judge(nodes, uj, ui, error)
+            nodes.loose[uj, ui] = self._bound_applies(self.step)
+        return rays
 
     # --- the quadtree ------------------------------------------------------------------
     def render_tile(self, tile: Tile, cancel=None) -> TileResult | None:
@@ -610,7 +790,7 @@ class TileSampler:
         return copy.copy(self)._render_tile(tile, cancel)
 
     def _render_tile(self, tile: Tile, cancel) -> TileResult | None:
-        self.rays = self.error_rays = 0
+        self.rays = self.error_rays = self.companion_rays = 0
         h, w = tile.shape
         s = STRIDE if self.interpolation > 0 else 1
         ny, nx = 1 + s * math.ceil((h + 1) / s), 1 + s * math.ceil((w + 1) / s)
@@ -620,10 +800,11 @@ class TileSampler:
         blocks = _Blocks(ny - 1, nx - 1)
         if s == 1:
             jj, ii = np.mgrid[0:ny, 0:nx]
-            self._trace_nodes(nodes, jj.ravel(), ii.ravel(), origin, cancel, dense=True)
+            self._trace_nodes(nodes, jj.ravel(), ii.ravel(), origin, cancel, dense=True,
+                              defer=True)  # fmt: skip
         else:
             self._refine(nodes, blocks, s, (h + 1, w + 1), origin, cancel)
-        self._retrace(nodes, cancel)
+        self._retrace(nodes, cancel, self._settle(nodes))
         if cancel is not None and cancel():
             return None
         return self._pixels(tile, nodes, blocks, origin, cancel)
@@ -634,26 +815,49 @@ class TileSampler:
         (rows and columns up to ``last``: the lattice may run past them) are refined."""
         ny, nx = nodes.traced.shape
         bj, bi = (a.ravel() for a in np.mgrid[0 : ny - 1 : s, 0 : nx - 1 : s])
+        first = _first_lattice((last[0] + 1) * (last[1] + 1), s)
+        if first < s // 2:  # one round for the levels whose points lie on its lattice
+            jj, ii = (a.ravel() for a in np.mgrid[0:ny:first, 0:nx:first])
+            self._trace_nodes(nodes, jj, ii, origin, cancel, defer=True)
         while bj.size:
             half = s // 2
             nine = _block_points(bj, bi, s)
             jj, ii = (np.concatenate([p[k] for p in nine]) for k in (0, 1))
-            self._trace_nodes(nodes, jj, ii, origin, cancel)
+            self._trace_nodes(nodes, jj, ii, origin, cancel, defer=True)
             if cancel is not None and cancel():
                 return
             accepted, deviation, vectors = self._accept(nodes, bj, bi, s)
             blocks.add(bj[accepted], bi[accepted], s, deviation[accepted], vectors[accepted])
             sj, si = bj[~accepted], bi[~accepted]
-            if s <= FINEST:
-                dj, di = (a.ravel() for a in np.mgrid[0 : s + 1, 0 : s + 1])
-                jj, ii = (sj[:, None] + dj).ravel(), (si[:, None] + di).ravel()
-                inside = (jj <= last[0]) & (ii <= last[1])
-                self._trace_nodes(nodes, jj[inside], ii[inside], origin, cancel, dense=True)
+            jj, ii = _block_nodes(sj, si, s, last)
+            if s <= FINEST or self._dense_pays(nodes, jj, ii, sj, si, s, last, first):
+                self._trace_nodes(nodes, jj, ii, origin, cancel, dense=True, defer=True)
                 return
             bj = np.concatenate([sj, sj, sj + half, sj + half])
             bi = np.concatenate([si, si + half, si, si + half])
             reach = (bj <= last[0]) & (bi <= last[1])
             bj, bi, s = bj[reach], bi[reach], half
+
+    @staticmethod
+    def _dense_pays(nodes: _Nodes, jj, ii, sj, si, s: int, last, first: int) -> bool:
+        """Whether tracing every untraced node (jj, ii) of the blocks (sj, si) refused at
+        size s in one round costs less (ROUND_RAYS a round) than refining them: a round
+        per level below s whose points are off the ``first`` round's lattice, down to
+        FINEST, and the dense one after it; the next level's points; half of what is
+        left (a guess: about half of the blocks refused at one level were refused at the
+        next in benchmarks/honesty.py's family)."""
+        dense = int(np.count_nonzero(~nodes.traced[jj, ii]))
+        half = s // 2
+        bj = np.concatenate([sj, sj, sj + half, sj + half])
+        bi = np.concatenate([si, si + half, si, si + half])
+        pj, pi = (np.concatenate([p[k] for p in _block_points(bj, bi, half)]) for k in (0, 1))
+        inside = (pj <= last[0]) & (pi <= last[1])
+        flat = np.unique(pj[inside] * nodes.traced.shape[1] + pi[inside])
+        level = int(np.count_nonzero(~nodes.traced.ravel()[flat]))
+        levels = [size for size in (half >> k for k in range(8)) if size >= FINEST]
+        rounds = 1 + sum((size // 2) % first != 0 for size in levels)
+        refined = rounds * ROUND_RAYS + level + 0.5 * max(dense - level, 0)
+        return ROUND_RAYS + dense <= refined
 
     def _accept(self, nodes: _Nodes, bj, bi, s: int) -> tuple[np.ndarray, ...]:
         """Which blocks (size s) are interpolated, their deviations (B, 5) (radians: its
@@ -855,7 +1059,7 @@ class TileSampler:
         return TileResult(
             colour.astype(np.float32),
             {name: data.astype(BY_NAME[name].dtype, copy=False) for name, data in passes.items()},
-            energy, self.rays, self.error_rays,
+            energy, self.rays, self.error_rays, self.companion_rays,
         )  # fmt: skip
 
     def _trace_centres(self, nodes: _Nodes, blocks: _Blocks, centre: _Points, rows, jj, ii, cancel):
@@ -1180,6 +1384,63 @@ class TileSampler:
 def _wrapped(angle: np.ndarray) -> np.ndarray:
     """Angles (radians) brought into [-pi, pi)."""
     return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+def _node_margin(jj: np.ndarray, ii: np.ndarray, dense: bool) -> np.ndarray | float:
+    """The share of the tracer's clearance margin (a coarsest block's) nodes (jj, ii)
+    record theirs within: MARGIN_BLOCKS x the largest block they are one of the nine
+    points of (blocks of s start at multiples of s: a node at multiples of p is a point of
+    blocks of 2 p), DENSE_MARGIN pixels where no block will interpolate them (``dense``)."""
+    if dense:
+        return DENSE_MARGIN / STRIDE
+    lattice = jj | ii | (STRIDE // 2)
+    block = 2 * (lattice & -lattice)  # the lowest bit both share, at most STRIDE / 2
+    return np.minimum(1.0, MARGIN_BLOCKS * np.maximum(block, DENSE_MARGIN) / STRIDE)
+
+
+ANCHOR = 4
+"""With the error pass, only the nodes at multiples of ANCHOR (the anchors) get their
+companion as they are traced; the others take the largest error of the anchors at their
+cell's corners where those end as they do (TileSampler._settle), or a companion of their
+own then. The nodes of blocks of 8 and up are all anchors: what is spared is the
+companions of the finest rounds, most of a tile's rays."""
+
+
+def _anchors(jj: np.ndarray, ii: np.ndarray) -> np.ndarray:
+    """(M,) bool: which nodes (jj, ii) are anchors (ANCHOR)."""
+    return (jj % ANCHOR == 0) & (ii % ANCHOR == 0)
+
+
+def _node_rays(nodes: _Nodes, jj, ii, origins: np.ndarray) -> RayResults:
+    """The rays recorded at nodes (jj, ii) from ``origins``, as far as
+    TileSampler._companion_error reads them (what they see, ending, object, steps)."""
+    rays = RayResults.empty(jj.size, origins, nodes.direction[jj, ii])
+    rays.ending, rays.object_id = nodes.ending[jj, ii], nodes.object_id[jj, ii]
+    rays.position, rays.steps = nodes.position[jj, ii], nodes.steps[jj, ii]
+    return rays
+
+
+def _first_lattice(pixels: int, stride: int) -> int:
+    """The spacing of the nodes _refine traces in its first round: stride / 2 (the points
+    of the coarsest blocks alone), or less, down to FINEST (the points of every level
+    down to blocks of 2 FINEST at once), where the rounds saved (ROUND_RAYS each) cost
+    more than the nodes traced ahead (pixels / spacing^2 at most, all blocks accepted)."""
+    best, cost, spacing = stride // 2, 0.0, stride // 4
+    while spacing >= FINEST:
+        saved = int(math.log2(stride // 2 // spacing)) * ROUND_RAYS
+        extra = pixels / spacing**2 - pixels / (stride // 2) ** 2 - saved
+        if extra < cost:
+            best, cost = spacing, extra
+        spacing //= 2
+    return best
+
+
+def _block_nodes(sj: np.ndarray, si: np.ndarray, s: int, last) -> tuple[np.ndarray, np.ndarray]:
+    """(jj, ii) every node of the blocks (sj, si) of size s up to row and column ``last``."""
+    dj, di = (a.ravel() for a in np.mgrid[0 : s + 1, 0 : s + 1])
+    jj, ii = (sj[:, None] + dj).ravel(), (si[:, None] + di).ravel()
+    inside = (jj <= last[0]) & (ii <= last[1])
+    return jj[inside], ii[inside]
 
 
 def _block_points(bj: np.ndarray, bi: np.ndarray, s: int) -> list[tuple[np.ndarray, np.ndarray]]:

@@ -20,3 +20,14 @@ def _module_rng_restarts_at_its_seed(request: pytest.FixtureRequest) -> None:
         return
     state = _SEEDED.setdefault(module.__name__, copy.deepcopy(rng.bit_generator.state))
     rng.bit_generator.state = copy.deepcopy(state)
+
+
+@pytest.fixture
+def rounds_free(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The sampler refines a small frame as it would a large one: a round of tracing costs
+    it nothing beyond its rays (core.sampling.ROUND_RAYS 0), so a test of interpolation on
+    a frame of a few thousand pixels still interpolates (the cost guard traces such a
+    frame's every pixel; forked workers inherit the setting)."""
+    from core import sampling
+
+    monkeypatch.setattr(sampling, "ROUND_RAYS", 0)

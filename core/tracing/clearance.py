@@ -70,7 +70,14 @@ class ClearanceBoxes:
         self.margin = float(margin)
 
     def record(
-        self, rows: np.ndarray, a: np.ndarray, b: np.ndarray, eye, out: Any, bend=None
+        self,
+        rows: np.ndarray,
+        a: np.ndarray,
+        b: np.ndarray,
+        eye,
+        out: Any,
+        bend=None,
+        share: np.ndarray | None = None,
     ) -> None:
         """Lower the clearances of the rays ``rows`` (``out``: RayResults) by the world
         chords a -> b (M, 3) seen from ``eye`` (M, 3), each chord measured on its part
@@ -80,11 +87,13 @@ class ClearanceBoxes:
         + h v1), its gaps less ``slack``:
         ``clearance`` the smallest angle to any box, the box it was to (``clearance_box``)
         and the smallest to any other (``clearance_other``; a bound from below: a box
-        overtaken keeps what it had)."""
+        overtaken keeps what it had). With ``share`` (M,), chord k is measured within
+        share[k] x the margin."""
         with np.errstate(divide="ignore"):
             inv_d = 1.0 / (b - a)
+        margin = self.margin if share is None else self.margin * share[:, None]
         for k, (lo, hi, distance) in enumerate(self.boxes):
-            enter, leave = slab_span(a, inv_d, lo - self.margin, hi + self.margin)
+            enter, leave = slab_span(a, inv_d, lo - margin, hi + margin)
             near = np.flatnonzero(enter <= leave)
             if near.size == 0:
                 continue

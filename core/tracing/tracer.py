@@ -302,8 +302,10 @@ class Tracer:
         magnification (``RayResults.magnification``, per the camera's solid angle: a moving
         camera's own) (core/tracing/differentials.py; ValueError where the method cannot
         carry them: ``supports_tangents``). Where the tracer watches the geometry,
-        ``clearance`` (N,) bool says which rays' paths record it inside the model's region
-        (default all; the others' stays inf there: a companion run's is never read)."""
+        ``clearance`` (N,) says which rays' paths record it inside the model's region
+        (default all; the others' stays inf there: a companion run's is never read):
+        bool, or each ray's share of the margin (0 none, 1 all: core.sampling's nodes need
+        their largest block's, not a coarsest block's)."""
         n = origins.shape[0]
         if np.ndim(step) and np.shape(step) != (n,):
             raise ValueError(f"step: one for all rays or one per ray ({n}), got {np.shape(step)}")
@@ -358,7 +360,7 @@ class Tracer:
             if np.ndim(h):
                 h = np.asarray(h, dtype=np.float64)[todo]
             local_tangents = None if tangents is None else tangents[todo] @ self.rotation
-            watch = None if clearance is None else np.asarray(clearance, dtype=bool)[todo]
+            watch = None if clearance is None else np.asarray(clearance, np.float64)[todo]
             self._integrate(
                 todo, start[todo].T.copy(), D[todo].T.copy(), out, h, cancel, camera,
                 local_tangents, watch,
@@ -434,7 +436,7 @@ class Tracer:
     ):  # fmt: skip
         """Follow rays from local positions X (3, M) along local directions D (3, M) (with
         ``tangents`` (M, k, 3): the directions' derivatives, carried along; ``watch`` (M,)
-        bool: the rays whose clearance is recorded, default all).
+        each ray's share of the margin its clearance is recorded within, default all).
 
         Per step, everything is done in the model's local frame on (3, M) arrays; world
         coordinates are computed only for the rays that need them: segments near geometry
@@ -460,7 +462,7 @@ class Tracer:
              "h0": np.broadcast_to(np.asarray(h, dtype=np.float64), rows.shape).copy(),
              "heading": D / np.linalg.norm(D, axis=0),  # the last chord's direction
              "streak": np.zeros(rows.size, dtype=np.int64),  # steps in a row off the cone
-             "watch": np.ones(rows.size, dtype=bool) if watch is None else watch,
+             "watch": np.ones(rows.size) if watch is None else watch,
              "kinks": np.zeros(rows.size, dtype=np.int64)},  # the model's kinks crossed
         )  # fmt: skip
         if shares is not None:
@@ -554,12 +556,13 @@ class Tracer:
                 paths, going = paths.without(redo), ok & ~redo
         if self._watch is not None:  # the steps within the margin of the objects' box
             near = segment_overlaps(X_prev.T, X.T, *self._watch_near)
-            r = np.flatnonzero(near & arrays["watch"])
+            r = np.flatnonzero(near & (arrays["watch"] > 0))
             if r.size:
                 world = [self._to_world(x[:, r].T) for x in (X_prev, X, camera)]
                 *bends, slack = _bends(paths, X.shape[1])
                 bend = (*(b[:, r].T @ self.rotation.T for b in bends), slack[r])
-                self._watch_segments(idx[r], world[0], world[1], out, world[2], bend)
+                self._watch_segments(idx[r], world[0], world[1], out, world[2], bend,
+                                     arrays["watch"][r])  # fmt: skip
         if paths is not None:
             ended |= self._segments(idx, paths, out, step_ends)
         if self.captured is not None:
@@ -881,12 +884,12 @@ class Tracer:
         hits.assign(on[ok], found, np.flatnonzero(ok))
         hits.hit[on[beside & ~ok]] = False  # the method's own path misses it: not a hit
 
-    def _watch_segments(self, rows, a, b, out: RayResults, eye=None, bend=None) -> None:
+    def _watch_segments(self, rows, a, b, out: RayResults, eye=None, bend=None, share=None):
         """Lower the clearance of the rays ``rows`` to that of their world chords a -> b
         seen from ``eye`` (default: a, the camera), bent into their cubic paths by
-        ``bend`` (see ClearanceBoxes.record)."""
+        ``bend``, within ``share`` (M,) of the margin each (see ClearanceBoxes.record)."""
         if self._watch is not None:
-            self._watch.record(rows, a, b, a if eye is None else eye, out, bend)
+            self._watch.record(rows, a, b, a if eye is None else eye, out, bend, share)
 
     def _finish_energy(self, out, rows, Q, P, H0):
         with np.errstate(all="ignore"):

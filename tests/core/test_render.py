@@ -245,6 +245,7 @@ def test_error_pass_is_honest_against_a_reference_render(method):
     assert share >= 0.9, f"only {share:.0%} within 3x; median ratio {np.median(ratio):.2f}"
 
 
+@pytest.mark.usefixtures("rounds_free")
 @pytest.mark.parametrize("options", [{}, {"tolerance_px": 0.5, "samples": 4}])
 def test_progressive_tiles_carry_every_pass_of_the_final_image(options):
     """``on_tile`` hands each finished tile (or span of rows) with every pass asked for, of

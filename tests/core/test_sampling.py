@@ -46,6 +46,7 @@ def test_tolerance_px_is_pixels_of_this_camera():
     assert px.summary["pixel_angle"] == cam.pixel_angle()
 
 
+@pytest.mark.usefixtures("rounds_free")
 def test_interpolation_never_crosses_an_ending_or_an_object():
     """At a loose 2 px, against one ray through every pixel with the same method (the
     model's default: Kerr's explicit split) at the same step: every pixel ends the same way
@@ -165,6 +166,7 @@ def true_error_px(ref, run, eye) -> np.ndarray:
     return np.where(same & (ending == core.ENDING["captured"]), np.nan, truth)
 
 
+@pytest.mark.usefixtures("rounds_free")
 def test_error_pass_tells_the_truth_on_a_small_frame():
     """Kerr a/M = 0.9, a board and a sphere at 1 px (Preview), against dopri5 at 1e-11 rad
     with a far region: of the pixels whose true error exceeds a tenth of the tolerance, >= 90 %
@@ -235,6 +237,7 @@ def _against_dopri5(scene, cam, tolerance_px: float):
     return run, truth, run.passes["error_px"].astype(float)
 
 
+@pytest.mark.usefixtures("rounds_free")
 def test_interpolated_sky_around_a_lens_is_not_under_reported():
     """Schwarzschild from 30 rg, the procedural sky only, 1 px (Preview), against dopri5 at
     1e-10 rad: of the interpolated pixels whose true error exceeds a tenth of the tolerance,
@@ -440,3 +443,26 @@ def test_final_keeps_a_tiny_lensed_image_its_centre_hit():
     light, expected = float(run.rgba[..., 0][around].sum()), float(truth[around].sum())
     assert expected > 0.05  # the image is there, and within the patch
     assert light >= 0.5 * expected, (light, expected)
+
+
+def test_a_frame_too_small_to_interpolate_with_profit_is_traced_at_every_pixel():
+    """The cost guard (core.sampling.ROUND_RAYS): refining a 48 x 32 frame would cost more
+    rounds of tracing than the rays interpolation spares, so every pixel centre is traced
+    (none has 0 steps) and is the dense render's pixel at the same step, to the last bit
+    where it was not traced again (its error over the budget); with rounds free
+    (rounds_free) the same frame interpolates a share of its pixels (17 %: its lattice's
+    border and the shadow's edge take the rest)."""
+    scene = core.Scene(model=hm.schwarzschild(rg=1.0), background="procedural")
+    cam = _hole_camera(48, 32)
+    passes = ("steps", "ending")
+    run = core.render(scene, cam, tolerance_px=1.0, passes=passes, workers=1)
+    dense = core.render(scene, cam, tolerance=TRACE_SHARE * cam.pixel_angle(), passes=passes)
+    assert np.all(run.passes["steps"] > 0)
+    np.testing.assert_array_equal(run.passes["ending"], dense.passes["ending"])
+    same = run.passes["steps"] == dense.passes["steps"]  # not traced again
+    assert same.mean() > 0.95
+    np.testing.assert_array_equal(run.rgba[same], dense.rgba[same])
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(sampling, "ROUND_RAYS", 0)
+        refined = core.render(scene, cam, tolerance_px=1.0, passes=passes, workers=1)
+    assert np.mean(refined.passes["steps"] == 0) > 0.1
