@@ -51,6 +51,12 @@ point is shaded by interpolation inside an accepted block or by a traced ray els
 its colour is their mean (box over the pixel, or Blackman-Harris of width ``filter_size`` as
 in Cycles, importance-sampled: filter_samples), with the centre's colour as one more sample
 where none shows it. Other pixels keep their centre's colour.
+
+Cost (issue 48): a round of tracing is counted as ROUND_RAYS rays (its per-step overhead);
+the coarse levels are traced in one first round where that pays (_first_lattice), a tile's
+refused blocks at once where refining them would not (_dense_pays), and the error pass's
+companions run at the anchors (ANCHOR) and where the anchors cannot speak for a node
+(TileSampler._settle).
 """
 
 from __future__ import annotations

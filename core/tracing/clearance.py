@@ -95,6 +95,8 @@ class ClearanceBoxes:
         for k, (lo, hi, distance) in enumerate(self.boxes):
             enter, leave = slab_span(a, inv_d, lo - margin, hi + margin)
             near = np.flatnonzero(enter <= leave)
+            done = (out.clearance[rows[near]] <= 0.0) & (out.clearance_box[rows[near]] == k)
+            near = near[~done]  # touching box k already: its chords can lower nothing
             if near.size == 0:
                 continue
             d = b[near] - a[near]

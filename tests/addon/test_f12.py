@@ -61,7 +61,7 @@ def test_f12_copies_tiles_not_frames(addon, scene, helpers, tmp_path, monkeypatc
     engine = addon.module("symray_addon.engine")
     job = addon.module("symray_addon.render_job")
     _hole_and_disk(scene, helpers, 40, 256)  # tiles are bands of 31 rows at least
-    scene.symray.parallel, scene.symray.workers = "THREADS", 4  # 8 bands
+    scene.symray.parallel, scene.symray.workers = "THREADS", 8  # 8 bands: one a worker (small)
     clock = _FakeClock(0.2)
     monkeypatch.setattr(engine._Progressive, "clock", staticmethod(clock))
     writes: list[tuple[str, tuple[int, ...]]] = []
