@@ -742,7 +742,7 @@ class TileSampler:
             xy = self._image_xy(jj, ii)
             rays = self._retrace_batch(nodes, xy, step, unsure, cancel)
             unsure = (np.zeros(0, int), np.zeros(0, int))
-            if jj.size == 0:
+            if rays is None:
                 continue
             seen = seen_direction(rays, self.camera.rays_at(xy)[0])
             assert self.tracer.order is not None  # a companion run: the scene is curved
@@ -758,16 +758,20 @@ class TileSampler:
             settled[jj, ii] = alike & nodes.flipped[jj, ii]
             self._store(nodes, jj, ii, rays, seen, error)
 
-    def _retrace_batch(self, nodes: _Nodes, xy, step: float, unsure, cancel) -> RayResults:
-        """The retraces of the points xy at ``step`` (returned), in one batch with the
-        companions of the ``unsure`` nodes (jj, ii) where there are no differentials
-        (a retrace carries them), which are judged by them."""
+    def _retrace_batch(self, nodes: _Nodes, xy, step: float, unsure, cancel):
+        """The retraces of the points xy at ``step`` (returned; None if none), in one
+        batch with the companions of the ``unsure`` nodes (jj, ii) where there are no
+        differentials (a retrace carries them), which are judged by them."""
         uj, ui = unsure
         n, margin = xy.shape[0], DENSE_MARGIN / STRIDE
         self.error_rays += n + uj.size
         self.companion_rays += uj.size
+        rays: RayResults | None = None
         if self.with_tangents:
-            rays = self._trace_points(xy, cancel, companion=False, step=step, margin=margin)[0]
+            if n:
+                rays = self._trace_points(xy, cancel, False, step=step, margin=margin)[0]
+            if uj.size == 0:
+                return rays
             points = self._image_xy(uj, ui)
         else:
             points = np.concatenate([xy, self._image_xy(uj, ui)])
@@ -779,7 +783,7 @@ class TileSampler:
             clearance=np.repeat([margin, 0.0], counts),
         )  # fmt: skip
         if not self.with_tangents:
-            rays, traced = traced.take(slice(0, n)), traced.take(slice(n, None))
+            rays, traced = traced.take(slice(0, n)) if n else None, traced.take(slice(n, None))
         if uj.size:
             rest = origins[origins.shape[0] - uj.size :]
             error = self._companion_error(
