@@ -574,8 +574,8 @@ class TileSampler:
         for dj in (0, ANCHOR):
             for di in (0, ANCHOR):
                 aj, ai = np.minimum(cj + dj, ny - 1), np.minimum(ci + di, nx - 1)
-                agree &= (aj == cj + dj) & (ai == ci + di) & nodes.traced[aj, ai]
-                agree &= ~nodes.pending[aj, ai] & ~nodes.flipped[aj, ai] & ~nodes.near[aj, ai]
+                agree &= (aj == cj + dj) & (ai == ci + di) & self._judged(nodes, aj, ai)
+                agree &= ~nodes.flipped[aj, ai] & ~nodes.near[aj, ai]
                 agree &= np.isfinite(nodes.integration[aj, ai]) & (nodes.integration[aj, ai] < FLIP)
                 agree &= nodes.ending[aj, ai] == nodes.ending[cj, ci]
                 agree &= nodes.object_id[aj, ai] == nodes.object_id[cj, ci]
@@ -597,10 +597,23 @@ class TileSampler:
         reach = NEAR_MISS * COMPANION_RATIO**self.tracer.order
         return np.maximum(reach * estimate, DENSE_MARGIN * self.pixel_angle)
 
+    @staticmethod
+    def _judged(nodes: _Nodes, jj, ii) -> np.ndarray:
+        """(M,) bool: the nodes (jj, ii) are traced and their errors judged."""
+        return nodes.traced[jj, ii] & ~nodes.pending[jj, ii]
+
     def _spare(self, nodes: _Nodes, jj, ii) -> np.ndarray:
         """(M,) bool: the nodes (jj, ii), not traced yet, whose companion is spared for now
-        (_trace_nodes' ``defer``): not anchors, and their anchors agree (_from_anchors)."""
-        return ~_anchors(jj, ii) & self._from_anchors(nodes, jj, ii)[0]
+        (_trace_nodes' ``defer``): not anchors, and their anchors agree (_from_anchors) or
+        are not all judged yet (traced in this round: _settle will know)."""
+        ny, nx = nodes.traced.shape
+        cj, ci = jj - jj % ANCHOR, ii - ii % ANCHOR
+        judged = np.ones(jj.size, dtype=bool)
+        for dj in (0, ANCHOR):
+            for di in (0, ANCHOR):
+                aj, ai = np.minimum(cj + dj, ny - 1), np.minimum(ci + di, nx - 1)
+                judged &= self._judged(nodes, aj, ai)
+        return ~_anchors(jj, ii) & (self._from_anchors(nodes, jj, ii)[0] | ~judged)
 
     def _settle(self, nodes: _Nodes) -> tuple[np.ndarray, np.ndarray]:
         """Judge the pending nodes (traced without their companion: _spare) by their
