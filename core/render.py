@@ -859,9 +859,8 @@ def _scene_extent(scene: Scene, camera) -> float:
         extra.append(annulus.bounds)
     more = np.array([np.asarray(box, np.float64).reshape(2, 3) for box in extra]).reshape(-1, 2, 3)
     boxes = np.concatenate([np.stack([lo, hi], axis=1), more])
-    pick = box_corners((0, 0, 0), (1, 1, 1)).astype(bool)  # (8, 3): hi where True
-    corners = np.where(pick, boxes[:, 1:2, :], boxes[:, 0:1, :])  # every box's (M, 8, 3)
-    finite = np.all(np.isfinite(corners), axis=(1, 2))
-    if finite.any():
-        far = max(far, float(np.max(np.linalg.norm(corners[finite] - scene.center, axis=2))))
+    finite = np.all(np.isfinite(boxes), axis=(1, 2))
+    if finite.any():  # a box's farthest corner takes the farther end on every axis
+        reach = np.max(np.abs(boxes[finite] - scene.center), axis=1)  # (M, 3)
+        far = max(far, float(np.max(np.linalg.norm(reach, axis=1))))
     return float(max(far, 1e-9))
