@@ -438,51 +438,24 @@ class TileSampler:
         self.rays += n if step is None else 0
         step = step or self.step
         seen = self.camera.direction_tangents(xy) if self.with_tangents and node else None
-        if not isinstance(companion, bool):
-            return self._trace_some_companions(xy, cancel, companion, share, seen)
-        if not (self.with_error and companion):
+        if not self.with_error or companion is False:
             tracer = self.tracer if node else self._colour_tracer  # a sample's colour alone
             rays = tracer.trace(origins, directions, step=step, cancel=cancel, tangents=seen,
                                 clearance=share if node else None)  # fmt: skip
             return rays, seen_direction(rays, origins), None
         assert step is not None
+        some = np.flatnonzero(np.broadcast_to(companion, (n,)))
         if seen is None:  # one batch: the companion shares the main run's per-step overhead
-            both = self.tracer.trace(
-                np.concatenate([origins, origins]),
-                np.concatenate([directions, directions]),
-                step=np.repeat([step, COMPANION_RATIO * step], n),
-                cancel=cancel,
-                clearance=np.concatenate([share, np.zeros(n)]),  # the companion's: unread
-            )
-            rays, coarse = both.take(slice(0, n)), both.take(slice(n, None))
-        else:  # the companion needs no differentials: a batch of its own costs less than
-            # carrying them through its half of a shared batch (benchmarks/frame.py)
-            rays = self.tracer.trace(origins, directions, step=step, cancel=cancel,
-                                     tangents=seen, clearance=share)  # fmt: skip
-            coarse = self.tracer.trace(
-                origins, directions, step=COMPANION_RATIO * step, cancel=cancel,
-                clearance=np.zeros(n, dtype=bool),
-            )  # fmt: skip
-        self.error_rays += n
-        self.companion_rays += n
-        error = self._companion_error(rays, coarse, origins, step)
-        return rays, seen_direction(rays, origins), error
-
-    def _trace_some_companions(self, xy, cancel, with_companion, share, seen):
-        """_trace_points of the points xy whose companion is ``with_companion`` (M,) bool
-        (in one batch with theirs where there are no differentials); the rest's error NaN."""
-        origins, directions = self.camera.rays_at(xy)
-        some = np.flatnonzero(with_companion)
-        n, step = xy.shape[0], self._first_step
-        if seen is None:
             both = self.tracer.trace(
                 np.concatenate([origins, origins[some]]),
                 np.concatenate([directions, directions[some]]),
                 step=np.repeat([step, COMPANION_RATIO * step], [n, some.size]),
-                cancel=cancel, clearance=np.concatenate([share, np.zeros(some.size)]),
-            )  # fmt: skip
+                cancel=cancel,
+                clearance=np.concatenate([share, np.zeros(some.size)]),  # the companion's: unread
+            )
             rays, coarse = both.take(slice(0, n)), both.take(slice(n, None))
-        else:
+        else:  # the companion needs no differentials: a batch of its own costs less than
+            # carrying them through its half of a shared batch (benchmarks/frame.py)
             rays = self.tracer.trace(origins, directions, step=step, cancel=cancel,
                                      tangents=seen, clearance=share)  # fmt: skip
             coarse = self.tracer.trace(origins[some], directions[some],
@@ -561,20 +534,21 @@ class TileSampler:
 
     def _from_anchors(self, nodes: _Nodes, jj, ii):
         """What the anchors at the corners of the nodes (jj, ii)'s ANCHOR cells say of
-        their errors -> (agree, estimate, like): ``agree`` where all four are traced,
+        their errors -> (agree, estimate, like, judged): ``agree`` where all four are traced,
         judged, finite, no flip or near miss, end alike (escaped, captured, on one object,
         across the same kinks: the error is smooth across the cell) and keep clear of the
         geometry by more than a companion's error could move a ray (_clear_of) unless
         captured; ``estimate`` their largest error (0 if captured); ``like``: the corner
-        whose ending the node must share (its (j, i))."""
+        whose ending the node must share (its (j, i)); ``judged``: all four are."""
         ny, nx = nodes.traced.shape
         cj, ci = jj - jj % ANCHOR, ii - ii % ANCHOR
-        agree, estimate = np.ones(jj.size, dtype=bool), np.zeros(jj.size)
-        least = np.full(jj.size, np.inf)
+        judged, estimate = np.ones(jj.size, dtype=bool), np.zeros(jj.size)
+        agree, least = np.ones(jj.size, dtype=bool), np.full(jj.size, np.inf)
         for dj in (0, ANCHOR):
             for di in (0, ANCHOR):
                 aj, ai = np.minimum(cj + dj, ny - 1), np.minimum(ci + di, nx - 1)
-                agree &= (aj == cj + dj) & (ai == ci + di) & self._judged(nodes, aj, ai)
+                judged &= (aj == cj + dj) & (ai == ci + di) & nodes.traced[aj, ai]
+                judged &= ~nodes.pending[aj, ai]
                 agree &= ~nodes.flipped[aj, ai] & ~nodes.near[aj, ai]
                 agree &= np.isfinite(nodes.integration[aj, ai]) & (nodes.integration[aj, ai] < FLIP)
                 agree &= nodes.ending[aj, ai] == nodes.ending[cj, ci]
@@ -584,8 +558,8 @@ class TileSampler:
                 least = np.minimum(least, nodes.clearance[aj, ai])
         captured = nodes.ending[cj, ci] == ENDING["captured"]
         estimate = np.where(captured, 0.0, estimate)
-        agree &= (least >= self._clear_of(estimate)) | captured
-        return agree, estimate, (cj, ci)
+        agree &= judged & ((least >= self._clear_of(estimate)) | captured)
+        return agree, estimate, (cj, ci), judged
 
     def _clear_of(self, estimate: np.ndarray) -> np.ndarray:
         """The clearance (radians) a node of error ``estimate`` needs for its companion to
@@ -597,23 +571,12 @@ class TileSampler:
         reach = NEAR_MISS * COMPANION_RATIO**self.tracer.order
         return np.maximum(reach * estimate, DENSE_MARGIN * self.pixel_angle)
 
-    @staticmethod
-    def _judged(nodes: _Nodes, jj, ii) -> np.ndarray:
-        """(M,) bool: the nodes (jj, ii) are traced and their errors judged."""
-        return nodes.traced[jj, ii] & ~nodes.pending[jj, ii]
-
     def _spare(self, nodes: _Nodes, jj, ii) -> np.ndarray:
         """(M,) bool: the nodes (jj, ii), not traced yet, whose companion is spared for now
         (_trace_nodes' ``defer``): not anchors, and their anchors agree (_from_anchors) or
         are not all judged yet (traced in this round: _settle will know)."""
-        ny, nx = nodes.traced.shape
-        cj, ci = jj - jj % ANCHOR, ii - ii % ANCHOR
-        judged = np.ones(jj.size, dtype=bool)
-        for dj in (0, ANCHOR):
-            for di in (0, ANCHOR):
-                aj, ai = np.minimum(cj + dj, ny - 1), np.minimum(ci + di, nx - 1)
-                judged &= self._judged(nodes, aj, ai)
-        return ~_anchors(jj, ii) & (self._from_anchors(nodes, jj, ii)[0] | ~judged)
+        agree, _, _, judged = self._from_anchors(nodes, jj, ii)
+        return ~_anchors(jj, ii) & (agree | ~judged)
 
     def _settle(self, nodes: _Nodes) -> tuple[np.ndarray, np.ndarray]:
         """Judge the pending nodes (traced without their companion: _spare) by their
@@ -624,7 +587,7 @@ class TileSampler:
         jj, ii = np.nonzero(nodes.pending)
         if jj.size == 0:
             return jj, ii
-        agree, estimate, (cj, ci) = self._from_anchors(nodes, jj, ii)
+        agree, estimate, (cj, ci), _ = self._from_anchors(nodes, jj, ii)
         nodes.pending[:] = False
         like = (nodes.ending[jj, ii] == nodes.ending[cj, ci]) & agree
         like &= nodes.object_id[jj, ii] == nodes.object_id[cj, ci]

@@ -251,21 +251,6 @@ class Tracer:
             if local is not None:
                 self._watch_near = (local[0] - margin, local[1] + margin)
 
-    def watching(self, margin: float) -> Tracer:
-        """This tracer, sharing all it holds, recording clearance only within ``margin``
-        (world units) of the objects' boxes (where it records any): chords beyond count as
-        clear, so fewer are measured (core.sampling's densely traced blocks need a pixel's
-        clearance, not a block's)."""
-        narrow = copy.copy(self)
-        if self._watch is not None:
-            narrow.watch_geometry(margin)
-        return narrow
-
-    @property
-    def clearance_margin(self) -> float:
-        """The margin clearance is recorded within (world units; 0: none recorded)."""
-        return 0.0 if self._watch is None else self._watch.margin
-
     def without_clearance(self) -> Tracer:
         """This tracer, sharing all it holds, but recording no clearance (rays whose
         colour alone is wanted: sub-pixel samples; their ``clearance`` stays inf)."""
