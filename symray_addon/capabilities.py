@@ -1,17 +1,12 @@
-"""What each model of the panel can do, asked of the core model it stands for.
-
-The panel's checks and sub-panels need to know, before the user's text is parsed, whether a
-model has a mass, a Poincaré time scale, an explicit split, orbits a disk can follow, and
-whether its rays start in an observer's frame. Each answer comes from the core: a stand-in of
-the model's class (its traits do not depend on the user's expressions), built once.
-"""
+"""What each model of the panel can do: the traits its core ModelKind declares
+(core.models.registry), read before the user's text is parsed."""
 
 from __future__ import annotations
 
 import functools
 from dataclasses import dataclass
 
-from ..core import hamiltonians as hm
+from ..core.models.registry import MODELS
 
 
 @dataclass(frozen=True)
@@ -30,23 +25,6 @@ class Capabilities:
     """An accretion disk can orbit it."""
 
 
-def _stand_in(model: str, below_extremal: bool):
-    """A core model of the class the panel's ``model`` builds (None: flat space)."""
-    if model == "SCHWARZSCHILD":
-        return hm.schwarzschild(1.0)
-    if model == "KERR":
-        return hm.kerr(1.0, 0.25 if below_extremal else 0.5, chart="kerr_schild")
-    if model == "MEDIUM":
-        return hm.medium("1")
-    if model == "METRIC":
-        return hm.metric([["-1", "0", "0", "0"], ["0", "1", "0", "0"],
-                          ["0", "0", "1", "0"], ["0", "0", "0", "1"]])  # fmt: skip
-    if model == "CUSTOM":
-        return hm.from_expression("0.5*(p_x**2 + p_y**2 + p_z**2)", q=["x", "y", "z"],
-                                  p=["p_x", "p_y", "p_z"])  # fmt: skip
-    return None
-
-
 def capabilities(model: str, spin: float = 0.0) -> Capabilities:
     """The traits of the panel's ``model`` (a Kerr hole's split depends on |a/M| < 1)."""
     try:
@@ -58,14 +36,14 @@ def capabilities(model: str, spin: float = 0.0) -> Capabilities:
 
 @functools.cache
 def _capabilities(model: str, below_extremal: bool) -> Capabilities:
-    core_model = _stand_in(model, below_extremal)
-    if core_model is None:
+    kind = MODELS.get(model)
+    if kind is None:  # Scene Objects before its objects are read, or an unknown name
         return Capabilities(False, False, False, False, False)
-    traced = core_model.for_backward_tracing(explicit_split=True)
+    traits = kind.traits
     return Capabilities(
-        observer=core_model.kind == "spacetime",
-        mass=core_model.rg > 0,
-        time_scaled=core_model.scales_time,
-        split=traced.split_parts() is not None,
-        disk=core_model.kerr_orbits() is not None,
+        observer=traits.spacetime,
+        mass=traits.mass,
+        time_scaled=traits.time_scaled,
+        split=traits.has_split(0.0 if below_extremal else 1.0),
+        disk=traits.disk,
     )

@@ -15,6 +15,7 @@ from __future__ import annotations
 import bpy
 from bpy.app.handlers import persistent
 
+from ..core.models.registry import MODELS
 from ..core.presets import MIRAGE_EQ17_INDEX
 from . import objects, world
 
@@ -28,9 +29,10 @@ OLD_INDEX = MIRAGE_EQ17_INDEX
 def _centre_to_hole(settings: bpy.types.PropertyGroup) -> None:
     """A Schwarzschild/Kerr model at a centre Empty -> that Empty as the scene's hole."""
     centre = settings.center
-    if centre is None or centre.type != "EMPTY" or settings.model not in ("SCHWARZSCHILD", "KERR"):
+    kind = MODELS.get(settings.model)
+    if centre is None or centre.type != "EMPTY" or kind is None or not kind.traits.hole:
         return
-    spin = float(settings.spin) if settings.model == "KERR" else 0.0
+    spin = float(settings.spin) if "spin" in kind.parameter_names() else 0.0
     if not -1.0 <= spin <= 1.0 or centre.symray.kind not in ("NONE", "BLACK_HOLE"):
         return
     size = objects.size_of(settings.rg, spin)

@@ -17,6 +17,7 @@ import numpy as np
 from ..core import AccretionDisk, Scene, expressions
 from ..core import hamiltonians as hm
 from ..core.models.medium_scan import index_pole
+from ..core.models.registry import model_kind, parameters
 from ..core.render import check_scene_camera
 from . import objects, validation
 from .capabilities import capabilities
@@ -59,49 +60,61 @@ def _expression(text: str, names: tuple[str, ...], what: str) -> str:
 
 
 def build_model(settings: Any, metric_source: str) -> Any | None:
-    """The core Hamiltonian for ``settings`` (a scene.symray), or None for flat space."""
+    """The core Hamiltonian for ``settings`` (a scene.symray), or None for flat space: a
+    kind of core.models.registry built from its parameters, or from its text inputs."""
     settings = objects.effective(settings)
-    model = settings.model
-    if model == "FLAT":
+    kind = model_kind(settings.model)
+    if kind.inputs:
+        return _FROM_TEXT[kind.inputs](settings, metric_source)
+    if kind.build is None:
         return None
-    if model == "SCHWARZSCHILD":
-        return hm.schwarzschild(rg=float(settings.rg))
-    if model == "KERR":
-        problem = validation.spin_problem(settings.spin)
-        if problem:
-            raise ValueError(problem)
-        spin, rg = float(settings.spin), float(settings.rg)
-        return hm.kerr(rg=rg, a=spin * rg / 2.0, chart="kerr_schild")
-    if model == "MEDIUM":
-        index = _expression(
-            settings.refractive_index, validation.INDEX_NAMES, "refractive index n(x, y, z)"
-        )
-        bounds = None
-        if settings.use_medium_bounds:
-            lo, hi = np.array(settings.medium_min), np.array(settings.medium_max)
-            if np.any(hi <= lo):
-                raise ValueError("The medium's box is empty: every Box Max must exceed Box Min")
-            bounds = (lo, hi)
-        model = hm.medium(index, literal=settings.index_form == "SEED", bounds=bounds)
-        if bounds is not None:
-            check_index_in_box(model, *bounds)
-        return model
-    if model == "METRIC":
-        try:
-            spec = validation.parse_metric(metric_source)
-        except expressions.ExpressionError as err:
-            raise expressions.ExpressionError(f"Invalid metric: {err}", None) from None
-        return hm.metric(
-            inverse=[list(row) for row in spec.rows],
-            coords=validation.METRIC_NAMES,
-            definitions=list(spec.definitions),
-        )
-    if model == "CUSTOM":
-        text = _expression(settings.hamiltonian, validation.HAMILTONIAN_NAMES, "Hamiltonian")
-        return hm.from_expression(
-            text, q=list(validation.HAMILTONIAN_COORDS), p=list(validation.HAMILTONIAN_MOMENTA)
-        )
-    raise ValueError(f"Unknown SymRay model '{model}'")
+    values = {name: float(getattr(settings, name)) for name in kind.parameter_names()}
+    problem = kind.problem(values)
+    if problem:
+        raise ValueError(problem)
+    return kind.build(**values)
+
+
+def _medium(settings: Any, _metric_source: str) -> Any:
+    """A medium from the Refractive Index text, its optical form and its box."""
+    index = _expression(
+        settings.refractive_index, validation.INDEX_NAMES, "refractive index n(x, y, z)"
+    )
+    bounds = None
+    if settings.use_medium_bounds:
+        lo, hi = np.array(settings.medium_min), np.array(settings.medium_max)
+        if np.any(hi <= lo):
+            raise ValueError("The medium's box is empty: every Box Max must exceed Box Min")
+        bounds = (lo, hi)
+    model = hm.medium(index, literal=settings.index_form == "SEED", bounds=bounds)
+    if bounds is not None:
+        check_index_in_box(model, *bounds)
+    return model
+
+
+def _metric(_settings: Any, metric_source: str) -> Any:
+    """A spacetime from the inverse-metric text."""
+    try:
+        spec = validation.parse_metric(metric_source)
+    except expressions.ExpressionError as err:
+        raise expressions.ExpressionError(f"Invalid metric: {err}", None) from None
+    return hm.metric(
+        inverse=[list(row) for row in spec.rows],
+        coords=validation.METRIC_NAMES,
+        definitions=list(spec.definitions),
+    )
+
+
+def _hamiltonian(settings: Any, _metric_source: str) -> Any:
+    """A Hamiltonian from its text over (x, y, z, p_x, p_y, p_z)."""
+    text = _expression(settings.hamiltonian, validation.HAMILTONIAN_NAMES, "Hamiltonian")
+    return hm.from_expression(
+        text, q=list(validation.HAMILTONIAN_COORDS), p=list(validation.HAMILTONIAN_MOMENTA)
+    )
+
+
+_FROM_TEXT = {"index": _medium, "metric": _metric, "hamiltonian": _hamiltonian}
+"""A registry kind's ``inputs`` -> its reader (settings, metric text) -> the core model."""
 
 
 def _point(p: Any) -> str:
@@ -163,8 +176,7 @@ def camera_problem(
     center = None if center_matrix is None else tuple(map(tuple, center_matrix))
     return _camera_problem(
         settings.model,
-        float(settings.rg),
-        float(settings.spin),
+        tuple((p.name, float(getattr(settings, p.name))) for p in parameters()),
         float(settings.tolerance),
         metric_source,
         center,
@@ -175,15 +187,14 @@ def camera_problem(
 @functools.lru_cache(maxsize=16)
 def _camera_problem(
     model: str,
-    rg: float,
-    spin: float,
+    values: tuple[tuple[str, float], ...],
     tolerance: float,
     metric_source: str,
     center: tuple | None,
     camera: tuple,
 ) -> str:
-    """camera_problem on plain (hashable) values."""
-    settings = SimpleNamespace(model=model, rg=rg, spin=spin, tolerance=tolerance)
+    """camera_problem on plain (hashable) values (``values``: the model parameters)."""
+    settings = SimpleNamespace(model=model, tolerance=tolerance, **dict(values))
     try:
         check_camera(
             settings, build_model(settings, metric_source), placement(center), np.array(camera)

@@ -16,6 +16,9 @@ from typing import Any
 
 import bpy
 
+from ..core.models.registry import hole_kind, hole_parameters
+from .model_settings import parameter_property
+
 KIND_ITEMS = [
     ("NONE", "None", "An ordinary object"),
     ("BLACK_HOLE", "Black Hole", "A black hole: its position is the hole's centre, its local "
@@ -28,11 +31,19 @@ DISK_OUTER_SIZES = 12.0
 """A new hole's disk reaches this many times its Size."""
 
 
-def rg_of(size: float, spin: float) -> float:
-    """rg = 2M of a hole whose horizon has Boyer–Lindquist radius ``size`` at spin a/M:
-    r₊ = M (1 + √(1 − χ²))."""
-    chi = min(abs(float(spin)), 1.0)
-    return 2.0 * float(size) / (1.0 + math.sqrt(1.0 - chi * chi))
+def rg_of(size: float, spin: float, charge: float = 0.0) -> float:
+    """rg = 2M of a hole whose horizon has Boyer–Lindquist radius ``size`` at spin a/M and
+    charge Q/M: r₊ = M (1 + √(1 − χ² − q²))."""
+    left = max(1.0 - float(spin) ** 2 - float(charge) ** 2, 0.0)
+    return 2.0 * float(size) / (1.0 + math.sqrt(left))
+
+
+def hole_values(hole: Any) -> dict[str, float]:
+    """A hole object's model parameters (core.models.registry): rg from its Size, and its
+    spin, charge, ... as set."""
+    values = {p.name: float(getattr(hole.symray, p.name)) for p in hole_parameters()}
+    values["rg"] = rg_of(hole.symray.size, values.get("spin", 0.0), values.get("charge", 0.0))
+    return values
 
 
 def size_of(rg: float, spin: float) -> float:
@@ -93,6 +104,11 @@ class SymRayObjectSettings(bpy.types.PropertyGroup):
     )
     size: size_property(update=_size_changed)  # type: ignore[valid-type]
     spin: spin_property()  # type: ignore[valid-type]
+
+
+for _parameter in hole_parameters():  # a hole's charge, ...: what the registry's holes take
+    if _parameter.name not in SymRayObjectSettings.__annotations__:
+        SymRayObjectSettings.__annotations__[_parameter.name] = parameter_property(_parameter)
 
 
 def rendering_collections(view_layer: Any) -> set[int]:
@@ -229,9 +245,11 @@ class Effective:
         if self.object_problem or (hole is None and not media):
             self.model, self.center = "FLAT", None
         elif hole is not None:
-            spin = float(hole.symray.spin)
-            self.model = "KERR" if spin != 0.0 else "SCHWARZSCHILD"
-            self.rg, self.spin, self.center = rg_of(hole.symray.size, spin), spin, hole
+            values = hole_values(hole)
+            self.model = hole_kind(values).name
+            for name, value in values.items():
+                setattr(self, name, value)
+            self.center = hole
             self.hole_size = hole.symray.size  # Size as set (rg is NaN where Spin is)
         else:
             self.model, self.center = "MEDIUM", media[0]

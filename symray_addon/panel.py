@@ -8,6 +8,7 @@ import textwrap
 
 import bpy
 
+from ..core.models.registry import MODELS, hole_kind, hole_parameters
 from . import models, objects, observer, presets, properties, validation
 from .capabilities import capabilities
 from .operator import SYMRAY_OT_bake_lighting, SYMRAY_OT_render
@@ -153,10 +154,16 @@ def _scene_objects(layout: bpy.types.UILayout, scene: bpy.types.Scene) -> None:
 def hole_settings(layout: bpy.types.UILayout, hole: bpy.types.Object) -> None:
     """A hole object's Size and Spin, with its horizon and shadow in scene units."""
     layout.label(text=f"Black Hole: {hole.name}", icon="SHADING_SOLID")
+    values = objects.hole_values(hole)
+    problem = hole_kind(values).problem(values)
     layout.prop(hole.symray, "size")
-    layout.prop(hole.symray, "spin")
-    rg = objects.rg_of(hole.symray.size, hole.symray.spin)
-    shadow = 1.5 * math.sqrt(3.0) * rg  # seen from afar, at spin 0 (Kerr: within ~7 %)
+    for parameter in hole_parameters():
+        row = layout.row()
+        row.alert = bool(problem)
+        row.prop(hole.symray, parameter.name)
+    if problem:
+        _error_lines(layout, problem)
+    shadow = 1.5 * math.sqrt(3.0) * values["rg"]  # from afar at spin 0 (Kerr: within ~7 %)
     layout.label(text=f"Its shadow's radius: about {_length(hole, shadow)}", icon="INFO")
 
 
@@ -179,31 +186,52 @@ def _length(datablock: bpy.types.ID, value: float) -> str:
 
 
 def _model_settings(layout: bpy.types.UILayout, settings: bpy.types.PropertyGroup) -> None:
-    """The explicit model's parameters (all models but Scene Objects)."""
-    model = settings.model
-    if capabilities(model).mass:
-        layout.prop(settings, "rg")
-    if model == "KERR":
+    """The explicit model's parameters (all models but Scene Objects): its registry kind's
+    numbers (the row alert when they build no model), or its text inputs."""
+    kind = MODELS.get(settings.model)
+    if kind is None:
+        return
+    problem = bool(validation.parameter_problem(settings))
+    for name in kind.parameter_names():
         row = layout.row()
-        row.alert = bool(validation.spin_problem(settings.spin))
-        row.prop(settings, "spin")
-    elif model == "MEDIUM":
-        medium_settings(layout, settings)
-        layout.prop(settings, "use_medium_bounds")
-        col = layout.column()
-        col.active = settings.use_medium_bounds
-        col.prop(settings, "medium_min")
-        col.prop(settings, "medium_max")
-    elif model == "METRIC":
-        if settings.metric_text is None:
-            _expression(layout, settings, "metric", settings.metric_error)
-        layout.prop(settings, "metric_text")
-        if settings.metric_text is not None:
-            error = validation.check_metric(properties.metric_source(settings))
-            if error:
-                _error_lines(layout, error)
-    elif model == "CUSTOM":
-        _expression(layout, settings, "hamiltonian", settings.hamiltonian_error)
+        row.alert = problem and name != "rg"
+        row.prop(settings, name)
+    if kind.inputs:
+        _TEXT_INPUTS[kind.inputs](layout, settings)
+
+
+def _index_inputs(layout: bpy.types.UILayout, settings: bpy.types.PropertyGroup) -> None:
+    """A medium's n(x, y, z), optical form and box."""
+    medium_settings(layout, settings)
+    layout.prop(settings, "use_medium_bounds")
+    col = layout.column()
+    col.active = settings.use_medium_bounds
+    col.prop(settings, "medium_min")
+    col.prop(settings, "medium_max")
+
+
+def _metric_inputs(layout: bpy.types.UILayout, settings: bpy.types.PropertyGroup) -> None:
+    """The inverse metric: one line, or a Text data-block."""
+    if settings.metric_text is None:
+        _expression(layout, settings, "metric", settings.metric_error)
+    layout.prop(settings, "metric_text")
+    if settings.metric_text is not None:
+        error = validation.check_metric(properties.metric_source(settings))
+        if error:
+            _error_lines(layout, error)
+
+
+def _hamiltonian_inputs(layout: bpy.types.UILayout, settings: bpy.types.PropertyGroup) -> None:
+    """H(x, y, z, p_x, p_y, p_z) as text."""
+    _expression(layout, settings, "hamiltonian", settings.hamiltonian_error)
+
+
+_TEXT_INPUTS = {
+    "index": _index_inputs,
+    "metric": _metric_inputs,
+    "hamiltonian": _hamiltonian_inputs,
+}
+"""A registry kind's ``inputs`` -> the rows that draw them."""
 
 
 class RENDER_PT_symray_integration(SymRayPanelMixin, bpy.types.Panel):

@@ -120,7 +120,7 @@ def frame_hole(scene: bpy.types.Scene, camera: bpy.types.Object) -> None:
     if bpy.context.scene == scene:  # a hole made just now: its matrix_world is not set yet
         bpy.context.view_layer.update()
     where = models.placement(hole.matrix_world)
-    rg = objects.rg_of(hole.symray.size, hole.symray.spin)
+    rg = objects.hole_values(hole)["rg"]
     disk = scene.symray.disk.enabled
     # what must fit: the disk's outer edge, or twice the shadow's radius (its lensed ring)
     extent = scene.symray.disk.outer_radius if disk else 2.0 * 1.5 * math.sqrt(3.0) * rg

@@ -7,7 +7,9 @@ from bpy.app.handlers import persistent
 
 from ..core import passes as core_passes
 from ..core.integrators import METHODS
+from ..core.models.registry import MODELS, parameters
 from . import disk_properties, presets, validation
+from .model_settings import parameter_property
 
 PASSES = tuple((p.name, p.label, p.toggle) for p in core_passes.PASSES if p.label)
 """(core pass, label, toggle) of the passes the add-on writes, in their one order (the
@@ -27,17 +29,11 @@ QUALITY_PRESETS = {"PREVIEW": (1.0, 1), "FINAL": (0.25, 16)}
 MODEL_ITEMS = [
     ("OBJECTS", "Scene Objects", "The scene's black hole or medium object (Add › SymRay); "
      "flat space without one", "OUTLINER_OB_EMPTY", 6),
-    ("FLAT", "Flat", "No bending: straight rays, an ordinary ray tracer", "NONE", 0),
-    ("SCHWARZSCHILD", "Schwarzschild", "Non-rotating black hole of size rg at the centre "
-     "object", "NONE", 1),
-    ("KERR", "Kerr", "Rotating black hole at the centre object; spin axis = its local Z",
-     "NONE", 2),
-    ("MEDIUM", "Medium", "Refractive index n(x, y, z) in the centre's local frame (mirages)",
-     "NONE", 3),
-    ("METRIC", "Metric", "Any spacetime given by its inverse metric g^ij(t, x, y, z)", "NONE", 4),
-    ("CUSTOM", "Custom Hamiltonian", "Any Hamiltonian H(x, y, z, p_x, p_y, p_z)", "NONE", 5),
+    *((k.name, k.label, k.description, "NONE", k.number) for k in MODELS.values()),
 ]  # fmt: skip
-"""(identifier, label, description, icon, number): the number is what a .blend stores."""
+"""(identifier, label, description, icon, number): Scene Objects, then the core's models
+(core.models.registry); the number is what a .blend stores."""
+
 
 METHOD_TEXT = {
     "symplectic_euler": (0, "Symplectic Euler", "1st order, seed Eq. 11"),
@@ -224,25 +220,6 @@ class SymRaySettings(bpy.types.PropertyGroup):
         description="Empty placing the model (all models but Scene Objects): its position is "
         "the black hole's centre, its local Z the spin axis, its local axes the frame of "
         "n(x, y, z) and g^ij; none = the world origin",
-    )
-    rg: bpy.props.FloatProperty(  # type: ignore[valid-type]
-        name="Size",
-        default=1.0,
-        min=1e-6,
-        soft_max=100.0,
-        subtype="DISTANCE",
-        description="Size of the black hole, in scene units: its horizon's radius when it "
-        "does not spin (physics: the Schwarzschild radius rg = 2GM/c²)",
-    )
-    spin: bpy.props.FloatProperty(  # type: ignore[valid-type]
-        name="Spin",
-        default=0.9,
-        min=-1e6,
-        max=1e6,
-        soft_min=-1.0,
-        soft_max=1.0,
-        description="How fast the hole turns, -1 to 1 (1: the fastest possible). Physics: "
-        "Kerr's a/M (1 = extremal)",
     )
     refractive_index: bpy.props.StringProperty(  # type: ignore[valid-type]
         name="Refractive Index",
@@ -494,6 +471,8 @@ def _add_pass_toggles(cls: type) -> None:
 
 
 _add_pass_toggles(SymRaySettings)
+for _parameter in parameters():  # rg, spin, charge, ...: one setting per model parameter
+    SymRaySettings.__annotations__[_parameter.name] = parameter_property(_parameter)
 
 
 def register() -> None:

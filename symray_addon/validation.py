@@ -24,6 +24,7 @@ from typing import Any
 from ..core import checks, expressions
 from ..core.geometry.disk import check_spin, isco
 from ..core.integrators import METHODS, Splitting
+from ..core.models.registry import MODELS
 from . import objects
 from .capabilities import capabilities
 
@@ -210,15 +211,25 @@ def typed_float(value: float) -> float:
     return float(f"{float(value):.7g}")
 
 
-def spin_problem(spin: Any) -> str:
-    """ "" for a Kerr spin a/M in [-1, 1], else the message."""
+def parameter_problem(settings: Any) -> str:
+    """Why the model's parameters build no model ("" when they do, or when its Size is
+    itself the problem: the Size check names it): the core registry's own message, e.g. a
+    spin beyond extremal."""
+    kind = MODELS.get(settings.model)
+    if kind is None or not kind.parameters:
+        return ""
+    values = {name: getattr(settings, name) for name in kind.parameter_names()}
     try:
-        spin = checks.check_range("Spin a/M", spin)
-    except ValueError as err:
-        return f"{err}: it must lie in [-1, 1]"
-    if abs(spin) > 1.0:
-        return f"Kerr spin a/M = {spin:g} is beyond extremal: it must lie in [-1, 1]"
-    return ""
+        checks.check_positive("Size", values.get("rg", 1.0))
+    except ValueError:
+        return ""
+    return kind.problem(values)
+
+
+def _has_spin(settings: Any) -> bool:
+    """Whether the settings' model takes a spin (Kerr, Kerr–Newman)."""
+    kind = MODELS.get(settings.model)
+    return kind is not None and "spin" in kind.parameter_names()
 
 
 def _check_split(method: str, model: str, spin: Any = 0.0) -> None:
@@ -291,8 +302,8 @@ def settings_problems(settings: Any) -> list[str]:
             check()
         except ValueError as err:
             problems.append(str(err))
-    if settings.model == "KERR" and spin_problem(settings.spin):
-        problems.append(spin_problem(settings.spin))
+    if parameter_problem(settings):
+        problems.append(parameter_problem(settings))
     return problems + disk_problems(settings)
 
 
@@ -303,6 +314,13 @@ def disk_problems(settings: Any) -> list[str]:
     if not disk.enabled:
         return []
     if not capabilities(settings.model).disk:
+        kind = MODELS.get(settings.model)
+        if kind is not None and kind.traits.hole:
+            return [
+                f"The Accretion Disk needs a Schwarzschild or Kerr hole: its gas follows "
+                f"their orbits, which a {kind.label} hole does not have; set the hole's "
+                "Charge to 0 or turn the disk off"
+            ]
         if settings.follows_objects:
             return ["The Accretion Disk needs a black hole: Add › SymRay › Black Hole"]
         return ["Accretion Disk needs a Schwarzschild or Kerr model"]
@@ -325,7 +343,7 @@ def _disk_checks(settings: Any) -> list[Callable[[], Any]]:
         lambda: checks.check_range("Disk Opacity", disk.opacity, 0.0, 1.0, lo_open=True),
         lambda: checks.check_range("Disk Beaming", disk.beaming, 0.0, 1.0),
     ]
-    if settings.model == "KERR" and not spin_problem(settings.spin):
+    if _has_spin(settings) and not parameter_problem(settings):
         found.append(lambda: check_spin(settings.spin, "Spin"))
     if not disk.auto_exposure:
         found.append(lambda: checks.check_positive("Disk Exposure", disk.exposure))
@@ -355,7 +373,7 @@ def inner_edge(settings: Any) -> float:
     """The prograde ISCO of the settings' hole, in scene units (Boyer–Lindquist r)."""
     settings = objects.effective(settings)
     mass = 0.5 * float(settings.rg)
-    spin = float(settings.spin) if settings.model == "KERR" else 0.0
+    spin = float(settings.spin) if _has_spin(settings) else 0.0
     return isco(mass, spin * mass)
 
 

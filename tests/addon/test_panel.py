@@ -57,7 +57,11 @@ def _draw(panel_name: str, scene) -> list:
     return log
 
 
-@pytest.mark.parametrize("model", ["FLAT", "SCHWARZSCHILD", "KERR", "MEDIUM", "METRIC", "CUSTOM"])
+@pytest.mark.parametrize(
+    "model",
+    ["FLAT", "SCHWARZSCHILD", "KERR", "MEDIUM", "METRIC", "CUSTOM", "REISSNER_NORDSTROM",
+     "KERR_NEWMAN"],
+)  # fmt: skip
 def test_main_panel_draws(scene, model):
     scene.symray.model = model
     log = _draw("RENDER_PT_symray", scene)
@@ -68,6 +72,8 @@ def test_main_panel_draws(scene, model):
         "METRIC": "metric",
         "CUSTOM": "hamiltonian",
         "SCHWARZSCHILD": "rg",
+        "REISSNER_NORDSTROM": "charge",  # rows made from the core's registry
+        "KERR_NEWMAN": "charge",
     }.get(model)
     if expected:
         assert ("prop", expected) in log
@@ -89,6 +95,20 @@ def test_the_panel_says_how_to_add_a_black_hole(factory_scene):
         for kind, text in log
         if kind == "label"
     )
+
+
+def test_a_holes_charge_is_drawn_and_checked_on_its_object(factory_scene):
+    """The Black Hole object's panel has a Charge (from the registry's hole parameters);
+    beyond spin² + charge² < 1 the row is marked and the core's message shown."""
+    bpy.ops.symray.add_black_hole(size=0.5, spin=0.6, disk=False)
+    hole = bpy.context.active_object
+    hole.symray.charge = 0.5
+    log = _draw_object(hole, factory_scene)
+    assert ("prop", "charge") in log
+    assert not any("Charge² < 1" in text for kind, text in log if kind == "label")
+    hole.symray.charge = 0.9
+    text = " ".join(text for kind, text in _draw_object(hole, factory_scene) if kind == "label")
+    assert "Spin² + Charge² < 1" in text, text
 
 
 def _draw_object(obj, scene) -> list:
@@ -177,6 +197,8 @@ def _camera(scene, location):
             "singular at the camera",
         ),
         (dict(model="SCHWARZSCHILD", rg=40.0), "inside the black hole's horizon"),
+        (dict(model="KERR_NEWMAN", spin=0.9, charge=0.6), "Spin² + Charge² < 1"),
+        (dict(model="REISSNER_NORDSTROM", rg=40.0), "inside the black hole's horizon"),
     ],
 )
 def test_panel_shows_render_problems_before_a_render(scene, setup, words):
@@ -191,7 +213,8 @@ def test_panel_shows_render_problems_before_a_render(scene, setup, words):
 
 def test_panel_shows_nothing_for_a_good_setup(scene):
     _camera(scene, (0.0, -30.0, 0.0))
-    for model in ("SCHWARZSCHILD", "KERR", "METRIC", "MEDIUM", "CUSTOM", "FLAT"):
+    for model in ("SCHWARZSCHILD", "KERR", "METRIC", "MEDIUM", "CUSTOM", "FLAT",
+                  "REISSNER_NORDSTROM", "KERR_NEWMAN"):  # fmt: skip
         scene.symray.model = model
         assert _labels(scene) == [], model
 

@@ -7,7 +7,8 @@ from types import SimpleNamespace
 import bpy
 import pytest
 
-MODELS = {"OBJECTS", "FLAT", "SCHWARZSCHILD", "KERR", "MEDIUM", "METRIC", "CUSTOM"}
+MODELS = {"OBJECTS", "FLAT", "SCHWARZSCHILD", "KERR", "MEDIUM", "METRIC", "CUSTOM",
+          "REISSNER_NORDSTROM", "KERR_NEWMAN"}  # fmt: skip
 METHOD_ORDER = (
     # the numbers a .blend stores the Method enum by (once its items' positions): fixed
     ("symplectic_euler", "stormer_verlet", "implicit_midpoint", "gauss4", "yoshida4")
