@@ -84,10 +84,10 @@ def near_paths(
     camera: np.ndarray, turn: np.ndarray, h0: np.ndarray,
 ) -> NearPaths:  # fmt: skip
     """The steps whose path X_prev -> X may pass the geometry's box, and one object's
-    own box where there are few (``Tracer._near_boxes``) (their chord's bounds widened by how
+    own box where there are few (``TracerState._near_boxes``) (their chord's bounds widened by how
     far a path turning by ``turn`` from its heading can stray from it) and may leave
     the ball around the hole that holds no geometry (with an
-    accretion disk: ``Tracer._clear``; a path from X_prev to X stays within the larger |X|
+    accretion disk: ``TracerState._clear``; a path from X_prev to X stays within the larger |X|
     plus its stray; a camera inside that ball keeps its rays' steps checked: halved
     where they turn, which near the camera keeps the error pass's estimate honest:
     where a ball reached past the camera, benchmarks/honesty.py near_tangent, it

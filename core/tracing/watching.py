@@ -42,7 +42,7 @@ def watch_step(
 ) -> None:  # fmt: skip
     """Lower the clearance of a batch's rays (``idx``) by their step X_prev -> X (local,
     (3, M), seen from ``camera``), where it lies within the margin of the objects' box
-    (``Tracer._watch_near``) and the ray's ``share`` of the margin is above 0: each step's
+    (``TracerState._watch_near``) and the ray's ``share`` of the margin is above 0: each step's
     chord bent into its cubic path where it passes near geometry (``paths``: ``bends``)."""
     near = segment_overlaps(X_prev.T, X.T, *tracer._watch_near)
     r = np.flatnonzero(near & (share > 0))
