@@ -156,7 +156,7 @@ class BVHIntersector:
         )
         rows = np.flatnonzero(candidate)
         # BVHTree works in float32: a segment starting on a surface (a hit point moved onto
-        # the method's path: the tracer's _surface_crossing) may miss it either way. Each
+        # the method's path: core.tracing.crossings.surface_crossing) may miss it either way. Each
         # cast starts ``slack`` before a; a hit in that slack is a hit at a.
         unit = d[rows] / length[rows, None]
         origins = a[rows] - slack[rows, None] * unit

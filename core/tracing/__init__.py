@@ -1,10 +1,17 @@
 """Tracing rays through a scene: one subject per module.
 
-``scene`` (Scene, ENDING), ``tracer`` (TracePlan, Tracer, TraceOptions: the plan and the
-per-step events of the batch loop), ``regions`` (where the model bends light: sphere or
-box), ``stepping`` (one step with retries in halves), ``steps`` (the step rule, the
-renderer's calibrations per model form, solve tolerance) and ``segments`` (hits and volume
-light along straight segments). ``core.trace`` is the public name of these.
+``scene`` (Scene, ENDING), ``plan`` (TraceOptions, TracePlan, plan_trace: how a scene's
+rays are followed), ``tracer`` (Tracer: the coordinating class; ``tracer_state`` what it
+holds), the tracer's subjects (``starts``: rays' start states and differentials;
+``step_loop``: the batch loop and each step's events; ``near_geometry``: steps near
+geometry, halved where bent; ``step_ends``: a step's ends, Newton on its fraction;
+``crossings``: chords, first hits, the method's surface crossings; ``disk_landing``: rays
+ending on an opaque disk; ``escape``: straight parts, leaving the region, the far field;
+``watching``: the clearance recorded per step), ``regions`` (where the model bends light:
+sphere or box), ``stepping`` (one step with retries in halves), ``steps`` (the step rule,
+the renderer's calibrations per model form, solve tolerance), ``segments`` (hits and
+volume light along straight segments), ``dense``, ``clearance``, ``differentials`` and
+``disklight``. ``core.trace`` is the public name of these.
 """
 
 from .regions import BoxRegion, Region, SphereRegion, region_for

@@ -13,7 +13,7 @@ Surfaces are found on k chords
 through points of the cubic, k chosen per ray so that each chord's own deviation, about
 that over k², stays below what the tolerance allows at the ray's distance from the camera.
 The hit found there is then moved to where the method's own partial step meets the surface
-(core/tracing/tracer.py, Tracer._surface_crossing): the cubic's error constant (1/384) is far
+(core/tracing/crossings.py, surface_crossing): the cubic's error constant (1/384) is far
 above a symplectic method's, and varies with where in the step the surface falls.
 """
 
@@ -30,7 +30,7 @@ REFINE_PIECES, REFINE_LEVELS = 16, 1
 REFINE_LEVELS times while they still deviate more than HIT_SHARE x allowed: the hit is then
 found on the cubic to within 1/256 of the chord's deviation, for the rays that end there
 only, and moved from there to where the method's own path meets the surface
-(Tracer._surface_crossing, whose first Newton step it is well within). A second level
+(crossings.surface_crossing, whose first Newton step it is well within). A second level
 (1/65536) changed no figure of benchmarks/honesty.py, no colour of the Kerr board's frames
 and their error estimates by under 1e-4 of themselves, for 5 % of a Final frame's time
 there; none (the chord's own hit as the crossing's start) put 24 pixels of mirage_grazing's
