@@ -42,7 +42,7 @@ def trace_nodes(
 ) -> None:
     """Trace the untraced nodes among (jj, ii) (flat index arrays) and store them
     (``dense``: no block will interpolate them; TileContext.trace_points). ``defer``: only the
-    anchors (anchors) get a companion now, the others' error waits for settle."""
+    anchors (``anchors``) get a companion now, the others' error waits for settle."""
     flat = np.unique(jj * nodes.traced.shape[1] + ii)
     jj, ii = np.divmod(flat, nodes.traced.shape[1])
     todo = ~nodes.traced[jj, ii]

@@ -37,6 +37,9 @@ the bilinear point lies off a curved surface."""
 
 @dataclass
 class Points:
+    """What ``evaluate`` finds at M lattice points: colour, ending (-1: to be traced), error,
+    and the passes' and the recast's values (object, chord direction, surface colour)."""
+
     rgba: np.ndarray
     ending: np.ndarray
     error: np.ndarray
