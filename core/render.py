@@ -75,7 +75,7 @@ over its rows (the hole, the photon ring), and a worker with a second tile to ta
 evens it out; each tile costs a few batches' per-step overhead ..."""
 TILE_ROUNDS = 6
 """... so a worker gets a second tile only where each keeps at least the pixels of
-TILE_ROUNDS rounds (sampling.ROUND_RAYS each: TileSampler._refine's, retraces and
+TILE_ROUNDS rounds (core.sampling.quadtree.ROUND_RAYS each: its refine's, retraces and
 centres) at the ~0.5 rays a pixel most scenes trace (benchmarks/honesty.py at 160 x
 120)."""
 PROBE_SCALE = 1 / 8
@@ -436,10 +436,10 @@ def _tiles_for(camera, workers: int) -> list[Tile]:
     whatever its size: fewer, larger tiles cost less, more balance the workers better
     (the Kerr board at 1080p Preview, traced in one process: 4 tiles 15 s, 16 tiles 22 s,
     32 tiles 30 s, 70 tiles 43 s; benchmarks/scaling.py)."""
-    w, h, stride = camera.width, camera.height, sampling_module.STRIDE
-    most = sampling_module.MAX_TILE_PIXELS
+    w, h, stride = camera.width, camera.height, sampling_module.lattice.STRIDE
+    most = sampling_module.tiling.MAX_TILE_PIXELS
     cols = w if w * (2 * stride - 1) <= most else stride * max(2, most // (2 * stride**2)) - 1
-    least = max(1, 2 * TILE_ROUNDS * sampling_module.ROUND_RAYS)  # pixels a tile
+    least = max(1, 2 * TILE_ROUNDS * sampling_module.quadtree.ROUND_RAYS)  # pixels a tile
     per_worker = min(TILES_PER_WORKER, max(1, w * h // (workers * least)))
     bands = max(per_worker * workers, math.ceil(h * cols / most))
     bands = min(bands, math.ceil(h / (stride - 1)))  # bands of at least STRIDE - 1 rows

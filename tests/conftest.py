@@ -25,9 +25,10 @@ def _module_rng_restarts_at_its_seed(request: pytest.FixtureRequest) -> None:
 @pytest.fixture
 def rounds_free(monkeypatch: pytest.MonkeyPatch) -> None:
     """The sampler refines a small frame as it would a large one: a round of tracing costs
-    it nothing beyond its rays (core.sampling.ROUND_RAYS 0), so a test of interpolation on
-    a frame of a few thousand pixels still interpolates (the cost guard traces such a
-    frame's every pixel; forked workers inherit the setting)."""
-    from core import sampling
+    it nothing beyond its rays (core.sampling.quadtree.ROUND_RAYS 0, where the sampler and
+    core.render read it), so a test of interpolation on a frame of a few thousand pixels
+    still interpolates (the cost guard traces such a frame's every pixel; forked workers
+    inherit the setting)."""
+    from core.sampling import quadtree
 
-    monkeypatch.setattr(sampling, "ROUND_RAYS", 0)
+    monkeypatch.setattr(quadtree, "ROUND_RAYS", 0)

@@ -182,7 +182,7 @@ def test_a_hit_near_its_objects_edge_reports_a_possible_flip():
     its error of the disk's edge (its inner or outer rim, or past the disk seen edge-on) may
     have missed it; every pixel whose ray ends elsewhere than the dense render's reports at
     least a pixel, at 1 and 0.25 px (before: 2 of the 4 at 1 px reported 0.015 px;
-    TileSampler._near_edge moves each hit across and along its surface by the error and
+    core.sampling.judging.near_edge moves each hit across and along its surface by the error and
     casts again). Since a disk hit the method's own crossing does not confirm is undone
     (Tracer._land_on_disk: the cubic's hit lay within its slack of the rim), no pixel ends
     elsewhere at 1 or 0.25 px (before: 3 and 1, reported; measured); the rims' rays that
@@ -204,7 +204,7 @@ def test_runs_that_shared_their_steps_are_traced_again():
     again at half the step: under-reported 3x on at most 1 % of the pixels (before: 3.5 %;
     measured 0.01 %), the true error above a tenth of the tolerance estimated within 3x on
     >= 85 % (measured 91 %; 100 % of 714 since a disk block's deviations count the move on
-    the disk, TileSampler._radius_deviations: fewer of its pixels are interpolated and far
+    the disk, acceptance.radius_deviations: fewer of its pixels are interpolated and far
     off, 714 above a tenth of the tolerance where 1877 were, hence > 500 now, not 1000)."""
     scene, cam, ref = _high_spin_disk()
     run = core.render(scene, cam, tolerance_px=0.25, passes=PASSES)
@@ -240,7 +240,7 @@ def test_an_opaque_disk_is_interpolated_within_the_tolerance():
     a pixel's offset makes, and fewer rays than the same disk traced pixel by pixel. Seen
     30 deg above its plane: at the preset's 10 deg a block's move on the disk,
     foreshortened ~6x on screen, exceeds the 1 px tolerance almost everywhere at this size
-    (80 rays saved), since the deviations count it (TileSampler._radius_deviations)."""
+    (80 rays saved), since the deviations count it (acceptance.radius_deviations)."""
     scene, camera = _disk_view(inclination=60.0)
     passes = ("redshift", "ending")
     dense = core.render(scene, camera, tolerance=1e-7, passes=passes)  # every centre traced
@@ -368,7 +368,7 @@ def test_an_interpolated_pixels_estimate_adds_its_deviations_as_vectors():
     where the pixel lies, plus the centre's excess; added as lengths, a lens map's x and y
     curvatures (opposite where its deflection is harmonic) made the estimate 3-3.9x the
     truth on interpolated pixels (88 % within 3x at 1 px, 91.7 % at 0.25). Added as vectors
-    (_deviation_vectors): >= 95 % of the pixels with a true error above a tenth of the
+    (acceptance.deviation_vectors): >= 95 % of the pixels with a true error above a tenth of the
     tolerance are estimated within 3x (measured 100 %), and under a third of the truth on
     at most 1 % of all pixels (measured 0)."""
     cam = _camera((0, -20, 1), (0, 0, 0), 160, 90, 50)
@@ -445,7 +445,7 @@ def test_an_interpolated_centre_whose_colour_its_error_could_change_is_traced():
     hole, looking along the orbit) and schwarzschild (a 24 x 16 checker), 160 x 90 at 1 px:
     interpolated checker edges moved by ~0.2 px, within the tolerance, changed the colour of
     1.5 % and 0.3 % of the pixels by more than 0.1. A centre whose colour could change by
-    more than COLOUR_STEP over its error is traced (_shaky): <= 0.2 % now (measured 0.01 %
+    more than COLOUR_STEP over its error is traced (shaky.shaky): <= 0.2 % now (measured 0.01 %
     and 0.06 %), while most pixels are still interpolated. The references at 1e-8 rad (1e-5
     px; half the time of 1e-10): a colour changes here where a point moves ~0.1 px."""
     for name in ("near_tangent", "schwarzschild"):
@@ -463,7 +463,7 @@ def test_a_sub_pixel_star_moved_by_less_than_the_tolerance_is_not_lost():
     the dense render shows at a pixel centre were lost, their interpolated directions
     moved off them by less than the tolerance, with no neighbour showing them. Where the
     sky's detail is finer than a pixel (Background.detail: a callable's is unknown) the sky
-    is looked up moved by the error (_shaky_sky): none lost."""
+    is looked up moved by the error (shaky.shaky_sky): none lost."""
     honesty = _honesty()
     scene, cam = honesty.stars(160, 90)
     ref = core.render(scene, cam, passes=PASSES, **REFERENCE)
@@ -523,7 +523,7 @@ def test_a_trace_records_clearance_only_for_the_rays_it_is_asked_to():
 def test_spared_companions_leave_no_pixel_near_geometry_under_reported():
     """The error pass runs its companions at the anchors (core.sampling.ANCHOR) and where
     a node's anchors disagree, it or they near geometry, or it ends unlike them; the other
-    nodes take their anchors' largest error (TileSampler._settle). On thin_front (thin
+    nodes take their anchors' largest error (core.sampling.anchors.settle). On thin_front (thin
     strips, a rod, an edge-on disk and small spheres before a hole) at 1 px against
     dopri5: companions are spared (fewer than 0.8 a ray), and of the pixels within 2 of an
     ending or object change in the reference whose true error is measurable (> 1e-3 px;

@@ -267,12 +267,12 @@ def test_tiles_shown_progressively_are_the_image():
         seen[y0:y1, x0:x1] += 1
         canvas[y0:y1, x0:x1] = part.rgba
 
-    old = sampling.STRIDE
-    sampling.STRIDE = 4  # bands of 7 rows: several on a small frame (read per render)
+    old = sampling.lattice.STRIDE
+    sampling.lattice.STRIDE = 4  # bands of 7 rows: several on a small frame (read per render)
     try:
         result = core.render(scene, cam, tolerance_px=1.0, on_tile=on_tile, passes=())
     finally:
-        sampling.STRIDE = old
+        sampling.lattice.STRIDE = old
     assert np.all(seen == 1) and calls[0] >= 2
     np.testing.assert_array_equal(canvas, result.rgba)
     assert result.summary["pixels"] == 1200 and 0 < result.summary["rays"]
@@ -312,7 +312,7 @@ def test_samples_in_groups_are_the_image_in_one_batch(monkeypatch):
         one = core.render(scene, cam, passes=(), workers=1, **options)
         assert one.summary["rays"] - cam.n_pixels > 20 * options["samples"]  # supersampled
         for points in groups:
-            monkeypatch.setattr(sampling, "SAMPLE_POINTS", points, raising=False)
+            monkeypatch.setattr(sampling.supersample, "SAMPLE_POINTS", points)
             grouped = core.render(scene, cam, passes=(), workers=1, **options)
             monkeypatch.undo()
             assert grouped.summary["rays"] == one.summary["rays"]
@@ -330,7 +330,7 @@ def test_anti_aliasing_memory_does_not_grow_with_samples(monkeypatch):
 
     scene = _aa_scene()
     cam = core.Camera.perspective((0, -20, 2), (0, 0, 0), (0, 0, 1), 50, 24, 18)
-    monkeypatch.setattr(sampling, "SAMPLE_POINTS", 4096, raising=False)
+    monkeypatch.setattr(sampling.supersample, "SAMPLE_POINTS", 4096)
     peaks, rays = {}, {}
     for samples in (64, 1024):
         tracemalloc.start()
@@ -463,6 +463,6 @@ def test_a_frame_too_small_to_interpolate_with_profit_is_traced_at_every_pixel()
     assert same.mean() > 0.95
     np.testing.assert_array_equal(run.rgba[same], dense.rgba[same])
     with pytest.MonkeyPatch.context() as patch:
-        patch.setattr(sampling, "ROUND_RAYS", 0)
+        patch.setattr(sampling.quadtree, "ROUND_RAYS", 0)
         refined = core.render(scene, cam, tolerance_px=1.0, passes=passes, workers=1)
     assert np.mean(refined.passes["steps"] == 0) > 0.1
