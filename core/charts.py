@@ -18,8 +18,11 @@ class CartesianChart:
 
     name = "cartesian"
     polar_axis = False
-    axis_hint = ""
     """Whether theta = Q[2] is a polar angle, singular on the axis (sin theta = 0)."""
+    axis_hint = ""
+    periodic: tuple[int, ...] = ()
+    """Spatial coordinates (indices from the first spatial one) that wrap by 2π, whose
+    finite differences are taken modulo 2π (core.tracing.starts): none here."""
 
     def __init__(self, time_index: int | None):
         self.time_index = time_index
@@ -59,6 +62,7 @@ class SpheroidalChart:
     name = "spherical"
     polar_axis = True
     axis_hint = ""
+    periodic: tuple[int, ...] = ()
     offset = 1
     time_index = 0
 
@@ -232,6 +236,7 @@ class IsotropicChart:
     name = "isotropic"
     polar_axis = False
     axis_hint = ""
+    periodic: tuple[int, ...] = ()
     offset = 0
     time_index = None
 

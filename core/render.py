@@ -31,7 +31,6 @@ from .geometry import Intersector
 from .geometry.group import member_bounds
 from .geometry.hits import box_corners
 from .imageio import FAILED_COLOR
-from .integrators import Splitting
 from .mipmap import span_footprint
 from .motion import check_observer, observer_motion
 from .motion import shift as doppler_shift
@@ -52,7 +51,9 @@ from .sampling import (
 from .sky import Background
 from .star_images import draw_stars
 from .stars import StarField
-from .tracing import ENDING, FAR_FIELD_CONSTANT, RayResults, Scene, TraceOptions, Tracer
+from .tolerances import TRACE_SHARE, Tolerances
+from .tracing import ENDING, RayResults, Scene, TraceOptions, Tracer
+from .tracing.plan import PlacedPlan
 from .tracing.scene import DISK_ID
 from .tracing.segments import filter_surfaces
 from .tracing.steps import DEFAULT_METHOD
@@ -66,9 +67,6 @@ DEFAULT_PASSES = tuple(name for name in ALL_PASSES if name not in ON_REQUEST)
 _MIN_CHUNK = 2048
 _CAMERA_CHUNK = 1 << 16
 """Pixels per chunk of a pass computed from camera rays alone (doppler): memory bounded."""
-TRACE_SHARE = 0.5
-"""With ``tolerance_px``, the integration and far field get this share of it (the tracer's
-``tolerance``); the image interpolation gets the rest."""
 TILES_PER_WORKER = 2
 """Tiles per worker (core.render's bands, _tiles_for): the work of a frame is rarely even
 over its rows (the hole, the photon ring), and a worker with a second tile to take
@@ -149,26 +147,26 @@ def render(
     _check_sampling(tolerance_px, samples, pixel_filter, filter_size)
     check_observer(observer)
     pixel_angle = camera.pixel_angle(_camera_distance(scene, camera))
-    options = _trace_options(method, tolerance, tolerance_px, pixel_angle, step, max_steps)
+    tol = Tolerances.of(tolerance, tolerance_px, pixel_angle)  # made once, used throughout
+    options = TraceOptions(method=method, tolerance=tol.trace, step=step, max_steps=max_steps)
     start_time = time.perf_counter()
     values = (method, step, max_steps, workers, parallel, cores, should_cancel, observer,
               shift_colours)  # fmt: skip
     probe = dict(zip(PROBE_OPTIONS, values, strict=True))
     scene = disk_exposure(scene, camera, **probe)
     extent = _scene_extent(scene, camera)
-    tracer = tracer_for_camera(scene, options, extent, camera.frame.position)
-    if tracer.curved:
-        checks.check_render_method(tracer.method, time_scaled(tracer.model))
-    check_camera(tracer, camera.frame.position)
-    moving = observer_motion(observer, tracer, camera.frame.position, shift_colours)
+    options = camera_options(scene, options, extent, camera.frame.position)
+    placed = PlacedPlan(scene, options, extent)  # no geometry yet: checks and motion
+    if placed.curved:
+        checks.check_render_method(placed.method, time_scaled(placed.model))
+    check_camera(placed, camera.frame.position)
+    moving = observer_motion(observer, placed, camera.frame.position, shift_colours)
     if moving is not None:  # the tolerances hold in the static frame (core.motion)
-        pixel_angle *= min(1.0, moving.smallest_doppler(camera))
-        options = _trace_options(method, tolerance, tolerance_px, pixel_angle, step, max_steps)
-        tracer = tracer_for_camera(scene, options, extent, camera.frame.position)
-        tracer.set_motion(moving)
-    interpolation = 0.0
-    if tolerance_px is not None:
-        interpolation = (1.0 - TRACE_SHARE) * tolerance_px * pixel_angle
+        tol = tol.narrowed(min(1.0, moving.smallest_doppler(camera)), tolerance)
+        options = replace(options, tolerance=tol.trace)
+    tracer = Tracer(scene, options, extent)  # built once
+    tracer.set_motion(moving)
+    tol = tol.for_plan(tracer)
     background = Background.of(scene.background)
     n = camera.n_pixels
     # with tolerance_px the companion run always goes: its estimate picks the rays to redo
@@ -178,20 +176,17 @@ def render(
     if with_tangents:  # refused by name before anything is traced
         tracer.check_tangents()
         camera.direction_tangents(np.zeros((1, 2)))
-    image = _Buffers(n, with_error, camera.width, passes, pixel_angle)
+    image = _Buffers(n, with_error, camera.width, passes, tol.pixel_angle)
     image.hold_stars(background, camera)
     image.camera, image.motion = camera, moving
     kind, count = _where_chunks_run(parallel, workers, n, cores, cluster_threads)
     sampled = samples > 1 or (tolerance_px is not None and tracer.curved)
     if sampled:
-        interpolation = interpolation if tracer.curved else 0.0
-        if interpolation > 0 or samples > 1:  # blocks and anti-aliasing need clearance
-            tracer.watch_geometry(_watch_margin(tracer, camera, pixel_angle))
+        if tol.interpolation > 0 or samples > 1:  # blocks and anti-aliasing need clearance
+            tracer.watch_geometry(_watch_margin(tracer, camera, tol.pixel_angle))
         sampler = TileSampler(
-            tracer, camera, background, shade, interpolation=interpolation, samples=samples,
+            tracer, camera, background, shade, tol, samples=samples,
             pixel_filter=pixel_filter, filter_size=filter_size, with_error=with_error,
-            far_field=_far_field_error(tracer), pixel_angle=pixel_angle,
-            budget=_integration_budget(tolerance_px, pixel_angle, tracer),
             tangents=with_tangents, magnification=with_tangents,
         )  # fmt: skip
         tile_list = _tiles_for(camera, count)
@@ -200,7 +195,7 @@ def render(
         middles = [((t.x0 + t.x1) / 2, (t.y0 + t.y1) / 2) for t in tile_list]
     else:
         chunks = _span_chunks(n, chunk_size, count)
-        work = _span_work(tracer, camera, with_error, _far_field_error(tracer), with_tangents)
+        work = _span_work(tracer, camera, with_error, tol.far_field, with_tangents)
         middles = [(camera.width / 2, (a + b) / 2 / camera.width) for a, b in chunks]
     chunks = costliest_first(chunks, expected_cost_rank(camera, scene.center, middles))
     cancelled = workers_module.CancelLatch(should_cancel)
@@ -217,19 +212,11 @@ def render(
     image.draw_stars(pixel_filter, filter_size, tracer, was_cancelled)
     result = image.result(camera, passes, time.perf_counter() - start_time, was_cancelled, tracer)
     result.summary["parallel"] = f"{count} {kind}" if kind != "inline" else "inline"
-    result.summary["pixel_angle"] = pixel_angle
+    result.summary["pixel_angle"] = tol.pixel_angle
     if scene.disk is not None:
         result.summary["disk_exposure"] = scene.disk.exposure
-    _summarise_px(result.summary, pixel_angle)
+    _summarise_px(result.summary, tol.pixel_angle)
     return result
-
-
-def _trace_options(method, tolerance, tolerance_px, pixel_angle, step, max_steps) -> TraceOptions:
-    """core.render's TraceOptions: with ``tolerance_px``, TRACE_SHARE of it (in radians of
-    ``pixel_angle`` a pixel) replaces ``tolerance``."""
-    if tolerance_px is not None:
-        tolerance = TRACE_SHARE * tolerance_px * pixel_angle
-    return TraceOptions(method=method, tolerance=tolerance, step=step, max_steps=max_steps)
 
 
 PROBE_OPTIONS = ("method", "step", "max_steps", "workers", "parallel", "cores", "should_cancel",
@@ -483,23 +470,6 @@ def _watch_margin(tracer: Tracer, camera, pixel_angle: float) -> float:
     return CLEARANCE * STRIDE * pixel_angle * far
 
 
-def _integration_budget(tolerance_px, pixel_angle: float, tracer: Tracer) -> float:
-    """With tolerance_px, the integration error (radians) a traced pixel may keep: the
-    tolerance less the far field's; without it, no limit (one run at the rule's step)."""
-    if tolerance_px is None:
-        return np.inf
-    floor = 0.1 * tracer.options.tolerance
-    return max(tolerance_px * pixel_angle - _far_field_error(tracer), floor)
-
-
-def _far_field_error(tracer: Tracer) -> float:
-    """Error (radians) the first-order far field leaves an escaped ray beyond the region
-    (FAR_FIELD_CONSTANT (M / R)^2; 0 without a mass)."""
-    if not tracer.curved or tracer.region is None or tracer.region.radius is None:
-        return 0.0
-    return FAR_FIELD_CONSTANT * (tracer.mass / tracer.region.radius) ** 2
-
-
 def _summarise_px(summary: dict, pixel_angle: float) -> None:
     """Add the error summary in pixels (error_px_median, error_px_max)."""
     for key in ("median", "max"):
@@ -527,28 +497,35 @@ def time_scaled(model) -> bool:
 def check_scene_camera(scene: Scene, position, tolerance: float = 1e-8) -> None:
     """Raise the core.ObserverError that rendering ``scene`` from ``position`` would meet
     (camera inside a horizon or on a coordinate axis, metric singular or of the wrong
-    signature there); nothing for a camera where rays can start."""
-    far = float(np.linalg.norm(np.asarray(position, dtype=np.float64) - scene.center))
-    options = TraceOptions(tolerance=tolerance)
-    check_camera(tracer_for_camera(scene, options, max(far, 1e-9), position), position)
+    signature there); nothing for a camera where rays can start. Plans the trace only (no
+    tracer, no geometry): the add-on asks at every panel redraw."""
+    far = max(float(np.linalg.norm(np.asarray(position, dtype=np.float64) - scene.center)), 1e-9)
+    options = camera_options(scene, TraceOptions(tolerance=tolerance), far, position)
+    check_camera(PlacedPlan(scene, options, far), position)
+
+
+def camera_options(scene: Scene, options: TraceOptions, extent: float, position) -> TraceOptions:
+    """``options``; with the default method (options.method None) and a model whose
+    explicit split cannot start rays at the camera (Kerr's Boyer–Lindquist split: a camera
+    on the polar axis, where Kerr–Schild still can), the implicit default (DEFAULT_METHOD)
+    in the model's own chart instead."""
+    if options.method is not None or not scene.curved:
+        return options
+    placed = PlacedPlan(scene, options, extent)
+    if not placed.method.needs_split:
+        return options
+    try:
+        with np.errstate(all="ignore"):
+            check_camera(placed, position)
+    except ObserverError:
+        return replace(options, method=DEFAULT_METHOD)
+    return options
 
 
 def tracer_for_camera(scene: Scene, options: TraceOptions, extent: float, position) -> Tracer:
-    """The scene's tracer; with the default method (options.method None) and a model whose
-    explicit split cannot start rays at the camera (Kerr's Boyer–Lindquist split: a camera
-    on the polar axis, where Kerr–Schild still can), the
-    tracer of the implicit default (DEFAULT_METHOD) in the model's own chart instead."""
-    tracer = Tracer(scene, options, extent)
-    if options.method is not None or not tracer.curved:
-        return tracer
-    if not isinstance(tracer.method, Splitting):
-        return tracer
-    try:
-        with np.errstate(all="ignore"):
-            check_camera(tracer, position)
-    except ObserverError:
-        return Tracer(scene, replace(options, method=DEFAULT_METHOD), extent)
-    return tracer
+    """The scene's tracer, with the method ``camera_options`` picks for a camera at
+    ``position``."""
+    return Tracer(scene, camera_options(scene, options, extent, position), extent)
 
 
 def _trace_chunk(

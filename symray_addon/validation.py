@@ -23,7 +23,7 @@ from typing import Any
 
 from ..core import checks, expressions
 from ..core.geometry.disk import check_spin, isco
-from ..core.integrators import METHODS, Splitting
+from ..core.integrators import METHODS
 from ..core.models.registry import MODELS
 from . import objects
 from .capabilities import capabilities
@@ -234,7 +234,8 @@ def _has_spin(settings: Any) -> bool:
 
 def _check_split(method: str, model: str, spin: Any = 0.0) -> None:
     """ValueError if an explicit splitting is chosen for a model that offers no split."""
-    if not isinstance(METHODS.get(method), Splitting):
+    chosen = METHODS.get(method)  # "AUTO" is no method: the model's default
+    if chosen is None or not chosen.needs_split:
         return
     if not capabilities(model, spin).split:
         raise ValueError(

@@ -208,7 +208,7 @@ class AccretionDisk:
     def bind(self, model: Any) -> AccretionDisk:
         """This disk around ``model`` (Schwarzschild or Kerr): mass, spin and r_in filled in
         and checked (ValueError naming the parameter and its range)."""
-        orbits = model.kerr_orbits() if hasattr(model, "kerr_orbits") else None
+        orbits = None if model is None else model.kerr_orbits()
         if orbits is None:
             raise ValueError(
                 "an accretion disk needs a black hole whose orbits it knows: a Schwarzschild "

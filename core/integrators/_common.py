@@ -130,6 +130,9 @@ class Method:
     follows_time_scale: bool = True
     """Whether it follows rays of a Poincaré-transformed K = g (H - H0) (Tao's binding of
     two copies does not: the renderer refuses it for black holes)."""
+    needs_split: bool = False
+    """Whether it steps the model's split (``split_parts``, a SplitSystem) rather than H
+    itself: the explicit splittings (diffrax's ``term_structure``, as a flag)."""
 
     def order_on(self, system: Any) -> int:
         """The order this method reaches on ``system`` (the nominal ``order`` unless the

@@ -12,7 +12,6 @@ from ._common import Method
 from .batch import Batch, run_batch
 from .poincare import Clocked, PoincareTransformed
 from .registry import get_method
-from .splitting import Splitting
 from .system import CaptureTest, System, as_system
 
 
@@ -318,7 +317,7 @@ def integrate(
     mode = "adaptive" if is_rk_adaptive else "clock" if adaptive else "fixed"
     Hk: System = H
     if mode == "clock":  # the splittings integrate the model's split of K (with s)
-        split = H.split_parts(0.0, clocked=True) if isinstance(meth, Splitting) else None
+        split = H.split_parts(0.0, clocked=True) if meth.needs_split else None
         Hk = split or PoincareTransformed(Clocked(H), 0.0)
         Q = np.concatenate((Q, np.zeros((1, N))))
         P = np.concatenate((P, -E0[None]))

@@ -146,6 +146,7 @@ class Splitting(Method):
 
     symplectic = True
     explicit = True
+    needs_split = True
 
     def __init__(
         self,
@@ -170,7 +171,8 @@ class Splitting(Method):
     def order_on(self, system: Any) -> int:
         """``order`` on a Runge–Kutta–Nyström split (T quadratic in p: ``nystrom``), else
         ``general_order`` (a separable H's own split counts as general)."""
-        return self.order if getattr(system, "nystrom", False) else self.general_order
+        nystrom = isinstance(system, SplitSystem) and system.nystrom
+        return self.order if nystrom else self.general_order
 
     @property
     def stages(self) -> int:

@@ -8,7 +8,8 @@ shape ``(n, N)``); the public ``value`` and ``gradient`` take the contract's ``(
 from __future__ import annotations
 
 import functools
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -163,6 +164,36 @@ class Hamiltonian(System):
         disk's innermost stable orbit and Keplerian speed (core.geometry.disk) follow from
         them. None: no disk can orbit here (flat space, media, other metrics)."""
         return None
+
+    def ray_capture_test(self) -> Callable[[np.ndarray, np.ndarray], np.ndarray] | None:
+        """The tracer's capture test, (Q, P) -> (N,) bool: rays that can no longer come out
+        of a horizon. By default ``capture_test()`` on Q alone (None: no horizon); a model
+        whose capture depends on the ray's direction says so (Kerr's split form)."""
+        captured = self.capture_test()
+        if captured is None:
+            return None
+        return lambda Q, P: captured(Q)
+
+    @property
+    def has_kinks(self) -> bool:
+        """Whether its force has kinks (``kinks_soa``): none by default."""
+        return False
+
+    def kinks_soa(self, Q: np.ndarray, derivatives: bool = False) -> Any:
+        """(K, N) values at positions (3, N) of the K expressions whose sign change is a kink
+        in the force (with ``derivatives``, also their gradients (K, 3, N)): the tracer
+        splits a step where a ray crosses one. None: smooth everywhere (the default)."""
+        return None
+
+    def face_jump(self, X: np.ndarray) -> np.ndarray:
+        """(N,) whether light meets an interface at points (3, N) of the faces of its box
+        (``bounds``): a medium whose index there differs from the vacuum outside. None by
+        default."""
+        return np.zeros(X.shape[-1], dtype=bool)
+
+    def check_faces(self, points: np.ndarray) -> None:
+        """ValueError where every one of ``points`` (3, N) on the box's faces is an
+        interface (``face_jump``); nothing by default."""
 
     def for_backward_tracing(self, explicit_split: bool = False) -> Hamiltonian:
         """The same light rays in the chart the tracer follows them in (regular where rays

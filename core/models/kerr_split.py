@@ -252,6 +252,10 @@ class KerrBoyerLindquist(Hamiltonian):
         falling_soa)."""
         return ~(Q[1] > 0.0)
 
+    def ray_capture_test(self):
+        """Rays falling in for good (see falling_soa): the capture depends on the direction."""
+        return self.falling_soa
+
     def falling_soa(self, Q: np.ndarray, P: np.ndarray) -> np.ndarray:
         """Rays that can no longer come back out, (N,): at or past the horizon, or below
         r_capture moving in (p_s < 0; there is no radial turning point below r_ph). A

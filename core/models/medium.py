@@ -78,6 +78,11 @@ class Medium(ExpressionHamiltonian):
         n = self._index({"x": Q[0], "y": Q[1], "z": Q[2]})
         return np.broadcast_to(np.asarray(n, dtype=np.float64), (Q.shape[-1],))
 
+    @property
+    def has_kinks(self) -> bool:
+        """Whether n has kinks: an abs(...) in its expression."""
+        return self._kinks is not None
+
     def kinks_soa(self, Q, derivatives: bool = False):
         """(K, N) the values at positions (3, N) of the K expressions whose sign change is a
         kink in n (the arguments of its abs(...)): where a ray crosses one, the tracer

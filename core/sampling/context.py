@@ -1,11 +1,12 @@
 """A tile's context: the sampler's settings, the tile's state, and tracing image points.
 
 Offers ``TileContext``: what every step of rendering a tile reads (the tracer, camera,
-background and shading, the tolerance, samples and filter, the error pass's budget), the
-tile's state (its lattice's origin in the image, its ray counts), ``image_xy`` (lattice
-points to image points) and ``trace_points`` (camera rays through image points, with their
-Richardson error from a companion run: ``companion_error``, ``bound_applies``). The steps
-themselves (core.sampling's other modules) are functions of a TileContext; core.sampling's
+background and shading, the render's Tolerances (core.tolerances: interpolation, the error
+pass's budget, the far field), samples and filter), the tile's state (its lattice's
+origin in the image, its ray counts), ``image_xy`` (lattice points to image points) and
+``trace_points`` (camera rays through image points, with their Richardson error from a
+companion run: ``companion_error``, ``bound_applies``). The steps themselves
+(core.sampling's other modules) are functions of a TileContext; core.sampling's
 TileSampler is one. Needs core.tracing's Tracer and core.sampling.error.
 """
 
@@ -17,6 +18,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..sky import Background
+from ..tolerances import Tolerances
 from ..tracing import ENDING, RayResults, Tracer
 from .error import (
     COMPANION_RATIO,
@@ -42,15 +44,12 @@ class TileContext:
         camera,
         background: Background,
         shade: Callable[[RayResults, Background], np.ndarray],
+        tolerances: Tolerances,
         *,
-        interpolation: float,
         samples: int = 1,
         pixel_filter: str = "box",
         filter_size: float = 1.0,
         with_error: bool = False,
-        far_field: float = 0.0,
-        pixel_angle: float = 1.0,
-        budget: float = np.inf,
         tangents: bool = False,
         magnification: bool = False,
     ) -> None:
@@ -58,7 +57,8 @@ class TileContext:
         self._colour_tracer = (
             tracer.without_clearance()
         )  # for sub-pixel samples (supersample.sample)
-        self.interpolation = float(interpolation)  # radians; 0: trace every pixel
+        self.tolerances = tolerances  # made once by core.render; its radians, read below
+        self.interpolation = tolerances.interpolation  # 0: trace every pixel
         self.samples = int(samples)
         self.unit = stratified_points(self.samples)  # (S, 2), jittered per pixel
         self.pixel_filter, self.filter_size = pixel_filter, filter_size
@@ -66,9 +66,9 @@ class TileContext:
         self.footprint = extent / math.sqrt(2)  # pixels from the centre to its corners
         self.with_error = with_error and tracer.curved
         self.step = tracer.step  # a node's first run's (retraces halve it)
-        self.far_field = far_field  # error of escaped rays beyond the region, radians
-        self.pixel_angle = pixel_angle  # radians (core.Camera.pixel_angle)
-        self.budget = budget  # radians: a traced ray's integration error above it is redone
+        self.far_field = tolerances.far_field  # error of escaped rays beyond the region
+        self.pixel_angle = tolerances.pixel_angle  # radians a pixel (core.Camera.pixel_angle)
+        self.budget = tolerances.budget  # a traced ray's integration error above it is redone
         self.with_tangents = tangents  # ray differentials: sky footprints, magnification
         self.with_magnification = magnification  # the pass: blocks where ln |μ| is bilinear
         self.origin = (0, 0)  # image (row, column) of the current tile's node (0, 0)

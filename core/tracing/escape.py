@@ -127,7 +127,7 @@ def leave_at_boundary(
         return done
     rows = cols[ok]
     bad = np.zeros(rows.size, dtype=bool)
-    if isinstance(region, BoxRegion) and hasattr(tracer.model, "face_jump"):  # a medium's box
+    if isinstance(region, BoxRegion):  # a medium's box
         bad = tracer.model.face_jump(crossing[:, ok])
     if bad.any():  # an interface the medium's box cuts: no plausible colour
         out.ending[idx[rows[bad]]] = ENDING["failed"]

@@ -12,12 +12,14 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
+
 from .. import checks, integrators
 from ..charts import chart_for
 from ..models.medium import FACE_SAMPLES
 from .regions import BoxRegion, Region, region_for
 from .scene import Scene
-from .stepping import RayCapture, ray_capture_test
+from .stepping import RayCapture
 from .steps import (
     default_method,
     default_step,
@@ -51,7 +53,7 @@ def tracing_model(model: Any, method: Any = None) -> Any:
     ``method`` as its isotropic optical medium)."""
     if model is None:
         return None
-    return model.for_backward_tracing(explicit_split=isinstance(method, integrators.Splitting))
+    return model.for_backward_tracing(explicit_split=method is not None and method.needs_split)
 
 
 @dataclass(frozen=True)
@@ -86,7 +88,7 @@ def plan_trace(scene: Scene, options: TraceOptions, extent: float = 1.0) -> Trac
     method = integrators.get_method(options.method or default_method(scene.model))
     model = tracing_model(scene.model, method)
     system = model
-    if isinstance(method, integrators.Splitting):  # refused without a split
+    if method.needs_split:  # refused without a split
         system = model.split_parts()
         integrators.splitting.split_flows(system, method.name)
     order = method.order_on(system)
@@ -96,7 +98,7 @@ def plan_trace(scene: Scene, options: TraceOptions, extent: float = 1.0) -> Trac
     if scene.disk is not None:  # the disk's hits need the rays' momenta: inside
         extent = max(extent, scene.disk.cartesian_radii()[1])
     region = region_for(model, options.tolerance, extent, radius)
-    if isinstance(region, BoxRegion) and hasattr(model, "check_faces"):
+    if isinstance(region, BoxRegion):
         model.check_faces(region.faces(FACE_SAMPLES))  # an interface the box cuts: refused
     constant, largest = rule_bounds(
         method, region.scaled(model), error_constant(method, model, system),
@@ -113,6 +115,32 @@ def plan_trace(scene: Scene, options: TraceOptions, extent: float = 1.0) -> Trac
     )
     return TracePlan(
         curved=True, model=model, method=method, order=order, chart=chart_for(model),
-        region=region, step=step, capture_test=ray_capture_test(model),
+        region=region, step=step, capture_test=model.ray_capture_test(),
         error_constant=constant, largest_step=largest,
     )  # fmt: skip
+
+
+class PlacedPlan:
+    """A scene's plan with its model's frame: the plan's attributes (``curved``, ``model``,
+    ``method``, ``order``, ``chart``, ``region``, ``step``, ``captured``, ``spacetime``,
+    ``mass``) and ``rotation`` with ``_to_local`` / ``_to_world``. What a camera check and
+    an observer's motion read (core.observer, core.motion): core.render checks a camera and
+    finds its motion with this alone, before any geometry is built. A Tracer is one."""
+
+    def __init__(self, scene: Scene, options: TraceOptions, extent: float = 1.0):
+        """The plan of ``scene`` with ``options`` (``plan_trace``) and the model's frame."""
+        self.scene = scene
+        self.options = options
+        self.rotation = scene.frame()
+        self.plan = plan = plan_trace(scene, options, extent)
+        self.curved, self.model = plan.curved, plan.model
+        self.method, self.order, self.chart = plan.method, plan.order, plan.chart
+        self.region, self.step, self.captured = plan.region, plan.step, plan.capture_test
+        self.spacetime = self.curved and self.chart.time_index is not None
+        self.mass = self.model.mass if self.curved else 0.0
+
+    def _to_local(self, world: np.ndarray) -> np.ndarray:
+        return (world - self.scene.center) @ self.rotation
+
+    def _to_world(self, local: np.ndarray) -> np.ndarray:
+        return local @ self.rotation.T + self.scene.center

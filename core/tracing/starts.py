@@ -15,7 +15,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .. import integrators
 from ..observer import medium_momenta, spacetime_momenta
 from .differentials import directional, unit_directional
 from .regions import SphereRegion
@@ -80,7 +79,7 @@ def start_tangents(
         Q, P = start_state(tracer, X.T.copy(), d.T.copy())
         return np.concatenate([Q, P]).T
 
-    periodic = [i + tracer.chart.offset for i in getattr(tracer.chart, "periodic", ())]
+    periodic = [i + tracer.chart.offset for i in tracer.chart.periodic]
     dZ = directional(state, D.T, tangents, periodic)  # unit directions: |d| = 1 each side
     dZ = np.moveaxis(dZ, 0, -1)  # (k, 2n, M)
     return dZ[:, :n].copy(), dZ[:, n:].copy()
@@ -91,9 +90,10 @@ def supports_tangents(tracer: TracerState) -> bool:
     a split whose flows take derivatives (``SplitSystem.tangents``)."""
     if not tracer.curved:
         return True
-    if not isinstance(tracer.method, integrators.Splitting):
+    if not tracer.method.needs_split:
         return False
-    return bool(getattr(tracer.model.split_parts(0.0), "tangents", False))
+    split = tracer.model.split_parts(0.0)
+    return split is not None and split.tangents
 
 
 def check_tangents(tracer: TracerState) -> None:

@@ -22,18 +22,6 @@ RayCapture = Callable[[np.ndarray, np.ndarray], np.ndarray]
 """(Q, P) -> (N,) bool: rays that can no longer come out of a horizon (ray_capture_test)."""
 
 
-def ray_capture_test(model: Any) -> RayCapture | None:
-    """The tracer's capture test of a model: its ``falling_soa(Q, P)`` where it has one
-    (a capture that depends on the ray's direction), else its ``capture_test()`` on Q."""
-    falling = getattr(model, "falling_soa", None)
-    if falling is not None:
-        return falling
-    captured = model.capture_test()
-    if captured is None:
-        return None
-    return lambda Q, P: captured(Q)
-
-
 SPLITS = 3  # a failed step is retried as 2, then 4, then 8 shorter steps
 OFF_SHELL = 1e-3  # |H - H0| / (|H0| + |p|^2) after one step that has it retried in halves
 OFF_CONE, OFF_CONE_STEPS = 1e-2, 16
@@ -64,9 +52,7 @@ class Stepper:
 
     def __init__(self, method: Method, model: Any, captured: RayCapture | None) -> None:
         self.method, self.model, self.captured = method, model, captured
-        self.kinks: Callable[[np.ndarray], np.ndarray | None] | None = getattr(
-            model, "kinks_soa", None
-        )
+        self.kinks: Callable[..., Any] | None = model.kinks_soa if model.has_kinks else None
 
     def advance(
         self, K: Any, state: State, h: Any, depth: int = 0
@@ -118,7 +104,7 @@ class Stepper:
         along the step h (d/du of the value at the fraction u: h grad f . dq/dtau)."""
         assert self.kinks is not None
         Q, P = self.method.qp(state)
-        found = self.kinks(Q[:3], derivatives=True)  # type: ignore[call-arg]
+        found = self.kinks(Q[:3], derivatives=True)
         assert found is not None
         values, grad = found
         _, dp = K.gradient_soa(Q, P, wrt="p")

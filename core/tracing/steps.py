@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
-from ..integrators import METHODS, Splitting
+from ..integrators import METHODS
 
 DEFAULT_METHOD = "gauss4"
 """The default integrator of images where the model offers no split (Kerr in BL as text,
@@ -192,7 +192,7 @@ def rule_bounds(
         constant = method.error_constant
     if not scaled:
         constant = None
-    if not isinstance(method, Splitting):
+    if not method.needs_split:
         largest = MAX_STEP
     elif largest is None:
         largest = MAX_SPLIT_STEP

@@ -1,8 +1,9 @@
 """What a tracer holds for one scene and options (the state the tracing modules share).
 
-Interface: ``TracerState(scene, options, extent)``: the plan (``plan``, and its ``curved``,
-``model``, ``method``, ``order``, ``chart``, ``region``, ``step``, ``captured``), the scene's
-``rotation`` and frame (``_to_local`` / ``_to_world``), its ``geometry`` and the local boxes
+Interface: ``TracerState(scene, options, extent)``: a PlacedPlan (core/tracing/plan.py: the
+plan, ``plan``, and its ``curved``, ``model``, ``method``, ``order``, ``chart``, ``region``,
+``step``, ``captured``; the scene's ``rotation`` and frame, ``_to_local`` / ``_to_world``),
+its ``geometry`` and the local boxes
 a step is near geometry by (``_near``, ``_near_boxes``: up to NEAR_BOXES; ``_clear``), the
 ``stepper``, the disk's light (``disk``), the camera's ``motion`` and the clearance watched
 (``_watch``, ``_watch_near``, ``_watch_segments``). ``Tracer`` (core/tracing/tracer.py) is
@@ -16,7 +17,7 @@ import numpy as np
 from ..motion import Motion
 from .clearance import ClearanceBoxes, clear_radius
 from .disklight import DiskLight
-from .plan import TraceOptions, plan_trace
+from .plan import PlacedPlan, TraceOptions
 from .scene import Scene
 from .segments import RayResults, SceneGeometry
 from .stepping import Stepper
@@ -26,7 +27,7 @@ NEAR_BOXES = 16
 (TracerState._near_boxes); more, by their union's (one test per step)."""
 
 
-class TracerState:
+class TracerState(PlacedPlan):
     """What a tracer holds for one scene and options: its plan's attributes, the model's
     frame (``_to_local`` / ``_to_world``), the geometry and the local boxes steps are near
     geometry by, the disk's light, the camera's motion and the clearance being watched."""
@@ -48,17 +49,9 @@ class TracerState:
     near geometry where its path may pass one of them, not only their union's box."""
 
     def __init__(self, scene: Scene, options: TraceOptions, extent: float = 1.0):
-        """The plan of ``scene`` with ``options`` (``plan_trace``), and what it needs."""
-        self.scene = scene
-        self.options = options
-        self.rotation = scene.frame()
+        """The plan of ``scene`` with ``options`` (PlacedPlan), and what it needs."""
         self.geometry = SceneGeometry(scene.intersector(), list(scene.volumes))
-        self.plan = plan = plan_trace(scene, options, extent)
-        self.curved, self.model = plan.curved, plan.model
-        self.method, self.order, self.chart = plan.method, plan.order, plan.chart
-        self.region, self.step, self.captured = plan.region, plan.step, plan.capture_test
-        self.spacetime = self.curved and self.chart.time_index is not None
-        self.mass = self.model.mass if self.curved else 0.0
+        super().__init__(scene, options, extent)
         self.stepper: Stepper | None = None
         self._near: tuple[np.ndarray, np.ndarray] | None = None
         if not self.curved:
@@ -91,10 +84,3 @@ class TracerState:
         ``bend``, within ``share`` (M,) of the margin each (see ClearanceBoxes.record)."""
         if self._watch is not None:
             self._watch.record(rows, a, b, a if eye is None else eye, out, bend, share)
-
-    # --- frames ------------------------------------------------------------------------
-    def _to_local(self, world: np.ndarray) -> np.ndarray:
-        return (world - self.scene.center) @ self.rotation
-
-    def _to_world(self, local: np.ndarray) -> np.ndarray:
-        return local @ self.rotation.T + self.scene.center
