@@ -28,11 +28,22 @@ COLOURS = {
 }
 
 
-def photon_orbit_radii(rg: float, spin: float) -> tuple[float, float]:
-    """Boyer–Lindquist radii of the prograde and retrograde circular photon orbits
-    (Bardeen, Press & Teukolsky 1972): 2M (1 + cos(⅔ arccos(∓χ)))."""
+def photon_orbit_radii(rg: float, spin: float, charge: float = 0.0) -> tuple[float, float]:
+    """Boyer–Lindquist radii of the prograde and retrograde circular photon orbits: at
+    charge 0 Bardeen, Press & Teukolsky's 2M (1 + cos(⅔ arccos(∓χ))); a charged hole's are
+    the outermost roots of r² − 3Mr + 2Q² ∓ 2a √(Mr − Q²) = 0 (Kerr–Newman's equator, with
+    a = χM, Q = qM), found on a fine grid (a drawing's accuracy)."""
     mass, chi = 0.5 * rg, min(abs(spin), 1.0)
-    return tuple(2 * mass * (1 + math.cos(2 / 3 * math.acos(s * chi))) for s in (-1.0, 1.0))
+    if charge == 0.0:
+        return tuple(2 * mass * (1 + math.cos(2 / 3 * math.acos(s * chi))) for s in (-1.0, 1.0))
+    a, q2 = chi * mass, (float(charge) * mass) ** 2
+    r = np.linspace(3.0 * mass, q2 / mass, 20_001)  # from outside every photon orbit inwards
+    radii = []
+    for sign in (-1.0, 1.0):
+        f = r * r - 3.0 * mass * r + 2.0 * q2 + sign * 2.0 * a * np.sqrt(mass * r - q2)
+        crossing = np.flatnonzero(np.sign(f[1:]) != np.sign(f[:-1]))
+        radii.append(float(r[crossing[0]]) if crossing.size else float("nan"))
+    return tuple(radii)
 
 
 def _ellipse(a: float, b: float, plane: str) -> np.ndarray:
@@ -52,12 +63,15 @@ def _circles(a: float, radii: Any) -> np.ndarray:
 
 
 def hole_lines(
-    size: float, spin: float, disk_radii: tuple[float, float] | None = None
+    size: float,
+    spin: float,
+    disk_radii: tuple[float, float] | None = None,
+    charge: float = 0.0,
 ) -> dict[str, np.ndarray]:
     """Line segments (N, 2, 3) in the hole's local frame, by what they show: 'horizon',
     'photon', 'disk' (Boyer–Lindquist radii ``disk_radii``, or none) and 'axis'.
     Equatorial radii are Kerr–Schild's √(r² + a²), as the renderer places them."""
-    rg = objects.rg_of(size, spin)
+    rg = objects.rg_of(size, spin, charge)
     a = 0.5 * rg * spin
     equator = math.hypot(size, a)
     lines = {
@@ -65,7 +79,7 @@ def hole_lines(
             [_ellipse(equator, equator, "XY")]
             + [_ellipse(equator, size, plane) for plane in ("XZ", "YZ")]
         ),
-        "photon": _circles(a, photon_orbit_radii(rg, spin)),
+        "photon": _circles(a, photon_orbit_radii(rg, spin, charge)),
         "axis": np.array([[[0.0, 0.0, -2.0 * size], [0.0, 0.0, 2.0 * size]]]),
     }
     if disk_radii is not None:
@@ -90,7 +104,8 @@ def world_lines(scene: bpy.types.Scene) -> dict[str, np.ndarray]:
         return {}
     size, spin = float(hole.symray.size), float(hole.symray.spin)
     where = placement(hole.matrix_world)
-    lines = hole_lines(size, spin, _disk_radii(scene, size, spin))
+    charge = float(hole.symray.charge)
+    lines = hole_lines(size, spin, _disk_radii(scene, size, spin), charge)
     return {k: v @ where.rotation.T + where.center for k, v in lines.items()}
 
 

@@ -123,3 +123,17 @@ def test_a_charged_hole_refuses_a_disk_by_name(addon, factory_scene):
         "orbits, which a Kerr–Newman hole does not have; set the hole's Charge to 0 or turn "
         "the disk off"
     ]
+
+
+def test_the_overlay_draws_a_charged_holes_photon_orbits(addon):
+    """Reissner–Nordström's photon sphere (3M + √(9M² − 8Q²))/2 both ways at spin 0; at a
+    vanishing charge, Bardeen, Press & Teukolsky's Kerr orbits; charge shrinks both."""
+    overlay = addon.module("symray_addon.overlay")
+    mass, charge = 0.5, 0.8
+    r_ph = 0.5 * (3 * mass + math.sqrt(9 * mass**2 - 8 * (charge * mass) ** 2))
+    np.testing.assert_allclose(overlay.photon_orbit_radii(1.0, 0.0, charge), [r_ph, r_ph],
+                               rtol=1e-4)  # fmt: skip
+    kerr = overlay.photon_orbit_radii(1.0, 0.7)
+    np.testing.assert_allclose(overlay.photon_orbit_radii(1.0, 0.7, 1e-6), kerr, rtol=1e-4)
+    charged = overlay.photon_orbit_radii(1.0, 0.7, 0.5)
+    assert charged[0] < kerr[0] and charged[1] < kerr[1]
