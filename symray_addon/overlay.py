@@ -31,15 +31,15 @@ COLOURS = {
 def photon_orbit_radii(rg: float, spin: float, charge: float = 0.0) -> tuple[float, float]:
     """Boyer–Lindquist radii of the prograde and retrograde circular photon orbits: at
     charge 0 Bardeen, Press & Teukolsky's 2M (1 + cos(⅔ arccos(∓χ))); a charged hole's are
-    the outermost roots of r² − 3Mr + 2Q² ∓ 2a √(Mr − Q²) = 0 (Kerr–Newman's equator, with
+    the outermost roots of r² − 3Mr + 2Q² ± 2a √(Mr − Q²) = 0 (Kerr–Newman's equator, with
     a = χM, Q = qM), found on a fine grid (a drawing's accuracy)."""
     mass, chi = 0.5 * rg, min(abs(spin), 1.0)
     if charge == 0.0:
         return tuple(2 * mass * (1 + math.cos(2 / 3 * math.acos(s * chi))) for s in (-1.0, 1.0))
     a, q2 = chi * mass, (float(charge) * mass) ** 2
-    r = np.linspace(3.0 * mass, q2 / mass, 20_001)  # from outside every photon orbit inwards
+    r = np.linspace(4.0 * mass, q2 / mass, 40_001)  # from outside every photon orbit inwards
     radii = []
-    for sign in (-1.0, 1.0):
+    for sign in (1.0, -1.0):  # prograde, retrograde
         f = r * r - 3.0 * mass * r + 2.0 * q2 + sign * 2.0 * a * np.sqrt(mass * r - q2)
         crossing = np.flatnonzero(np.sign(f[1:]) != np.sign(f[:-1]))
         radii.append(float(r[crossing[0]]) if crossing.size else float("nan"))
