@@ -45,6 +45,21 @@ class Pass:
     ``pass_<label>``); None: a core-only pass."""
     shown: bool = False
     """Whether the add-on's toggle is on in a new scene."""
+    on_request: bool = False
+    """Computed only where asked for (not in core.render's DEFAULT_PASSES)."""
+    held_on_request: bool = False
+    """Stored per pixel only where asked for (the others are held for every render)."""
+    per_ray: bool = False
+    """Its value is the traced ray's own field of the same name (core.tracing.RayResults;
+    and a sampler node's, core.sampling.lattice.Nodes): stored by ``traced_passes`` and
+    the sampler without code of its own."""
+    hits_only: bool = False
+    """Held only where the ray hit a surface (``fill`` elsewhere)."""
+
+    @property
+    def working_dtype(self) -> Any:
+        """The type the sampler computes it in: float64 for a float pass, else its own."""
+        return np.float64 if np.issubdtype(self.dtype, np.floating) else self.dtype
 
     @property
     def layer(self) -> str | None:
@@ -73,34 +88,35 @@ PASSES: tuple[Pass, ...] = (
     Pass("steps", np.int32, 0,
          "integration steps of the pixel's own ray; 0 where the pixel was interpolated "
          "from traced neighbours (no ray of its own: the adaptive sampler's smooth blocks)",
-         interpolated=False,
-         label="Steps", shown=True),
+         interpolated=False, per_ray=True, label="Steps", shown=True),
     Pass("ending", np.int8, -1, "how each ray ended (core.ENDING code; -1: not rendered)",
-         label="Ending"),
+         per_ray=True, label="Ending"),
     Pass("direction", np.float32, math.nan,
          "what each pixel's centre sees: the escape direction, or the unit vector to the hit "
-         "point (NaN where captured or failed)", channels=3),
+         "point (NaN where captured or failed)", channels=3, on_request=True,
+         held_on_request=True),
     Pass("position", np.float32, math.nan,
          "where each pixel's centre's ray ended on a surface (world coordinates; NaN where it "
-         "hit nothing)", channels=3),
+         "hit nothing)", channels=3, on_request=True, per_ray=True, hits_only=True),
     Pass("redshift", np.float32, math.nan,
          "g = observed / emitted frequency where a ray ends on the accretion disk (or first "
          "crosses a translucent one; interpolated on an opaque one's smooth blocks), NaN "
          "elsewhere; it includes the doppler pass's g of a moving camera unless colours are "
-         "not shifted (core.render's shift_colours)", label="Redshift"),
+         "not shifted (core.render's shift_colours)", per_ray=True, label="Redshift"),
     Pass("doppler", np.float32, math.nan,
          "g of the camera's motion along each pixel centre's ray (core.motion): the frequency "
          "it sees over the static (Kerr: zero-angular-momentum) observer's; 1 when static",
-         interpolated=False, from_camera=True),
+         interpolated=False, from_camera=True, on_request=True),
     Pass("magnification", np.float32, math.nan,
          "|μ| where a pixel centre sees the sky: how much brighter a point source (a star) "
          "looks in that image than without the hole, the pixel's solid angle over the sky's "
          "it covers (ray differentials carried through the integration; a moving camera's "
-         "own solid angle); NaN where it sees no sky", label="Magnification"),
+         "own solid angle); NaN where it sees no sky", on_request=True, held_on_request=True,
+         per_ray=True, label="Magnification"),
     Pass("transmittance", np.float32, 1.0,
          "the share of the light behind (the sky, or what the ray ends on) that reaches the "
          "camera through what lies in front: volumes, a translucent disk; 1 where nothing "
-         "(point stars are dimmed by it)"),
+         "(point stars are dimmed by it)", on_request=True, held_on_request=True, per_ray=True),
 )  # fmt: skip
 """Every pass, in its one order."""
 
@@ -110,18 +126,26 @@ STORED = tuple(p for p in PASSES if p.derived_from is None and not p.from_camera
 """The passes held per pixel while a frame renders (the others are computed from them)."""
 
 
-OPTIONAL = ("direction", "magnification", "transmittance")
+OPTIONAL = tuple(p.name for p in PASSES if p.held_on_request)
 """Stored passes held (and, magnification, computed) only where asked for."""
+ON_REQUEST = tuple(p.name for p in PASSES if p.on_request)
+"""Passes computed only when asked for."""
+DEFAULT_PASSES = tuple(p.name for p in PASSES if not p.on_request)
+"""The passes core.render computes unless asked otherwise."""
 
 
 def traced_passes(rays: Any, seen: np.ndarray | None, error: np.ndarray | None) -> dict:
     """The stored passes of rays traced through pixel centres (a RayResults), by name:
     ``seen`` the directions they see (or None), ``error`` their estimate (or None)."""
     hit = rays.ending == ENDING["hit"]
-    position = np.where(hit[:, None], rays.position, np.nan)
-    values = {"steps": rays.steps, "ending": rays.ending, "redshift": rays.redshift,
-              "position": position, "magnification": rays.magnification,
-              "transmittance": rays.transmittance}  # fmt: skip
+    values = {}
+    for kind in STORED:
+        if not kind.per_ray:
+            continue
+        value = getattr(rays, kind.name)
+        if kind.hits_only:
+            value = np.where(hit if value.ndim == 1 else hit[:, None], value, kind.fill)
+        values[kind.name] = value
     if seen is not None:
         values["direction"] = seen
     if error is not None:

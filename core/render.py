@@ -35,7 +35,15 @@ from .mipmap import span_footprint
 from .motion import check_observer, observer_motion
 from .motion import shift as doppler_shift
 from .observer import ObserverError, check_camera
-from .passes import ALL_PASSES, BY_NAME, OPTIONAL, STORED, traced_passes
+from .passes import (
+    ALL_PASSES,
+    BY_NAME,
+    DEFAULT_PASSES,
+    ON_REQUEST,  # noqa: F401 (core.render.ON_REQUEST: the passes asked for by name)
+    OPTIONAL,
+    STORED,
+    traced_passes,
+)
 from .sampling import (
     CLEARANCE,
     COMPANION_RATIO,
@@ -60,10 +68,6 @@ from .tracing.steps import DEFAULT_METHOD
 
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
-ON_REQUEST = ("direction", "position", "doppler", "magnification", "transmittance")
-"""Passes computed only when asked for."""
-DEFAULT_PASSES = tuple(name for name in ALL_PASSES if name not in ON_REQUEST)
-"""The passes core.render computes unless asked otherwise."""
 _MIN_CHUNK = 2048
 _CAMERA_CHUNK = 1 << 16
 """Pixels per chunk of a pass computed from camera rays alone (doppler): memory bounded."""

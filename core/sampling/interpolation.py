@@ -12,11 +12,13 @@ core.sampling.acceptance (the error's shape) and core.sampling.disk.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from ..geometry import Hits
 from ..motion import shift as doppler_shift
+from ..passes import STORED
 from ..tracing import ENDING
 from ..tracing.differentials import magnification
 from ..tracing.scene import DISK_ID
@@ -35,23 +37,50 @@ block widths (at its distance from the camera) either side: the surface is found
 the bilinear point lies off a curved surface."""
 
 
-@dataclass
-class Points:
-    """What ``evaluate`` finds at M lattice points: colour, ending (-1: to be traced), error,
-    and the passes' and the recast's values (object, chord direction, surface colour)."""
+@dataclass(frozen=True)
+class PointValue:
+    """One array ``evaluate`` gives at each lattice point."""
 
-    rgba: np.ndarray
-    ending: np.ndarray
-    error: np.ndarray
-    direction: np.ndarray
-    redshift: np.ndarray
-    position: np.ndarray
-    magnification: np.ndarray
-    transmittance: np.ndarray
-    """1 where interpolated: blocks are only where nothing lies in front (Nodes.plain)."""
-    object_id: np.ndarray
-    tangent: np.ndarray
-    surface: np.ndarray
+    name: str
+    """Its name: the Nodes array it is taken from (where a point is a traced node)."""
+    dtype: Any
+    channels: int
+    fill: float
+    """Its value before anything is known (ending -1: to be traced)."""
+    hits_only: bool = False
+    """Taken from a traced node only where its ray hit a surface."""
+
+    def empty(self, m: int) -> np.ndarray:
+        """M points' values, all ``fill``."""
+        shape = (m,) if self.channels == 1 else (m, self.channels)
+        return np.full(shape, self.fill, dtype=self.dtype)
+
+
+POINT_VALUES: tuple[PointValue, ...] = (
+    PointValue("rgba", np.float64, 4, 0.0),
+    *(PointValue(p.name, p.working_dtype, p.channels, p.fill, p.hits_only)
+      for p in STORED if p.interpolated),
+    PointValue("object_id", np.int32, 1, -1, hits_only=True),
+    PointValue("tangent", np.float64, 3, 0.0, hits_only=True),
+    PointValue("surface", np.float64, 4, 0.0, hits_only=True),
+)  # fmt: skip
+"""What a lattice point holds: its colour, every interpolated pass of core.passes (ending,
+error, direction, position, redshift, magnification, transmittance: a new pass is its row
+there), and what a hit is cast again with (object, chord direction, surface colour)."""
+
+
+class Points:
+    """What ``evaluate`` finds at M lattice points: one array per POINT_VALUES entry, by its
+    name (``points.rgba``, ``points.ending`` (-1: to be traced), ...; ``values``: all)."""
+
+    def __init__(self, m: int) -> None:
+        self.values = {v.name: v.empty(m) for v in POINT_VALUES}
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        try:
+            return self.__dict__["values"][name]
+        except KeyError:
+            raise AttributeError(name) from None
 
 
 def evaluate(
@@ -61,11 +90,7 @@ def evaluate(
     node's own where a point is one, else interpolated in its accepted block; points in
     no accepted block and on no traced node get ending -1 (to be traced)."""
     m = y.shape[0]
-    out = Points(
-        np.zeros((m, 4)), np.full(m, -1, dtype=np.int8), np.zeros(m), np.full((m, 3), np.nan),
-        np.full(m, np.nan), np.full((m, 3), np.nan), np.full(m, np.nan), np.ones(m),
-        np.full(m, -1, dtype=np.int32), np.zeros((m, 3)), np.zeros((m, 4)),
-    )  # fmt: skip
+    out = Points(m)
     cell_j = np.clip(np.floor(y).astype(np.int64), 0, blocks.block.shape[0] - 1)
     cell_i = np.clip(np.floor(x).astype(np.int64), 0, blocks.block.shape[1] - 1)
     b = blocks.block[cell_j, cell_i]
@@ -77,18 +102,13 @@ def evaluate(
         part = inside[start : start + INTERPOLATE_POINTS]
         interpolate(ctx, nodes, blocks, b[part], y[part], x[part], out, part)
     t = np.flatnonzero(traced)
-    out.rgba[t] = nodes.rgba[nj[t], ni[t]]
-    out.ending[t] = nodes.ending[nj[t], ni[t]]
-    out.error[t] = nodes.error[nj[t], ni[t]]
-    out.direction[t] = nodes.direction[nj[t], ni[t]]
-    out.redshift[t] = nodes.redshift[nj[t], ni[t]]
-    out.magnification[t] = nodes.magnification[nj[t], ni[t]]
-    out.transmittance[t] = nodes.transmittance[nj[t], ni[t]]
+    for value in POINT_VALUES:  # a traced node's own
+        if not value.hits_only:
+            out.values[value.name][t] = getattr(nodes, value.name)[nj[t], ni[t]]
     hit = t[out.ending[t] == ENDING["hit"]]
-    out.position[hit] = nodes.position[nj[hit], ni[hit]]
-    out.object_id[hit] = nodes.object_id[nj[hit], ni[hit]]
-    out.tangent[hit] = nodes.tangent[nj[hit], ni[hit]]
-    out.surface[hit] = nodes.surface[nj[hit], ni[hit]]
+    for value in POINT_VALUES:
+        if value.hits_only:
+            out.values[value.name][hit] = getattr(nodes, value.name)[nj[hit], ni[hit]]
     return out
 
 

@@ -15,7 +15,7 @@ from ..tracing import ENDING, RayResults
 from ..tracing.scene import DISK_ID
 from .context import TileContext
 from .error import FLIP
-from .lattice import Nodes
+from .lattice import RAY_PASSES, Nodes
 
 NEAR_MISS = 2.0
 """A traced ray that missed every object by less than NEAR_MISS x its integration error
@@ -57,9 +57,9 @@ def record(
     """Record traced rays at the nodes (jj, ii)."""
     nodes.traced[jj, ii] = True
     nodes.direction[jj, ii] = seen
-    nodes.ending[jj, ii] = rays.ending
+    for kind in RAY_PASSES:  # ending, steps, position, redshift, magnification, ...
+        getattr(nodes, kind.name)[jj, ii] = getattr(rays, kind.name)
     nodes.rgba[jj, ii] = ctx.shade(rays, ctx.background)
-    nodes.steps[jj, ii] = rays.steps
     nodes.energy[jj, ii] = rays.energy_error
     escaped = rays.ending == ENDING["escaped"]
     no_light = (rays.transmittance == 1.0) & ~np.any(rays.radiance, axis=1)
@@ -68,14 +68,10 @@ def record(
     nodes.clearance[jj, ii] = rays.clearance  # a hit's: from all but its object
     nodes.object_id[jj, ii] = rays.object_id
     nodes.kinks[jj, ii] = rays.kinks
-    nodes.position[jj, ii] = rays.position
     nodes.tangent[jj, ii] = rays.tangent
     nodes.surface[jj, ii] = rays.surface
-    nodes.redshift[jj, ii] = rays.redshift
     on_disk = np.flatnonzero(hit & (rays.object_id == DISK_ID))
     nodes.radius[jj, ii] = np.nan
-    nodes.magnification[jj, ii] = rays.magnification
-    nodes.transmittance[jj, ii] = rays.transmittance
     if nodes.jacobian.shape[2] == rays.sky_jacobian.shape[1]:
         nodes.jacobian[jj, ii] = rays.sky_jacobian
     if on_disk.size:

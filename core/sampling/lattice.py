@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..passes import STORED
 from ..tracing import RayResults
 
 STRIDE = 32
@@ -31,27 +32,35 @@ node where nothing is interpolated, and every retrace (blocks are chosen by then
 clearance watched 32 pixels wide was 45 % of thin_front's time at 96 x 54."""
 
 
+RAY_PASSES = tuple(kind for kind in STORED if kind.per_ray)
+"""The passes a node holds as its ray's own field (core.passes' ``per_ray``: ending, steps,
+position, redshift, magnification, transmittance): Nodes makes an array for each, and
+judging.record copies the ray's."""
+
+
 class Nodes:
-    """The lattice of a tile: what is known at each node (traced or not)."""
+    """The lattice of a tile: what is known at each node (traced or not). Besides the
+    arrays below, one per RAY_PASSES entry, by its name (``nodes.ending``, ``nodes.steps``,
+    ``nodes.position``, ...)."""
 
     def __init__(self, ny: int, nx: int, tangents: bool = False) -> None:
         shape = (ny, nx)
+        self.passes = {  # RAY_PASSES' arrays, their fill where not traced (position NaN)
+            kind.name: np.full(shape + kind.empty(0).shape[1:], kind.fill, kind.working_dtype)
+            for kind in RAY_PASSES
+        }
         self.traced = np.zeros(shape, dtype=bool)
         self.direction = np.zeros(shape + (3,))
-        self.ending = np.full(shape, -1, dtype=np.int8)
         self.rgba = np.zeros(shape + (4,))
         self.error = np.zeros(shape)
-        self.steps = np.zeros(shape, dtype=np.int32)
         self.energy = np.zeros(shape)
         self.plain = np.zeros(shape, dtype=bool)  # ended without volume light
         self.clearance = np.zeros(shape)  # radians from geometry (RayResults.clearance)
         self.integration = np.zeros(shape)  # the integration's error estimate (radians)
         self.object_id = np.full(shape, -1, dtype=np.int32)
         self.kinks = np.zeros(shape, dtype=np.int64)  # the model's kinks its ray crossed
-        self.position = np.zeros(shape + (3,))  # hit points (world)
         self.tangent = np.zeros(shape + (3,))  # the hitting chords' directions
         self.surface = np.zeros(shape + (4,))  # the surface's colour where hit
-        self.redshift = np.full(shape, np.nan)  # g on the accretion disk
         self.radius = np.full(shape, np.nan)  # Boyer–Lindquist r of a hit on the disk
         self.flipped = np.zeros(shape, dtype=bool)  # two of its runs ended on different things
         self.near = np.zeros(shape, dtype=bool)  # missed an object by under NEAR_MISS x its error
@@ -59,10 +68,14 @@ class Nodes:
         self.pending = np.zeros(
             shape, dtype=bool
         )  # traced, its error not judged yet (anchors.settle)
-        self.magnification = np.full(shape, np.nan)  # |μ| where it sees the sky (with tangents)
-        self.transmittance = np.ones(shape)  # through volumes and a translucent disk
         # d(direction) / d(image x, y) where it sees the sky (RayResults.sky_jacobian)
         self.jacobian = np.full(shape + ((2, 3) if tangents else (0, 3)), np.nan)
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        try:
+            return self.__dict__["passes"][name]
+        except KeyError:
+            raise AttributeError(name) from None
 
 
 class Blocks:

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from ..passes import BY_NAME
+from ..passes import BY_NAME, STORED
 from . import lattice
 from .anchors import settle, trace_nodes
 from .context import Cancel, TileContext
@@ -73,13 +73,8 @@ class TileSampler(TileContext):
         if self.tracer.geometry.filters:
             filter_surfaces(self, centre, (h + 2, w + 2), jj, ii)
         rgba = centre.rgba.reshape(h + 2, w + 2, 4)
-        error = centre.error.reshape(h + 2, w + 2)
         ending = centre.ending.reshape(h + 2, w + 2)
-        direction = centre.direction.reshape(h + 2, w + 2, 3)
-        redshift = centre.redshift.reshape(h + 2, w + 2)
-        position = centre.position.reshape(h + 2, w + 2, 3)
         inner = (slice(1, h + 1), slice(1, w + 1))
-        steps = nodes.steps[inner]
         energy = nodes.energy[inner]
         colour = rgba[inner].copy()
         if self.samples > 1:
@@ -90,11 +85,14 @@ class TileSampler(TileContext):
             busy = np.any(np.stack(differs), axis=0) | near
             colour[busy] = supersample(self, nodes, blocks, busy, differs, near, colour[busy],
                                        cancel)  # fmt: skip
-        passes = {"error": error[inner], "steps": steps, "ending": ending[inner],
-                  "direction": direction[inner], "redshift": redshift[inner],
-                  "position": position[inner],
-                  "magnification": centre.magnification.reshape(h + 2, w + 2)[inner],
-                  "transmittance": centre.transmittance.reshape(h + 2, w + 2)[inner]}  # fmt: skip
+        passes = {  # every stored pass: the points' where interpolated, else the nodes'
+            kind.name: (
+                centre.values[kind.name].reshape((h + 2, w + 2) + kind.empty(0).shape[1:])
+                if kind.interpolated
+                else getattr(nodes, kind.name)
+            )[inner]
+            for kind in STORED
+        }
         return TileResult(
             colour.astype(np.float32),
             {name: data.astype(BY_NAME[name].dtype, copy=False) for name, data in passes.items()},
@@ -117,8 +115,5 @@ class TileSampler(TileContext):
             return
         trace_nodes(self, nodes, jj[rows], ii[rows], self.origin, cancel)
         again = evaluate(self, nodes, blocks, jj[rows] * 1.0, ii[rows] * 1.0)
-        for name in (
-            "rgba", "ending", "error", "direction", "redshift", "position", "magnification",
-            "transmittance", "object_id", "tangent", "surface",
-        ):  # fmt: skip
-            getattr(centre, name)[rows] = getattr(again, name)
+        for name, values in centre.values.items():
+            values[rows] = again.values[name]
