@@ -85,9 +85,25 @@ class Intersector(Protocol):
     def intersect(self, a: np.ndarray, b: np.ndarray) -> Hits: ...
 
 
+# The Intersector protocol's optional members, looked up here only (a user's intersector
+# may have none of them):
+
+
 def filters(intersector: Any) -> bool:
-    """Whether an intersector colours over footprints (the module)."""
+    """Whether an intersector colours over footprints (``filters``; the module)."""
     return bool(getattr(intersector, "filters", False))
+
+
+def part_bounds(intersector: Any) -> Any:
+    """((lo, hi, id) of each object) of an intersector holding many objects that reports
+    their ids itself (``part_bounds``: the add-on's meshes); None for one object."""
+    return getattr(intersector, "part_bounds", None)
+
+
+def reported_id(intersector: Any) -> int:
+    """The object id an intersector's hits report (``object_id``: core's primitives),
+    -3 where it does not say."""
+    return int(getattr(intersector, "object_id", -3))
 
 
 def _segments(a: Any, b: Any) -> tuple[np.ndarray, np.ndarray]:

@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from ..geometry import Hits, Intersector, filters, segment_overlaps
-from ..geometry.hits import box_corners
+from ..geometry import Group, Hits, Intersector, filters, segment_overlaps
+from ..geometry.hits import box_corners, part_bounds, reported_id
 from ..mipmap import surface_footprint
 from .clearance import VOLUME_ID, Bound, shape_distance
 from .scene import ENDING
@@ -184,27 +184,28 @@ class SceneGeometry:
         their boxes as ``part_bounds`` ((lo, hi, id) each; id -3 for a box of several):
         a hit's clearance is then from every object but its own, not 0 from the box of
         all of them (which made every hit a near miss, traced again, error pi)."""
-        members = getattr(self.objects, "objects", [self.objects])
-        ids = getattr(self.objects, "ids", [None] * len(members))
+        group = self.objects if isinstance(self.objects, Group) else None
+        members = [self.objects] if group is None else group.objects
+        ids: list[int | None] = [None] if group is None else group.ids
         boxes: list[Bound] = [(np.asarray(v.lo, float), np.asarray(v.hi, float), None, VOLUME_ID)
                               for v in self.volumes]  # fmt: skip
         for obj, oid in zip(members, ids, strict=True):
-            parts = getattr(obj, "part_bounds", None)
+            parts = part_bounds(obj)
             if parts is not None and oid is None:  # one intersector for many objects
                 boxes += [(np.asarray(lo, float), np.asarray(hi, float), None, int(part))
                           for lo, hi, part in parts]  # fmt: skip
                 continue
             lo, hi = (np.asarray(x, float) for x in obj.bounds)
             if not np.any(lo > hi):
-                oid = getattr(obj, "object_id", -3) if oid is None else oid
+                oid = reported_id(obj) if oid is None else oid
                 boxes.append((lo, hi, shape_distance(obj), oid))
         return boxes
 
     def box_count(self) -> int:
         """How many boxes ``boxes`` lists, from a Group's member bounds where it has them."""
-        bounds = getattr(self.objects, "member_bounds", None)
-        if bounds is None:
+        if not isinstance(self.objects, Group):
             return len(self.boxes())
+        bounds = self.objects.member_bounds
         return len(self.volumes) + int(np.count_nonzero(~np.any(bounds[0] > bounds[1], axis=1)))
 
     def local_boxes(self, to_local: Any) -> list[tuple[np.ndarray, np.ndarray]]:
