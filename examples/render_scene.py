@@ -5,7 +5,8 @@
 
 The SymRay extension must be installed and enabled (``make render`` does both, into an
 isolated user folder). The default scene follows the seed paper's Fig. 8: a black hole
-(Add › SymRay › Black Hole at the origin, rg = 1; spinning with ``--spin``) in front of the
+(Add › SymRay › Black Hole at the origin, rg = 1; spinning with ``--spin``, charged with
+``--charge``) in front of the
 procedural sky, with a checkerboard behind it that the hole lenses into an Einstein ring.
 ``--blend FILE`` renders a saved scene instead (its own SymRay settings are kept).
 The EXR (``--exr``, default: the PNG's name with .exr) is multi-layer, with the passes
@@ -43,6 +44,12 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument("--width", type=int, default=160)
     parser.add_argument("--height", type=int, default=120)
     parser.add_argument("--spin", type=float, default=0.0, help="a/M; nonzero = Kerr")
+    parser.add_argument(
+        "--charge",
+        type=float,
+        default=0.0,
+        help="Q/M; nonzero = Reissner–Nordström, or Kerr–Newman with --spin (spin² + charge² < 1)",
+    )
     parser.add_argument(
         "--quality",
         default="FINAL",
@@ -138,7 +145,9 @@ def build_scene(args: argparse.Namespace) -> bpy.types.Scene:
     scene.cursor.location = (0.0, 0.0, 0.0)
     objects = addon_module("symray_addon.objects")
     # Add › SymRay › Black Hole at the cursor; Size is the horizon's radius (rg = 1)
-    bpy.ops.symray.add_black_hole(size=objects.size_of(1.0, args.spin), spin=args.spin, disk=False)
+    size = objects.size_of(1.0, args.spin, args.charge)
+    bpy.ops.symray.add_black_hole(size=size, spin=args.spin, disk=False)
+    bpy.context.active_object.symray.charge = args.charge
     board_object(scene)
     camera_data = bpy.data.cameras.new("Camera")
     camera_data.lens = 50.0

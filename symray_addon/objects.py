@@ -46,10 +46,11 @@ def hole_values(hole: Any) -> dict[str, float]:
     return values
 
 
-def size_of(rg: float, spin: float) -> float:
-    """The horizon radius r₊ of a hole of rg = 2M and spin a/M (inverse of ``rg_of``)."""
-    chi = min(abs(float(spin)), 1.0)
-    return 0.5 * float(rg) * (1.0 + math.sqrt(1.0 - chi * chi))
+def size_of(rg: float, spin: float, charge: float = 0.0) -> float:
+    """The horizon radius r₊ of a hole of rg = 2M, spin a/M and charge Q/M (inverse of
+    ``rg_of``)."""
+    left = max(1.0 - float(spin) ** 2 - float(charge) ** 2, 0.0)
+    return 0.5 * float(rg) * (1.0 + math.sqrt(left))
 
 
 def _size_changed(self: bpy.types.PropertyGroup, _context: bpy.types.Context) -> None:
