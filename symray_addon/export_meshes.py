@@ -148,13 +148,7 @@ class BVHIntersector:
         d = b - a
         length = np.sqrt(np.einsum("ij,ij->i", d, d))
         slack = FLOAT32_SLACK * (1.0 + np.abs(a).max(axis=1))
-        lo, hi = self.bounds
-        candidate = (
-            np.all(np.maximum(a, b) >= lo - slack[:, None], axis=1)
-            & np.all(np.minimum(a, b) <= hi + slack[:, None], axis=1)
-            & (length > 0.0)
-        )
-        rows = np.flatnonzero(candidate)
+        rows = np.flatnonzero(self._near_parts(a, b, slack) & (length > 0.0))
         # BVHTree works in float32: a segment starting on a surface (a hit point moved onto
         # the method's path: core.tracing.crossings.surface_crossing) may miss it either way. Each
         # cast starts ``slack`` before a; a hit in that slack is a hit at a.
@@ -166,6 +160,19 @@ class BVHIntersector:
         face = found[hit, 0].astype(np.int64)
         dist = np.maximum(found[hit, 1] - slack[rows[hit]], 0.0)
         return self._hits(n, a, d, length, rows[hit], face, dist, seen)
+
+    def _near_parts(self, a: np.ndarray, b: np.ndarray, slack: np.ndarray) -> np.ndarray:
+        """(N,) whether each segment's box meets, within ``slack``, the box of one of the
+        objects (``part_bounds``: at most PART_BOXES): only those are cast. A floor under a
+        small object made their union's box a slab around everything (issue 51: 3.4 M
+        segments cast where 0.2 M were without the floor)."""
+        top, bottom = np.maximum(a, b), np.minimum(a, b)
+        near = np.zeros(a.shape[0], dtype=bool)
+        for lo, hi, _ in self.part_bounds:
+            near |= np.all(top >= lo - slack[:, None], axis=1) & np.all(
+                bottom <= hi + slack[:, None], axis=1
+            )
+        return near
 
     def _cast(self, origins: np.ndarray, unit: np.ndarray, limit: np.ndarray) -> np.ndarray:
         """(M, 2): the face index and distance of each ray's first hit within ``limit``

@@ -92,6 +92,7 @@ class ClearanceBoxes:
         out: Any,
         bend=None,
         share: np.ndarray | None = None,
+        until: np.ndarray | None = None,
     ) -> None:
         """Lower the clearances of the rays ``rows`` (``out``: RayResults) by the world
         chords a -> b (M, 3) seen from ``eye`` (M, 3), each chord measured on its part
@@ -102,12 +103,15 @@ class ClearanceBoxes:
         ``clearance`` the smallest angle to any box, the box it was to (``clearance_box``)
         and the smallest to any other (``clearance_other``; a bound from below: a box
         overtaken keeps what it had). With ``share`` (M,), chord k is measured within
-        share[k] x the margin."""
+        share[k] x the margin. With ``until`` (M,), chord k only up to that fraction of it
+        (where its ray hit a surface: what lies beyond is not on its path)."""
         with np.errstate(divide="ignore"):
             inv_d = 1.0 / (b - a)
         margin = self.margin if share is None else self.margin * share[:, None]
         for k, (lo, hi, distance) in enumerate(self.boxes):
             enter, leave = slab_span(a, inv_d, lo - margin, hi + margin)
+            if until is not None:
+                leave = np.minimum(leave, until)
             near = np.flatnonzero(enter <= leave)
             done = (out.clearance[rows[near]] <= 0.0) & (out.clearance_box[rows[near]] == k)
             near = near[~done]  # touching box k already: its chords can lower nothing

@@ -52,7 +52,12 @@ class FirstHits:
 
 
 def along_paths(
-    tracer: TracerState, idx: np.ndarray, paths: NearPaths, out: RayResults, step_ends: StepEnds
+    tracer: TracerState,
+    idx: np.ndarray,
+    paths: NearPaths,
+    out: RayResults,
+    step_ends: StepEnds,
+    until: np.ndarray,
 ) -> np.ndarray:
     """Surface hits and volume emission along this step's path near geometry.
 
@@ -65,7 +70,8 @@ def along_paths(
     are then recorded in order up to the hit. A ray whose hit the method's path misses,
     or that goes on through a translucent disk, is cast again from the next chord. An
     opaque disk's hits are placed on it and lit once for the whole step
-    (disklight.land_on_disk). -> (M,) bool: the rays that hit a surface (recorded in ``out``).
+    (disklight.land_on_disk). -> (M,) bool: the rays that hit a surface (recorded in ``out``);
+    ``until`` (M,) takes, in place, the fraction of the step at each one's hit.
     """
     hit_rows = np.zeros(idx.shape[0], dtype=bool)
     c, X0, X1, V0, V1, h = paths.rows, paths.X0, paths.X1, paths.V0, paths.V1, paths.h
@@ -92,12 +98,14 @@ def along_paths(
             offset += group.going.size
             ended, again = record_chords(tracer, idx, group, first, out, step_ends, landed)
             hit_rows[group.cols[group.going[ended]]] = True
+            until[group.cols[group.going[ended]]] = first.guess[ended]
             group.start[group.going[again]] = first.stop[again] + 1
             group.going = group.going[again]
     if landed:
         cols, u = (np.concatenate([x[i] for x in landed]) for i in (0, 1))
         off = land_on_disk(tracer, idx, cols, u, out, step_ends)
         hit_rows[cols[off]] = False
+        until[cols[off]] = 1.0
     return hit_rows
 
 

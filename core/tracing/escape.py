@@ -35,10 +35,22 @@ def straight(
 ) -> None:  # fmt: skip
     """Rays that stay straight from a along d: one cast each, ending hit or escaped
     (``eye``: where they are seen from, default a)."""
-    tracer._watch_segments(rows, a, a + _FAR * d, out, eye)
     h = tracer.geometry.record(rows, a, a + _FAR * d, out)
+    _watch_to_hits(tracer, rows, a, a + _FAR * d, h, out, eye)
     out.ending[rows[~h]] = ENDING["escaped"]
     out.direction[rows] = d
+
+
+def _watch_to_hits(
+    tracer: TracerState, rows: np.ndarray, a: np.ndarray, b: np.ndarray, hit: np.ndarray,
+    out: RayResults, eye: np.ndarray | None = None,
+) -> None:  # fmt: skip
+    """Record the straight segments a -> b of ``rows`` in their clearance, those that
+    ``hit`` a surface only up to it (what lies behind a hit is not on the ray's path)."""
+    if tracer._watch is None:
+        return
+    end = np.where(hit[:, None], out.position[rows], b)
+    tracer._watch_segments(rows, a, end, out, eye)
 
 
 def straight_to_region(
@@ -52,8 +64,8 @@ def straight_to_region(
     enters = np.isfinite(X_entry[:, 0])
     a = origins[rows]
     b = np.where(enters[:, None], tracer._to_world(X_entry), a + _FAR * directions[rows])
-    tracer._watch_segments(rows, a, b, out)
     h = tracer.geometry.record(rows, a, b, out)
+    _watch_to_hits(tracer, rows, a, b, h, out)
     miss = ~h & ~enters
     if miss.any():
         X0 = tracer._to_local(a[miss])

@@ -156,10 +156,11 @@ def step_events(
             Q, P = tracer.method.qp(batch.state)
             S, X = Q[chart.offset :], np.where(redo, X_prev, X)
             paths, going = paths.without(redo), ok & ~redo
-    if tracer._watch is not None:  # the steps within the margin of the objects' box
-        watch_step(tracer, idx, X_prev, X, camera, paths, arrays["watch"], out)
+    until = np.ones(X.shape[1])  # the share of the step each ray travels (to its hit)
     if paths is not None:
-        ended |= along_paths(tracer, idx, paths, out, step_ends)
+        ended |= along_paths(tracer, idx, paths, out, step_ends, until)
+    if tracer._watch is not None:  # the steps within the margin of the objects' box
+        watch_step(tracer, idx, X_prev, X, camera, paths, arrays["watch"], out, until)
     if tracer.captured is not None:
         captured = ~ended & going & tracer.captured(Q, P)
         if captured.any():

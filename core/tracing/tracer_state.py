@@ -78,9 +78,12 @@ class TracerState(PlacedPlan):
         behind = SceneGeometry(scene.intersector(disk=False), list(scene.volumes))
         return DiskLight(scene.disk, self.model, self.chart, self._to_local, self.geometry, behind)
 
-    def _watch_segments(self, rows, a, b, out: RayResults, eye=None, bend=None, share=None):
+    def _watch_segments(
+        self, rows, a, b, out: RayResults, eye=None, bend=None, share=None, until=None
+    ):
         """Lower the clearance of the rays ``rows`` to that of their world chords a -> b
         seen from ``eye`` (default: a, the camera), bent into their cubic paths by
-        ``bend``, within ``share`` (M,) of the margin each (see ClearanceBoxes.record)."""
+        ``bend``, within ``share`` (M,) of the margin each, up to ``until`` (M,) of each
+        chord (its ray's hit; see ClearanceBoxes.record)."""
         if self._watch is not None:
-            self._watch.record(rows, a, b, a if eye is None else eye, out, bend, share)
+            self._watch.record(rows, a, b, a if eye is None else eye, out, bend, share, until)

@@ -38,16 +38,18 @@ def bends(paths: NearPaths | None, n: int) -> tuple[np.ndarray, np.ndarray, np.n
 
 def watch_step(
     tracer: TracerState, idx: np.ndarray, X_prev: np.ndarray, X: np.ndarray, camera: np.ndarray,
-    paths: NearPaths | None, share: np.ndarray, out: RayResults,
+    paths: NearPaths | None, share: np.ndarray, out: RayResults, until: np.ndarray,
 ) -> None:  # fmt: skip
     """Lower the clearance of a batch's rays (``idx``) by their step X_prev -> X (local,
     (3, M), seen from ``camera``), where it lies within the margin of the objects' box
     (``TracerState._watch_near``) and the ray's ``share`` of the margin is above 0: each step's
-    chord bent into its cubic path where it passes near geometry (``paths``: ``bends``)."""
+    chord bent into its cubic path where it passes near geometry (``paths``: ``bends``),
+    up to ``until`` (M,) of it (a ray that hit a surface in this step: to its hit; the
+    rest of the step is not its path: an object behind the hit is no obstacle)."""
     near = segment_overlaps(X_prev.T, X.T, *tracer._watch_near)
     r = np.flatnonzero(near & (share > 0))
     if r.size:
         world = [tracer._to_world(x[:, r].T) for x in (X_prev, X, camera)]
         *bent, slack = bends(paths, X.shape[1])
         bend = (*(b[:, r].T @ tracer.rotation.T for b in bent), slack[r])
-        tracer._watch_segments(idx[r], world[0], world[1], out, world[2], bend, share[r])
+        tracer._watch_segments(idx[r], world[0], world[1], out, world[2], bend, share[r], until[r])

@@ -42,3 +42,53 @@ def test_a_ray_through_a_tilted_strips_box_clear_of_the_strip_keeps_its_clearanc
     assert rays.ending[0] == core.ENDING["escaped"]
     gap = np.sqrt(2.0)  # (x, z) = (1, -1) from the strip's centre line x = z
     assert 0.5 * gap / 20 < rays.clearance[0] < 1.5 * gap / 20
+
+
+def test_what_lies_behind_a_hit_is_not_on_the_rays_path():
+    """A ray that hits a sphere records its clearance up to the hit: a wall 5 units behind
+    the sphere, which the ray's line runs into beyond the hit, is not on its path (it
+    was: clearance 0, and every block there refused). Straight rays (flat space) and bent
+    ones (a light hole) alike."""
+    from core.trace import TraceOptions, Tracer
+
+    sphere = core.Sphere((0.0, 0.0, 0.0), 1.0)
+    wall = core.Plane((0.0, 5.0, 0.0), normal=(0, -1, 0), u_axis=(1, 0, 0), extent=(6.0, 6.0))
+    for model in (None, hm.schwarzschild(rg=0.01)):
+        scene = core.Scene(model=model, objects=[sphere, wall])
+        tracer = Tracer(scene, TraceOptions(tolerance=1e-6), 30.0)
+        tracer.watch_geometry(10.0)
+        rays = tracer.trace(np.array([[0.2, -20.0, 0.1]]), np.array([[0.0, 1.0, 0.0]]))
+        assert rays.ending[0] == core.ENDING["hit"] and rays.position[0, 1] < 0.0  # the sphere
+        others = tracer._watch.besides_hit(rays)  # clearance from all but the sphere
+        # before the hit the wall is 24 units ahead and 6 wide: over 0.2 rad away
+        assert others[0] > 0.2, (model, others[0])
+
+
+def test_a_floor_under_an_opaque_disk_costs_no_extra_rays():
+    """Issue 51: a floor 1 unit under a hole's opaque disk. The disk's rays used to record
+    the floor as touched (their last step's chord ran on past the disk down to it) and
+    refused every block near it: 3717 rays against 2900 without the floor at 96 x 54.
+    Measured to the hit, the frame traces no more than without the floor (5 % slack), and
+    its error estimates still bound the truth against a dense render (no pixel over the
+    tolerance with more than 3x its estimate)."""
+
+    def scene(floor: bool) -> core.Scene:
+        plane = core.Plane((0, 0, -1.0), normal=(0, 0, 1), u_axis=(1, 0, 0), extent=(15, 15),
+                           color=(0.6, 0.6, 0.6, 1))  # fmt: skip
+        objects = [plane] if floor else []
+        return core.Scene(model=hm.kerr(rg=1.0, a=0.3, chart="kerr_schild"),
+                          disk=core.AccretionDisk(r_out=6.0), objects=objects,
+                          background="procedural")  # fmt: skip
+
+    cam = core.Camera.perspective((7.4, -6.9, 5.0), (0, 0, 0), (0, 0, 1), 40.0, 96, 54)
+    passes = ("error_px", "ending", "direction")
+    bare = core.render(scene(False), cam, tolerance_px=1.0, workers=1, passes=passes)
+    floor = core.render(scene(True), cam, tolerance_px=1.0, workers=1, passes=passes)
+    assert floor.summary["rays"] <= 1.05 * bare.summary["rays"]
+    angle = floor.summary["pixel_angle"]
+    dense = core.render(scene(True), cam, tolerance=0.5 * angle, workers=1, passes=passes)
+    np.testing.assert_array_equal(floor.passes["ending"], dense.passes["ending"])
+    cos = np.sum(floor.passes["direction"] * dense.passes["direction"], axis=-1)
+    truth = np.arccos(np.clip(cos, -1.0, 1.0)) / angle
+    estimate = np.maximum(floor.passes["error_px"], 0.1)
+    assert not np.any((truth > 1.0) & (truth > 3.0 * estimate))
