@@ -205,14 +205,17 @@ def test_a_floor_under_a_disk_stays_cheap(addon, factory_scene):
     """Issue 51: a floor under the hole and its disk traced every pixel 3.7 more times
     (error pi everywhere: every mesh hit was a near miss of the box of all meshes, and the
     cube and the floor had one object id). Each object's hits keep their own id, a hit's
-    clearance is from the other objects' boxes: the floor costs at most 2x the rays."""
+    clearance is from the other objects' boxes along its path up to its hit: the floor
+    costs at most 1.2x the rays (1.00x now, 1.06x before clearance stopped at the hit; at
+    this size the frame is mostly traced anyway: tests/core/test_clearance.py's floor
+    test is the one that sees the blocks over the disk)."""
     scene = factory_scene
     scene.render.resolution_x, scene.render.resolution_y = 96, 54
     bpy.ops.symray.add_black_hole()
     alone = _floor_summary(addon, scene, floor=False)
     floored = _floor_summary(addon, scene, floor=True)
     cost = (floored["rays"] + floored["error_rays"]) / (alone["rays"] + alone["error_rays"])
-    assert cost <= 2.0, (floored, alone)
+    assert cost <= 1.2, (floored, alone)
     assert floored["error_px_median"] < 1.0  # within the tolerance, not pi
 
 
