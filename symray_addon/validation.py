@@ -271,7 +271,8 @@ def _settings_checks(settings: Any) -> list[Callable[[], Any]]:
     if traits.mass:  # a hole object's own Size (its rg also holds its Spin: NaN with it)
         size = getattr(settings, "hole_size", settings.rg)
         found.append(lambda: checks.check_positive("Size", size))
-    if model == "MEDIUM" and settings.use_medium_bounds:
+    kind = MODELS.get(model)
+    if kind is not None and kind.inputs == "index" and settings.use_medium_bounds:  # a box
         found.append(lambda: checks.check_vector("Box Min", settings.medium_min))
         found.append(lambda: checks.check_vector("Box Max", settings.medium_max))
     return found
