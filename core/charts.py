@@ -12,6 +12,8 @@ from typing import Any
 
 import numpy as np
 
+from .backend import array_module
+
 
 class CartesianChart:
     """q = (x, y, z) [or (t, x, y, z) with a leading time]: the identity map."""
@@ -46,7 +48,7 @@ class CartesianChart:
 
     def coord_time(self, S: np.ndarray, D: np.ndarray) -> np.ndarray:
         """Coordinate-time component of Cartesian vectors D (the same time slices): 0."""
-        return np.zeros(S.shape[1])
+        return np.zeros_like(S[0])
 
     def axial_killing(self, S: np.ndarray) -> np.ndarray:
         """Spatial components of the rotation generator about z: (-y, x, 0)."""
@@ -92,7 +94,7 @@ class SpheroidalChart:
         r, theta, phi = S
         R = np.sqrt(r * r + self.a**2)
         st, ct, sp, cp = np.sin(theta), np.cos(theta), np.sin(phi), np.cos(phi)
-        J = np.empty((r.shape[0], 3, 3))
+        J = np.empty_like(r, shape=(r.shape[0], 3, 3))
         J[:, 0, 0] = r / R * st * cp
         J[:, 0, 1] = R * ct * cp
         J[:, 0, 2] = -R * st * sp
@@ -116,7 +118,7 @@ class SpheroidalChart:
 
     def coord_time(self, S: np.ndarray, D: np.ndarray) -> np.ndarray:
         """Coordinate-time component of Cartesian vectors D (the same time slices): 0."""
-        return np.zeros(S.shape[1])
+        return np.zeros_like(S[0])
 
     def axial_killing(self, S):
         """Components of d/dphi: (0, 0, 1)."""
@@ -189,7 +191,7 @@ class KerrBLChart:
         s, r, st, ct, sp, cp = self._parts(S)
         a, b = self.a, self.b
         sh = np.sinh(s)
-        J = np.empty((s.shape[0], 3, 3))
+        J = np.empty_like(s, shape=(s.shape[0], 3, 3))
         d_phi = np.stack([-st * (r * sp - a * cp), st * (r * cp + a * sp), np.zeros_like(s)])
         d_r = np.stack([st * cp, st * sp, ct])
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -203,7 +205,7 @@ class KerrBLChart:
         singular: on the axis, at the horizon)."""
         J = self.jacobian(S)
         ok = np.isfinite(J).all(axis=(1, 2)) & (np.abs(np.linalg.det(np.nan_to_num(J))) > 1e-300)
-        J[~ok] = np.eye(3)
+        J[~ok] = array_module(J).eye(3)
         out = np.linalg.solve(J, D.T[..., None])[..., 0].T
         out[:, ~ok] = np.nan
         return out
@@ -262,7 +264,7 @@ class IsotropicChart:
 
     def coord_time(self, S: np.ndarray, D: np.ndarray) -> np.ndarray:
         """Coordinate-time component of Cartesian vectors D (the same time slices): 0."""
-        return np.zeros(S.shape[1])
+        return np.zeros_like(S[0])
 
     def cartesian_velocity(self, S: np.ndarray, dS: np.ndarray) -> np.ndarray:
         """World velocity J dS of an isotropic one: J = λ I + λ'(ρ) x xᵀ / ρ, λ = (1 + M/2ρ)²."""

@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from .backend import is_array
+
 Partials = dict[int, "float | np.ndarray"]
 
 
@@ -137,7 +139,7 @@ def subset(x, idx):
     """The rays idx (last axis) of a Dual, an array or a float (floats are shared)."""
     if isinstance(x, Dual):
         return Dual(subset(x.v, idx), {k: subset(g, idx) for k, g in x.d.items()})
-    return x[..., idx] if isinstance(x, np.ndarray) and x.ndim else x
+    return x[..., idx] if is_array(x) and x.ndim else x
 
 
 def value_of(x):

@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .backend import array_module, to_host
+
 
 class ObserverError(ValueError):
     """No observer frame can be set up where the rays start (the camera); subclasses say why."""
@@ -55,16 +57,17 @@ def inverse_metric_soa(model, Q: np.ndarray) -> np.ndarray:
 def spacetime_momenta(model, chart, S: np.ndarray, D: np.ndarray):
     """(Q, P) (4, N) for photons at spatial coords S seen along local Cartesian directions D.
     The observer's frame is set up once per distinct start (a camera's rays share one)."""
-    n_rays = S.shape[1]
+    n_rays, xp = S.shape[1], array_module(S)
     if n_rays and (S == S[:, :1]).all():  # one camera's rays: no sort
-        points, where = S[:, :1], np.zeros(n_rays, dtype=np.intp)
+        points, where = S[:, :1], xp.zeros(n_rays, dtype=np.intp)
     else:
         points, where = np.unique(S, axis=1, return_inverse=True)
         where = where.reshape(-1)
-    g, u, E = _observer_frames(model, chart, points)
+    # the frames at the few distinct starts are set up on the host (core.backend)
+    g, u, E = (xp.asarray(a) for a in _observer_frames(model, chart, to_host(points)))
     k = -u[where] + np.einsum("nia,an->ni", E[where], D)
-    P = np.ascontiguousarray(np.einsum("nij,nj->in", g[where], k))
-    return np.vstack([np.zeros((1, n_rays)), S]), P
+    P = np.einsum("nij,nj->in", g[where], k).copy()  # C-contiguous rows
+    return xp.concatenate([xp.zeros((1, n_rays)), S]), P
 
 
 def observer_frame(model, chart, S: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -26,6 +26,7 @@ import numpy as np
 from . import checks, cluster
 from . import sampling as sampling_module
 from . import workers as workers_module
+from .backend import CPU, Device, device_of
 from .blackbody import XYZ_FROM_RGB
 from .geometry import Intersector
 from .geometry.group import member_bounds
@@ -69,6 +70,9 @@ from .tracing.steps import DEFAULT_METHOD
 MAX_STEPS_COLOR = (0.0, 1.0, 1.0, 1.0)
 """Debug colour of rays that reached max_steps without ending (cyan)."""
 _MIN_CHUNK = 2048
+DEVICE_CHUNK = 1 << 21
+"""Rays a device traces at once (a 1080p frame in one batch; about 2 GB of GPU memory
+with the error pass's companion)."""
 _CAMERA_CHUNK = 1 << 16
 """Pixels per chunk of a pass computed from camera rays alone (doppler): memory bounded."""
 TILES_PER_WORKER = 2
@@ -122,6 +126,7 @@ def render(
     observer: Any = "static",
     shift_colours: bool = True,
     client: Any = None,
+    device: str | Device = "cpu",
 ) -> RenderResult:
     """Render ``scene`` seen by ``camera`` (docs/design.md, "Rendering in the core").
 
@@ -145,8 +150,15 @@ def render(
     cluster (core.cluster); ``workers`` then defaults to the cluster's threads and sets
     the tiling, so the image equals a local render's with the same ``workers``, bit for
     bit. The disk's exposure probe stays local.
+    ``device``: "cpu" (numpy) or "cuda" (CuPy: core.backend; a core.backend.Device for
+    tests). On a device the frame is traced in as few batches as ``DEVICE_CHUNK`` allows,
+    one pixel-centre ray each (with ``tolerance_px``: every pixel at the step the sampler
+    would take, no interpolation), the intersectors and the shading on the host; images
+    equal the CPU's dense render at the same step. ``samples`` > 1 and ``client`` are
+    refused there.
     """
     passes = _check_render_call(passes, chunk_size, workers, cores)
+    dev = _device_for_render(device, samples, client)
     cluster_threads = cluster.check_client(client) if client is not None else None
     _check_sampling(tolerance_px, samples, pixel_filter, filter_size)
     check_observer(observer)
@@ -185,6 +197,8 @@ def render(
     image.camera, image.motion = camera, moving
     kind, count = _where_chunks_run(parallel, workers, n, cores, cluster_threads)
     sampled = samples > 1 or (tolerance_px is not None and tracer.curved)
+    if not dev.on_host:  # every pixel centre, in batches as large as the device holds
+        sampled, kind, count, chunk_size = False, "inline", 1, DEVICE_CHUNK
     if sampled:
         if tol.interpolation > 0 or samples > 1:  # blocks and anti-aliasing need clearance
             tracer.watch_geometry(_watch_margin(tracer, camera, tol.pixel_angle))
@@ -199,7 +213,7 @@ def render(
         middles = [((t.x0 + t.x1) / 2, (t.y0 + t.y1) / 2) for t in tile_list]
     else:
         chunks = _span_chunks(n, chunk_size, count)
-        work = _span_work(tracer, camera, with_error, tol.far_field, with_tangents)
+        work = _span_work(tracer, camera, with_error, tol.far_field, with_tangents, dev)
         middles = [(camera.width / 2, (a + b) / 2 / camera.width) for a, b in chunks]
     chunks = costliest_first(chunks, expected_cost_rank(camera, scene.center, middles))
     cancelled = workers_module.CancelLatch(should_cancel)
@@ -339,16 +353,21 @@ def _probe(scene: Scene, camera, probe: dict) -> tuple[np.ndarray, ...]:
     return np.isfinite(g), g, position, luminance
 
 
-def _span_work(tracer: Tracer, camera, with_error: bool, far_field: float, tangents: bool):
+def _span_work(
+    tracer: Tracer, camera, with_error: bool, far_field: float, tangents: bool,
+    device: Device = CPU,
+):  # fmt: skip
     """A chunk of flat pixel indices: one ray through each pixel centre (with its ray
-    differentials where ``tangents``)."""
+    differentials where ``tangents``), traced on ``device``."""
 
     def work(span, cancel):
         if cancel():
             return None
         origins, directions = camera.rays(*span)
         seen = camera.direction_tangents(camera.pixel_centres(*span)) if tangents else None
-        chunk = _trace_chunk(tracer, origins, directions, with_error, cancel, far_field, seen)
+        chunk = _trace_chunk(
+            tracer, origins, directions, with_error, cancel, far_field, seen, device
+        )
         if cancel():
             return None
         filter_surfaces(tracer.geometry, chunk[0], span[0], camera.width)
@@ -533,19 +552,48 @@ def tracer_for_camera(scene: Scene, options: TraceOptions, extent: float, positi
 
 
 def _trace_chunk(
-    tracer: Tracer, origins, directions, with_error: bool, cancel, far_field=0.0, tangents=None
-):
-    """Trace one chunk (with ``tangents``: the directions' derivatives along the image, for
-    the magnification pass); with the error pass, a companion run at COMPANION_RATIO x the
-    step."""
-    rays = tracer.trace(origins, directions, cancel=cancel, tangents=tangents)
+    tracer: Tracer, origins, directions, with_error: bool, cancel, far_field=0.0, tangents=None,
+    device: Device = CPU,
+):  # fmt: skip
+    """Trace one chunk on ``device`` (with ``tangents``: the directions' derivatives along
+    the image, for the magnification pass); with the error pass, a companion run at
+    COMPANION_RATIO x the step."""
+    rays = _traced_on(device, tracer, origins, directions, cancel=cancel, tangents=tangents)
     seen = seen_direction(rays, origins)
     if not with_error:
         return rays, seen, None
     assert tracer.step is not None and tracer.order is not None  # with_error: curved
-    coarse = tracer.trace(origins, directions, step=COMPANION_RATIO * tracer.step, cancel=cancel)
+    companion = COMPANION_RATIO * tracer.step
+    coarse = _traced_on(device, tracer, origins, directions, step=companion, cancel=cancel)
     error = richardson_error(rays, coarse, origins, tracer.order)
     return rays, seen, error + np.where(rays.ending == ENDING["escaped"], far_field, 0.0)
+
+
+def _traced_on(device: Device, tracer: Tracer, origins, directions, **options) -> RayResults:
+    """``tracer.trace`` of host rays on ``device``: the rays (and tangents) go there, their
+    results come back (core.backend)."""
+    if device.on_host:
+        return tracer.trace(origins, directions, **options)
+    tangents = options.pop("tangents", None)
+    if tangents is not None:
+        options["tangents"] = device.to_device(tangents)
+    return tracer.trace(
+        device.to_device(origins), device.to_device(directions), **options
+    ).to_host()
+
+
+def _device_for_render(device: str | Device, samples: int, client: Any) -> Device:
+    """The Device ``core.render``'s ``device`` names; ValueError for what a device
+    render does not take (``samples`` > 1, a cluster ``client``)."""
+    dev = device_of(device)
+    if not dev.on_host and samples > 1:
+        raise ValueError(
+            f"samples > 1 (anti-aliasing) runs on the CPU only; device {dev.name!r} traces "
+            "one ray per pixel centre"
+        )
+    if not dev.on_host and client is not None:
+        raise ValueError(f"a cluster client renders on the CPU; got device {dev.name!r}")
+    return dev
 
 
 class _Buffers:

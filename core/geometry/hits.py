@@ -20,6 +20,8 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from ..backend import array_module, placed
+
 _INF = np.inf
 
 
@@ -36,11 +38,12 @@ class Hits:
     color: np.ndarray  # (N, 4) float64
 
     @classmethod
-    def miss(cls, n: int) -> Hits:
-        """N segments that hit nothing."""
+    def miss(cls, n: int, like: Any = None) -> Hits:
+        """N segments that hit nothing (arrays of ``like``'s library: core.backend)."""
+        xp = array_module(like)
         return cls(
-            np.zeros(n, dtype=bool), np.full(n, _INF), np.full(n, -1, dtype=np.int32),
-            np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 2)), np.zeros((n, 4)),
+            xp.zeros(n, dtype=bool), xp.full(n, _INF), xp.full(n, -1, dtype=np.int32),
+            xp.zeros((n, 3)), xp.zeros((n, 3)), xp.zeros((n, 2)), xp.zeros((n, 4)),
         )  # fmt: skip
 
     @classmethod
@@ -50,6 +53,12 @@ class Hits:
 
     def __len__(self) -> int:
         return self.hit.shape[0]
+
+    def moved(self, xp: Any) -> Hits:
+        """These hits as arrays of the library ``xp`` (host hits onto a device)."""
+        return (
+            self if xp is np else Hits(*(xp.asarray(getattr(self, f.name)) for f in fields(self)))
+        )
 
     def take(self, rows: np.ndarray | slice) -> Hits:
         """The hits of the segments ``rows`` only (a slice or indices)."""
@@ -116,6 +125,7 @@ def _segments(a: Any, b: Any) -> tuple[np.ndarray, np.ndarray]:
 
 def segment_overlaps(a: np.ndarray, b: np.ndarray, lo: np.ndarray, hi: np.ndarray):
     """(N,) bool: the AABB of each segment a -> b overlaps the box [lo, hi]."""
+    lo, hi = placed(lo, a), placed(hi, a)
     return np.all((np.minimum(a, b) <= hi) & (np.maximum(a, b) >= lo), axis=1)
 
 

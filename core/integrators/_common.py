@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from ..backend import array_module
 from .system import FrozenQ, System, as_system
 
 State = tuple[np.ndarray, ...]
@@ -64,7 +65,7 @@ def as_soa(a: Any) -> np.ndarray:
 
     (Row order matters: per-ray reductions over the n rows, and every row view, are several
     times slower on a transposed (Fortran-ordered) block.)"""
-    return np.array(a, dtype=np.float64, order="C")
+    return array_module(a).array(a, dtype=np.float64, order="C")
 
 
 def flow(H: System, Z: np.ndarray) -> np.ndarray:

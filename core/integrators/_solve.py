@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from ..backend import array_module
+
 Phi = Callable[[np.ndarray, "np.ndarray | None"], np.ndarray]
 
 _EPS = np.finfo(np.float64).eps
@@ -75,11 +77,12 @@ def solve(
     # a batched linear solve, counted as much again: at 3 (2k + 1) two thirds of the rays of
     # a cheap H (Volterra, h = 0.25) went to Newton every step, 1.7x slower than iterating
     newton_cost = 6.0 * (2 * k + 1)
-    ok = np.zeros(N, dtype=bool)
-    to_newton = np.zeros(N, dtype=bool)
+    xp = array_module(W0)
+    ok = xp.zeros(N, dtype=bool)
+    to_newton = xp.zeros(N, dtype=bool)
     W_all: Any = None  # every ray's iterate, once the batch was narrowed
     ids, W, sc, prev = None, W0, scale, None
-    active = np.ones(N, dtype=bool)  # rays of the current batch still iterating
+    active = xp.ones(N, dtype=bool)  # rays of the current batch still iterating
     for _ in range(opts.max_iter):
         Wn = phi(W, ids)
         if not active.all():
@@ -102,7 +105,7 @@ def solve(
                 W_all[:, ids] = W
                 ids = ids[active]
             W, sc, prev = W[:, active], scale[:, ids], err[active]
-            active = np.ones(ids.size, dtype=bool)
+            active = xp.ones(ids.size, dtype=bool)
         else:
             prev = err
     else:
@@ -126,9 +129,10 @@ def newton(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Newton's method on W - phi(W) = 0 for the rays idx; -> (W (k, M), converged (M,))."""
     M = idx.size
-    ok = np.zeros(M, dtype=bool)
-    loc = np.arange(M)
-    prev = np.full(M, np.inf)
+    xp = array_module(W)
+    ok = xp.zeros(M, dtype=bool)
+    loc = xp.arange(M)
+    prev = xp.full(M, np.inf)
     for _ in range(opts.max_newton):
         Wa, rays, sc = W[:, loc], idx[loc], scale[:, loc]
         F = Wa - phi(Wa, rays)
@@ -151,20 +155,21 @@ def fd_jacobian(phi: Phi, W: np.ndarray, idx: np.ndarray, scale: np.ndarray) -> 
     """(M, k, k) Jacobian of W - phi(W) by central differences, all 2k perturbations in one call."""
     k, M = W.shape
     d = _FD_STEP * scale
-    E = np.eye(k)[:, :, None] * d[None]  # E[j, r] = delta_jr d_r
+    xp = array_module(W)
+    E = xp.eye(k)[:, :, None] * d[None]  # E[j, r] = delta_jr d_r
     pert = np.concatenate((W[None] + E, W[None] - E))  # (2k, k, M)
     pert = pert.transpose(1, 0, 2).reshape(k, 2 * k * M)
-    out = phi(pert, np.tile(idx, 2 * k)).reshape(k, 2 * k, M)
+    out = phi(pert, xp.tile(idx, 2 * k)).reshape(k, 2 * k, M)
     dphi = (out[:, :k] - out[:, k:]) / (2.0 * d[None])  # dphi[r, j] = d phi_r / d W_j
     J = -dphi.transpose(2, 0, 1)
-    J[:, np.arange(k), np.arange(k)] += 1.0
+    J[:, xp.arange(k), xp.arange(k)] += 1.0
     return J
 
 
 def batched_solve(J: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Solve J x = rhs per ray (J (M, k, k), rhs (k, M)); -> (x (k, M), solved (M,) bool)."""
     good = np.isfinite(J).all(axis=(1, 2)) & np.isfinite(rhs).all(axis=0)
-    x = np.full(rhs.shape, np.nan)
+    x = np.full_like(rhs, np.nan)
     if not good.any():
         return x, good
     Jg, bg = J[good], rhs[:, good].T[..., None]

@@ -161,7 +161,7 @@ class StormerVerlet(_KickDrift):
         """
         Q, P = state
         frozen = frozen_q(H, Q)
-        ok = np.ones(Q.shape[-1], dtype=bool)
+        ok = np.ones_like(Q[0], dtype=bool)
         for h in hs:
             half = 0.5 * h
             Ph, ok1 = implicit_momentum(H, Q, P, half, self.solver, frozen)
@@ -223,7 +223,7 @@ class Gauss4(_Implicit):
     def init(self, H: Any, Q: np.ndarray, P: np.ndarray) -> State:
         """(q, p, Y) with no polynomial yet (Y NaN)."""
         Q, P = as_soa(Q), as_soa(P)
-        return Q, P, np.full((2 * (Q.shape[0] + P.shape[0]),) + Q.shape[1:], np.nan)
+        return Q, P, np.full_like(Q, np.nan, shape=(2 * (Q.shape[0] + P.shape[0]),) + Q.shape[1:])
 
     @staticmethod
     def _stage_flows(H: Any, Z0: np.ndarray, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -236,7 +236,7 @@ class Gauss4(_Implicit):
         """Stage increments (4n, M) from the last polynomial; f(z0) where there is none."""
         m2 = Z0.shape[0]
         velocity, curvature = Y[:m2], Y[m2:]
-        W0 = np.empty((2 * m2,) + Z0.shape[1:])
+        W0 = np.empty_like(Z0, shape=(2 * m2,) + Z0.shape[1:])
         for i, rows in ((0, slice(0, m2)), (1, slice(m2, None))):
             ch = GAUSS4_C[i] * h
             np.multiply(velocity, ch, out=W0[rows])

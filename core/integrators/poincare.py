@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from ..backend import asarray
 from .system import FrozenQ, Gradient, System, ValueGradient, as_system
 
 
@@ -23,7 +24,7 @@ class PoincareTransformed(System):
 
     def __init__(self, H: Any, H0: Any = 0.0) -> None:
         self.H = as_system(H)
-        self.H0 = np.asarray(H0, dtype=np.float64)
+        self.H0 = asarray(H0, dtype=np.float64)
         self.dim = self.H.dim
 
     def subset(self, keep: np.ndarray) -> PoincareTransformed:

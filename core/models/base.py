@@ -15,6 +15,7 @@ import numpy as np
 
 from .. import checks
 from .. import expressions as ex
+from ..backend import array_module, is_array
 from ..charts import CartesianChart, Chart
 from ..dual import Dual
 from ..integrators.system import System
@@ -44,9 +45,7 @@ def blocked(method):
                 self,
                 Q[..., cut],
                 *(
-                    a[..., cut]
-                    if isinstance(a, np.ndarray) and a.ndim and a.shape[-1] == n_rays
-                    else a
+                    a[..., cut] if is_array(a) and a.ndim and a.shape[-1] == n_rays else a
                     for a in args
                 ),
                 **kwargs,
@@ -55,7 +54,8 @@ def blocked(method):
             parts = (part,) if single else part
             if out is None:
                 out = tuple(
-                    None if x is None else np.empty(np.shape(x)[:-1] + (n_rays,)) for x in parts
+                    None if x is None else np.empty_like(x, shape=x.shape[:-1] + (n_rays,))
+                    for x in parts
                 )
             for o, x in zip(out, parts, strict=True):
                 if o is not None:
@@ -189,7 +189,7 @@ class Hamiltonian(System):
         """(N,) whether light meets an interface at points (3, N) of the faces of its box
         (``bounds``): a medium whose index there differs from the vacuum outside. None by
         default."""
-        return np.zeros(X.shape[-1], dtype=bool)
+        return np.zeros_like(X[0], dtype=bool)
 
     def check_faces(self, points: np.ndarray) -> None:
         """ValueError where every one of ``points`` (3, N) on the box's faces is an
@@ -209,14 +209,13 @@ class Hamiltonian(System):
 
     def time_scale_soa(self, Q: np.ndarray):
         """Poincaré time-transformation g(q) and dg/dq (docs/design.md); default g = 1."""
-        n_rays = Q.shape[-1]
         if self._time_scale is None:
-            return np.ones(n_rays), np.zeros_like(Q)
+            return np.ones_like(Q[0]), np.zeros_like(Q)
         env: dict[str, object] = {
             name: Dual.variable(Q[i], i) for i, name in enumerate(self.coords)
         }
         (g,) = self._time_scale.evaluate(env)
-        return _value_and_partials(g, self.dim, n_rays, offset=0)
+        return _value_and_partials(g, self.dim, Q, offset=0)
 
     def invariants_soa(self, Q, P) -> dict[str, np.ndarray]:
         """Known constants of motion besides H (name -> (N,)); none by default."""
@@ -275,14 +274,16 @@ def _check_names(coords, momenta) -> None:
         raise ValueError(f"variable names clash with built-in names: {sorted(clash)}")
 
 
-def _value_and_partials(result, n: int, n_rays: int, offset: int):
-    """Split a Dual (or constant) into its value (N,) and partials rows offset..offset+n."""
+def _value_and_partials(result, n: int, like: Any, offset: int):
+    """Split a Dual (or constant) into its value (N,) and partials rows offset..offset+n,
+    arrays of ``like``'s library (the rays' coordinates (..., N))."""
     if isinstance(result, Dual):
         value, partials = result.v, result.d
     else:
         value, partials = result, {}
-    value = np.broadcast_to(np.asarray(value, dtype=np.float64), (n_rays,))
-    grad = np.zeros((n, n_rays))
+    n_rays, xp = like.shape[-1], array_module(like)
+    value = xp.broadcast_to(xp.asarray(value, dtype=np.float64), (n_rays,))
+    grad = xp.zeros((n, n_rays))
     for k, g in partials.items():
         if offset <= k < offset + n:
             grad[k - offset] = g

@@ -7,6 +7,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from .. import expressions as ex
+from ..backend import array_module
 from ..dual import Dual
 from .base import Hamiltonian, _value_and_partials, blocked
 
@@ -45,32 +46,33 @@ class ExpressionHamiltonian(Hamiltonian):
     def _evaluate(self, Q, P, wrt: str):
         env = self._env(Q, P, wrt)
         (h,) = self.program.evaluate(env)
-        bad = self._invalid(env, Q.shape[-1])
+        bad = self._invalid(env, Q)
         return h, bad
 
-    def _invalid(self, env, n_rays):
-        """Rays where a quantity that must be positive (e.g. n) is not: they get NaN."""
-        bad = None
+    def _invalid(self, env, Q):
+        """Rays (of coordinates Q (n, N)) where a quantity that must be positive (e.g. n)
+        is not: they get NaN."""
+        bad, xp = None, array_module(Q)
         for name in self.positive:
             v = env[name]
             v = v.v if isinstance(v, Dual) else v
-            mask = ~(np.asarray(v) > 0)
+            mask = ~(xp.asarray(v) > 0)
             bad = mask if bad is None else (bad | mask)
-        return None if bad is None else np.broadcast_to(bad, (n_rays,))
+        return None if bad is None else xp.broadcast_to(bad, (Q.shape[-1],))
 
     @blocked
     def value_soa(self, Q, P):
         h, bad = self._evaluate(Q, P, "")
-        h = np.array(np.broadcast_to(h, (Q.shape[-1],)), dtype=np.float64)
+        xp = array_module(Q)
+        h = xp.array(xp.broadcast_to(xp.asarray(h), (Q.shape[-1],)), dtype=np.float64)
         if bad is not None:
             h[bad] = np.nan
         return h
 
     def _value_gradient(self, Q, P, wrt):
         h, bad = self._evaluate(Q, P, wrt)
-        n_rays = Q.shape[-1]
-        value, dq = _value_and_partials(h, self.dim, n_rays, 0)
-        _, dp = _value_and_partials(h, self.dim, n_rays, self.dim)
+        value, dq = _value_and_partials(h, self.dim, Q, 0)
+        _, dp = _value_and_partials(h, self.dim, Q, self.dim)
         if bad is not None and bad.any():
             value = value.copy()
             value[bad] = np.nan

@@ -206,7 +206,7 @@ class KerrSchild(Hamiltonian):
         dr = np.zeros_like(Q)
         for j, g in r.d.items():
             dr[j] = g
-        return np.array(r.v), dr
+        return r.v.copy(), dr
 
     @blocked
     def poincare_soa(self, Q, P, H0, wrt: str = "qp"):
@@ -220,7 +220,7 @@ class KerrSchild(Hamiltonian):
 
     def radius_at(self, X: np.ndarray) -> np.ndarray:
         """Kerr–Schild r at local Cartesian positions X (3, N)."""
-        return self.radius_soa(np.vstack([np.zeros((1, X.shape[1])), X]))
+        return self.radius_soa(np.concatenate([np.zeros_like(X[:1]), X]))
 
     def radius_soa(self, Q):
         """Kerr–Schild r > 0 from r^4 - (x^2+y^2+z^2-a^2) r^2 - a^2 z^2 = 0."""

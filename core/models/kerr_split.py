@@ -54,6 +54,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .. import dual
+from ..backend import asarray, is_array
 from ..charts import KerrBLChart
 from ..dual import DualRows
 from ..integrators.splitting import SplitSystem
@@ -284,7 +285,7 @@ class SqrtSplit(SplitSystem):
 
     def __init__(self, model: KerrBoyerLindquist, H0) -> None:
         self.model = model
-        self.H0 = np.asarray(H0, dtype=np.float64)
+        self.H0 = asarray(H0, dtype=np.float64)
         self.dim = 4
         self.c0 = C0 * model.mass**2
         self._kept: tuple | None = None  # (rows, theta, its sines): _sines
@@ -336,7 +337,7 @@ class SqrtSplit(SplitSystem):
         computes them: rho and down, to rounding), else computed (for Duals: None)."""
         if isinstance(Q, DualRows):
             theta = Q.value[2]
-        elif isinstance(Q, np.ndarray):
+        elif is_array(Q):
             theta = Q[2]
         else:
             return None  # rows of Duals (tests): the plain code takes its own
@@ -349,7 +350,7 @@ class SqrtSplit(SplitSystem):
 
     def _keep_sines(self, Q: Any, sines) -> None:
         """Keep (sin theta, cos theta) of the rows Q as a drift left them (``_sines``)."""
-        if sines is not None and isinstance(Q, DualRows | np.ndarray):
+        if sines is not None and (isinstance(Q, DualRows) or is_array(Q)):
             theta = Q.value[2] if isinstance(Q, DualRows) else Q[2]
             self._kept = (Q, theta.copy(), sines)
 
@@ -473,7 +474,7 @@ def sphere_geodesic(Q: np.ndarray, P: np.ndarray, c, sines=None):
         cw = dual.cos(omega)
         sw = dual.sin(omega) / dual.where(dual.value_of(size) > 0, size, np.inf)
     rho, down = _turn_end(Q, P, (st, ct), spin, cw, sw)
-    return (rho, down) if isinstance(rho, np.ndarray) else None
+    return (rho, down) if is_array(rho) else None
 
 
 def _turn_end(Q: Any, P: Any, sines, spin, cw, sw):

@@ -8,6 +8,7 @@ import numpy as np
 
 from .. import checks
 from .. import expressions as ex
+from ..backend import array_module
 from ..dual import Dual
 from .base import _value_and_partials
 from .expression import ExpressionHamiltonian
@@ -49,13 +50,12 @@ class Medium(ExpressionHamiltonian):
         """w(q) of the explicit split and its gradient (3, N) (None if not asked for):
         w = n^2 (physical H, Poincaré g = n^2) or 1/n (literal H, g = 1/n); NaN where n <= 0.
         """
-        n_rays = Q.shape[-1]
         env: dict[str, object] = {
             name: (Dual.variable(Q[i], i) if derivatives else Q[i])
             for i, name in enumerate(self.coords)
         }
         (n,) = self._index_program.evaluate(env)
-        n, dn = _value_and_partials(n, 3, n_rays, offset=0)
+        n, dn = _value_and_partials(n, 3, Q, offset=0)
         with np.errstate(all="ignore"):
             n = np.where(n > 0, n, np.nan)
             if self.literal:
@@ -76,7 +76,8 @@ class Medium(ExpressionHamiltonian):
     def index_soa(self, Q) -> np.ndarray:
         """The refractive index (the user's n, or the seed's literal n) at positions (3, N)."""
         n = self._index({"x": Q[0], "y": Q[1], "z": Q[2]})
-        return np.broadcast_to(np.asarray(n, dtype=np.float64), (Q.shape[-1],))
+        xp = array_module(Q)
+        return xp.broadcast_to(xp.asarray(n, dtype=np.float64), (Q.shape[-1],))
 
     @property
     def has_kinks(self) -> bool:
@@ -90,12 +91,11 @@ class Medium(ExpressionHamiltonian):
         ``derivatives``, also their gradients (K, 3, N). None: n is smooth."""
         if self._kinks is None:
             return None
-        n_rays = Q.shape[-1]
         env: dict[str, object] = {
             name: (Dual.variable(Q[i], i) if derivatives else Q[i])
             for i, name in enumerate(self.coords)
         }
-        parts = [_value_and_partials(f, 3, n_rays, 0) for f in self._kinks.evaluate(env)]
+        parts = [_value_and_partials(f, 3, Q, 0) for f in self._kinks.evaluate(env)]
         values = np.stack([v for v, _ in parts])
         return (values, np.stack([g for _, g in parts])) if derivatives else values
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..backend import asarray
 from ..integrators.splitting import SplitSystem
 
 
@@ -27,7 +28,7 @@ class OpticalSplit(SplitSystem):
 
     def __init__(self, medium, H0, clocked: bool = False) -> None:
         self.medium = medium
-        self.H0 = np.asarray(H0, dtype=np.float64)
+        self.H0 = asarray(H0, dtype=np.float64)
         self.clocked = clocked
         self.dim = 4 if clocked else 3
         self.separable = not clocked  # clocked: V depends on p_s; its kick is still exact

@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from .. import expressions as ex
+from ..backend import array_module
 from ..dual import Dual
 from ..integrators.system import FrozenQ
 from .base import Hamiltonian, blocked
@@ -86,9 +87,10 @@ class MetricHamiltonian(Hamiltonian):
         need_q, need_p = "q" in want, "p" in want
         need_h = "v" in want or (need_q and H0 is not None and isinstance(scale, Dual))
         # (Any: each is an array exactly where it is wanted, None elsewhere)
-        h: Any = np.zeros(n_rays) if need_h else None
-        dq: Any = np.zeros((n, n_rays)) if need_q else None
-        dp: Any = np.zeros((n, n_rays)) if need_p else None
+        xp = array_module(P)
+        h: Any = xp.zeros(n_rays) if need_h else None
+        dq: Any = xp.zeros((n, n_rays)) if need_q else None
+        dp: Any = xp.zeros((n, n_rays)) if need_p else None
         for (i, j), g in zip(self.pairs, entries, strict=True):
             w = 0.5 if i == j else 1.0
             gv = g.v if isinstance(g, Dual) else g
@@ -120,8 +122,7 @@ class MetricHamiltonian(Hamiltonian):
 
     @blocked
     def value_soa(self, Q, P):
-        n_rays = Q.shape[-1]
-        h = np.zeros(n_rays)
+        h = np.zeros_like(P[0])
         for (i, j), g in zip(self.pairs, self.inverse_metric_soa(Q, seed=False), strict=True):
             w = 0.5 if i == j else 1.0
             h += w * g * P[i] * P[j]

@@ -27,6 +27,7 @@ import math
 import numpy as np
 
 from .. import dual
+from ..backend import asarray, is_array
 from ..charts import IsotropicChart
 from ..dual import DualRows
 from ..integrators.splitting import SplitSystem
@@ -126,7 +127,7 @@ class LogarithmicSplit(SplitSystem):
 
     def __init__(self, model: SchwarzschildOptical, H0) -> None:
         self.model = model
-        self.H0 = np.asarray(H0, dtype=np.float64)
+        self.H0 = asarray(H0, dtype=np.float64)
         self.dim = 3
 
     def subset(self, keep) -> LogarithmicSplit:
@@ -138,7 +139,7 @@ class LogarithmicSplit(SplitSystem):
         ρ = M/2. Written row by row with core.dual's functions: on rows carrying
         derivatives (core.dual.DualRows) it gives f's as well, f being a function of ρ²
         alone (its derivative is taken with one scalar seed, then chained)."""
-        if isinstance(Q, np.ndarray):
+        if is_array(Q):
             return self._radial_factor(np.einsum("ij,ij->j", Q, Q))
         rho2 = Q[0] * Q[0] + Q[1] * Q[1] + Q[2] * Q[2]
         if isinstance(rho2, dual.Dual):
@@ -208,7 +209,7 @@ class LogarithmicSplit(SplitSystem):
             Q.tangent += dc[:, None, :] * p
             Q.value += c * p
             return
-        if isinstance(P, np.ndarray):
+        if is_array(P):
             c = t / (0.5 * np.einsum("ij,ij->j", P, P) - self.H0)
         else:  # rows of Duals
             c = t / (0.5 * (P[0] * P[0] + P[1] * P[1] + P[2] * P[2]) - self.H0)

@@ -101,7 +101,7 @@ class SphericalSpacetime(MetricHamiltonian):
     def captured_soa(self, Q) -> np.ndarray:
         """Rays at r < 1.01 r+ (N,): the Poincaré step only reaches r+ asymptotically here,
         and an ingoing photon that close to the horizon cannot come back out."""
-        return Q[1] < 1.01 * self.horizon if self.horizon > 0 else np.zeros(Q.shape[1], bool)
+        return Q[1] < 1.01 * self.horizon if self.horizon > 0 else np.zeros_like(Q[0], bool)
 
     def invariants_soa(self, Q, P):
         """E = -p_t, L = p_phi and the Carter constant (photons, mu = 0)."""

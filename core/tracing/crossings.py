@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..backend import array_module
 from ..geometry import Hits
 from . import dense
 from .disk_landing import land_on_disk
@@ -73,7 +74,7 @@ def along_paths(
     (disklight.land_on_disk). -> (M,) bool: the rays that hit a surface (recorded in ``out``);
     ``until`` (M,) takes, in place, the fraction of the step at each one's hit.
     """
-    hit_rows = np.zeros(idx.shape[0], dtype=bool)
+    hit_rows = np.zeros_like(idx, dtype=bool)
     c, X0, X1, V0, V1, h = paths.rows, paths.X0, paths.X1, paths.V0, paths.V1, paths.h
     if c.size == 0:
         return hit_rows
@@ -84,8 +85,8 @@ def along_paths(
         hg = h if np.ndim(h) == 0 else h[g]
         path = dense.CubicPath(X0[:, g], V0[:, g], X1[:, g], V1[:, g], hg)
         limits = (paths.deviation[g] / (n * n), paths.allowed[g])
-        groups.append(ChordGroup(c[g], path, int(n), limits, np.zeros(g.size, np.int64),
-                                 np.arange(g.size)))  # fmt: skip
+        groups.append(ChordGroup(c[g], path, int(n), limits, np.zeros_like(g, np.int64),
+                                 array_module(g).arange(g.size)))  # fmt: skip
     while groups := [group for group in groups if group.going.size]:
         firsts = [first_hits(tracer, group) for group in groups]
         hits = Hits.concatenate([first.hits for first in firsts])
@@ -122,13 +123,13 @@ def record_chords(
     """
     rays = group.going
     start, cols = group.start[rays], group.cols[rays]
-    ended = np.zeros(rays.size, dtype=bool)
+    ended = np.zeros_like(rays, dtype=bool)
     for j in range(int(start.min()), group.n):
         live = np.flatnonzero((start <= j) & (first.stop >= j))
         if live.size == 0:
             break
         a, b = first.ends[j, live], first.ends[j + 1, live]
-        hits = Hits.miss(live.size)
+        hits = Hits.miss(live.size, live)
         at = np.flatnonzero(first.stop[live] == j)
         hits.assign(at, first.hits, live[at])
         if tracer.disk is None or tracer.disk.opaque:
@@ -153,14 +154,14 @@ def first_hits(tracer: TracerState, group: ChordGroup) -> FirstHits:
     """Cast the chords of ``group``'s going rays all at once, each ray's from its start;
     each ray's first hit refined on the cubic (refine)."""
     rays = group.going
-    n, k = group.n, rays.size
-    points = group.path.points(np.arange(n + 1) / n, rays).reshape(3, -1)
+    n, k, xp = group.n, rays.size, array_module(rays)
+    points = group.path.points(xp.arange(n + 1) / n, rays).reshape(3, -1)
     ends = tracer._to_world(points.T).reshape(n + 1, k, 3)
     cast = tracer.geometry.cast(ends[:-1].reshape(-1, 3), ends[1:].reshape(-1, 3))
-    got = cast.hit.reshape(n, k) & (np.arange(n)[:, None] >= group.start[rays])
+    got = cast.hit.reshape(n, k) & (xp.arange(n)[:, None] >= group.start[rays])
     found = got.any(axis=0)
     stop = np.where(found, got.argmax(axis=0), n - 1)
-    hits = cast.take(stop * k + np.arange(k))
+    hits = cast.take(stop * k + xp.arange(k))
     guess = stop / n
     on = np.flatnonzero(found)
     guess[on] = dense.on_cubic(group.path, rays[on], stop[on] / n, 1.0 / n, hits.t[on])
@@ -183,14 +184,15 @@ def refine(
     deviation, allowed = limits
     allowed = allowed * dense.HIT_SHARE
     todo = np.flatnonzero(hits.hit & (deviation > allowed))
-    lo = np.broadcast_to(np.asarray(t0, dtype=np.float64), live.shape)[todo]
+    xp = array_module(live)
+    lo = xp.broadcast_to(xp.asarray(t0, dtype=np.float64), live.shape)[todo]
     guess = guess.copy()
     m = dense.REFINE_PIECES
     for _ in range(dense.REFINE_LEVELS):
         if todo.size == 0:
             break
         width /= m
-        ta = (np.arange(m + 1) * width)[:, None] + lo  # (m + 1, R): sub-chords' ends
+        ta = (xp.arange(m + 1) * width)[:, None] + lo  # (m + 1, R): sub-chords' ends
         ends = tracer._to_world(path.points(ta, live[todo]).reshape(3, -1).T)
         ends = ends.reshape(m + 1, todo.size, 3)  # sub-chord i of ray k: i -> i + 1
         sub = tracer.geometry.cast(ends[:-1].reshape(-1, 3), ends[1:].reshape(-1, 3))
@@ -220,9 +222,9 @@ def surface_crossing(
     on = np.flatnonzero(hits.hit & (hits.object_id != DISK_ID))
     if on.size == 0:
         return
-    found = Hits.miss(on.size)
+    found = Hits.miss(on.size, on)
     h = step_ends.h if np.ndim(step_ends.h) == 0 else step_ends.h[cols[on]]
-    beside = np.zeros(on.size, dtype=bool)  # the method's point passes the object by
+    beside = np.zeros_like(on, dtype=bool)  # the method's point passes the object by
 
     def to_surface(todo, X, V):
         # both ways along V, as far as the step reaches: the nearer hit on the object

@@ -23,6 +23,8 @@ import math
 
 import numpy as np
 
+from ..backend import array_module
+
 MAX_PIECES = 16
 """At most this many chords per step to look for surfaces (the deviation shrinks 256-fold)."""
 REFINE_PIECES, REFINE_LEVELS = 16, 1
@@ -60,7 +62,8 @@ class CubicPath:
 
     def __init__(self, X0: np.ndarray, V0: np.ndarray, X1: np.ndarray, V1: np.ndarray, h):
         self.X0, self.V0, self.X1, self.V1 = X0, V0, X1, V1
-        self.h = np.broadcast_to(np.asarray(h, dtype=np.float64), X0.shape[1:])
+        xp = array_module(X0)
+        self.h = xp.broadcast_to(xp.asarray(h, dtype=np.float64), X0.shape[1:])
 
     @property
     def size(self) -> int:
@@ -75,7 +78,7 @@ class CubicPath:
     def points(self, ts: np.ndarray, rays: np.ndarray) -> np.ndarray:
         """Points (3, T, len(rays)) of the rays ``rays`` at T parameters each: ``ts`` (T,)
         shared, or (T, len(rays)) per ray (each ray's ends gathered once)."""
-        ts = np.asarray(ts, dtype=np.float64)
+        ts = array_module(self.X0).asarray(ts, dtype=np.float64)
         return hermite(self.X0[:, None, rays], self.V0[:, None, rays], self.X1[:, None, rays],
                        self.V1[:, None, rays], self.h[rays],
                        ts[:, None] if ts.ndim == 1 else ts)  # fmt: skip
@@ -96,16 +99,17 @@ def on_cubic(path: CubicPath, rays: np.ndarray, t0, width: float, fraction) -> n
     hV0, hV1 = path.h[rays] * path.V0[:, rays], path.h[rays] * path.V1[:, rays]
     # X(t) = X0 + B t + C t^2 + D t^3 (the Hermite basis of the module's docstring)
     B, C, D = hV0, 3.0 * (X1 - X0) - 2.0 * hV0 - hV1, 2.0 * (X0 - X1) + hV0 + hV1
-    lo = np.broadcast_to(np.asarray(t0, dtype=np.float64), rays.shape)
+    xp = array_module(X0)
+    lo = xp.broadcast_to(xp.asarray(t0, dtype=np.float64), rays.shape)
     hi = lo + width
     a = hermite(X0, hV0, X1, hV1, 1.0, lo)
     chord = hermite(X0, hV0, X1, hV1, 1.0, hi) - a
     with np.errstate(divide="ignore", invalid="ignore"):
         d = chord / np.einsum("im,im->m", chord, chord)  # along(t) = (X(t) - a) . d
         b, c, e = (np.einsum("im,im->m", v, d) for v in (B, C, D))
-        start = lo + np.asarray(fraction) * width
+        start = lo + xp.asarray(fraction) * width
         t = start.copy()
-        target = np.asarray(fraction) + np.einsum("im,im->m", a - X0, d)
+        target = xp.asarray(fraction) + np.einsum("im,im->m", a - X0, d)
         for _ in range(NEWTON_STEPS):
             slope = b + t * (2.0 * c + 3.0 * e * t)
             t = np.clip(t - (t * (b + t * (c + e * t)) - target) / slope, lo, hi)
@@ -142,7 +146,7 @@ def pieces(deviation: np.ndarray, allowed: np.ndarray) -> np.ndarray:
     """(M,) chords per step: the power of two k <= MAX_PIECES with deviation / k² <= allowed."""
     with np.errstate(divide="ignore", invalid="ignore"):
         need = np.sqrt(deviation / allowed)
-    k = np.ones(deviation.shape, dtype=np.int64)
+    k = np.ones_like(deviation, dtype=np.int64)
     while True:
         more = (k < need) & (k < MAX_PIECES)
         if not more.any():

@@ -18,6 +18,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from ..backend import array_module
+
 FD_STEP = 1e-6
 """Relative step of the central differences of the closed-form maps (see the module)."""
 RADIAL = 1e-7
@@ -124,7 +126,7 @@ def _radial_frame(axis, d, tangents) -> tuple[np.ndarray, np.ndarray]:
     across = tangents - np.einsum("mkj,mj->mk", tangents, d)[..., None] * d[:, None]
     sizes = np.linalg.norm(across, axis=2)
     pick = np.argmax(sizes, axis=1)
-    rows = np.arange(d.shape[0])
+    rows = array_module(d).arange(d.shape[0])
     e_in = across[rows, pick] / sizes[rows, pick][:, None]
     e_out = np.cross(axis, e_in) + np.einsum("ij,ij->i", axis, e_in)[:, None] * axis
     return e_in, e_out

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..backend import placed
 from .scene import DISK_ID
 from .segments import RayResults
 from .step_ends import StepEnds
@@ -34,10 +35,10 @@ def land_on_disk(
     X, ok = step_ends.plane_crossing(cols, u)
     rows = idx[cols]
     world = tracer._to_world(X.T)
-    off = np.zeros(cols.size, dtype=bool)
+    off = np.zeros_like(cols, dtype=bool)
     if ok.any():
         # across the plane (found to share |X|), along its normal
-        near = 1e-3 * np.linalg.norm(X[:, ok], axis=0)[:, None] * tracer.rotation[:, 2]
+        near = 1e-3 * np.linalg.norm(X[:, ok], axis=0)[:, None] * placed(tracer.rotation, X)[:, 2]
         across = tracer.geometry.cast(world[ok] - near, world[ok] + near)
         off[ok] = ~(across.hit & (across.object_id == DISK_ID))
     out.position[rows[ok]] = world[ok]

@@ -108,7 +108,7 @@ class DiskLight:
         volumes' light before it), keeps (1 - opacity) of what lies behind and goes on to
         the chord's end (cast again without the disk: a surface there ends it)."""
         cross = hits.hit & (hits.object_id == DISK_ID)
-        got = np.zeros(rows.shape[0], dtype=bool)
+        got = np.zeros_like(rows, dtype=bool)
         other = np.flatnonzero(~cross)
         got[other] = self.geometry.record_hits(rows[other], a[other], b[other],
                                                hits.take(other), out)  # fmt: skip
@@ -116,7 +116,7 @@ class DiskLight:
         if on.size == 0:
             return got
         r, p = rows[on], hits.position[on]
-        out.accumulate(r, *self.geometry.volume_light(a[on], p, Hits.miss(on.size)))
+        out.accumulate(r, *self.geometry.volume_light(a[on], p, Hits.miss(on.size, on)))
         rgb, bad = self._light(r, p, state, on, out)
         alpha = self.disk.opacity
         out.radiance[r] += (alpha * out.transmittance[r])[:, None] * rgb

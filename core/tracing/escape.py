@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..backend import placed
 from ..integrators.batch import Batch
 from .differentials import axial_final, directional, unit_directional
 from .regions import BoxRegion
@@ -71,7 +72,8 @@ def straight_to_region(
         X0 = tracer._to_local(a[miss])
 
         def far(d_world: np.ndarray) -> np.ndarray:
-            return far_field(tracer.mass, X0, d_world @ tracer.rotation) @ tracer.rotation.T
+            R = placed(tracer.rotation, X0)
+            return far_field(tracer.mass, X0, d_world @ R) @ R.T
 
         out.direction[rows[miss]] = far(directions[rows[miss]])
         out.ending[rows[miss]] = ENDING["escaped"]
@@ -127,7 +129,7 @@ def leave_at_boundary(
     the crossing did not converge the step's end stands: ``escape``)."""
     region = tracer.region
     assert region is not None
-    done = np.zeros(X.shape[1], dtype=bool)
+    done = np.zeros_like(X[0], dtype=bool)
     u = region.exit_time(X_prev[:, cols], X[:, cols] - X_prev[:, cols])
     crossing, ok, V = ends.crossing(
         cols, np.clip(np.nan_to_num(u, nan=1.0), 0.0, 1.0),
@@ -138,14 +140,14 @@ def leave_at_boundary(
     if not ok.any():
         return done
     rows = cols[ok]
-    bad = np.zeros(rows.size, dtype=bool)
+    bad = np.zeros_like(rows, dtype=bool)
     if isinstance(region, BoxRegion):  # a medium's box
         bad = tracer.model.face_jump(crossing[:, ok])
     if bad.any():  # an interface the medium's box cuts: no plausible colour
         out.ending[idx[rows[bad]]] = ENDING["failed"]
         out.position[idx[rows[bad]]] = tracer._to_world(crossing[:, ok][:, bad].T)
     go = ~bad
-    D = (V[:, ok][:, go] / np.linalg.norm(V[:, ok][:, go], axis=0)).T @ tracer.rotation.T
+    D = (V[:, ok][:, go] / np.linalg.norm(V[:, ok][:, go], axis=0)).T @ placed(tracer.rotation, V).T
     world = tracer._to_world(crossing[:, ok][:, go].T)
     eye = tracer._to_world(ends.camera[:, rows[go]].T)
     straight(tracer, idx[rows[go]], world, D, out, eye)
@@ -175,7 +177,7 @@ def escape(
         dZ = np.moveaxis(np.concatenate(tangents, axis=1), -1, 0)  # (M, k, 2n)
         jacobian = directional(direction, Z, dZ)
         if shares is not None:  # the cameras' axes: eye - centre, in world axes
-            axis = eye - tracer.scene.center
+            axis = eye - placed(tracer.scene.center, eye)
             axis /= np.linalg.norm(axis, axis=1, keepdims=True)
             jacobian = axial_final(shares, jacobian, d_world, axis)
         sky = out.ending[rows] == ENDING["escaped"]
@@ -189,7 +191,7 @@ def escape_direction(tracer: TracerState, Q: np.ndarray, P: np.ndarray) -> np.nd
     _, dHdp = tracer.model.gradient_soa(Q, P, wrt="p")
     V = tracer.chart.cartesian_velocity(S, dHdp[tracer.chart.offset :])
     D = (V / np.linalg.norm(V, axis=0)).T
-    return far_field(tracer.mass, tracer.chart.to_cartesian(S).T, D) @ tracer.rotation.T
+    return far_field(tracer.mass, tracer.chart.to_cartesian(S).T, D) @ placed(tracer.rotation, D).T
 
 
 def far_field(mass: float, X: np.ndarray, D: np.ndarray) -> np.ndarray:

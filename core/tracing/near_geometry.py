@@ -105,7 +105,7 @@ def near_paths(
     near &= segment_overlaps(low.T, high.T, *tracer._near)  # their bounds, as boxes
     if tracer._near_boxes is not None and near.any():  # each object's own box
         rows = np.flatnonzero(near)
-        any_box = np.zeros(rows.size, dtype=bool)
+        any_box = np.zeros_like(rows, dtype=bool)
         for lo, hi in tracer._near_boxes:
             any_box |= segment_overlaps(low[:, rows].T, high[:, rows].T, lo, hi)
         near[rows[~any_box]] = False
@@ -152,8 +152,8 @@ def bent_steps(
     (its own control)."""
     h, h0, heading = arrays["h"], arrays["h0"], arrays["heading"]
     if tracer.options.step is not None or tracer.method.adaptive:
-        return np.zeros(h.shape, dtype=bool)  # a step given is taken as given; dopri5
-    near = np.zeros(h.shape, dtype=bool)
+        return np.zeros_like(h, dtype=bool)  # a step given is taken as given; dopri5
+    near = np.zeros_like(h, dtype=bool)
     near[paths.rows] = True
     scale = h0 / tracer.step  # a run at r x the rule's step keeps r x its steps here
     turn_limit, bend_limit = TURN_LIMIT * scale, BEND_LIMIT * scale[paths.rows] ** 2

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from .. import checks, integrators
+from ..backend import placed
 from ..charts import chart_for
 from ..models.medium import FACE_SAMPLES
 from .regions import BoxRegion, Region, region_for
@@ -140,7 +141,7 @@ class PlacedPlan:
         self.mass = self.model.mass if self.curved else 0.0
 
     def _to_local(self, world: np.ndarray) -> np.ndarray:
-        return (world - self.scene.center) @ self.rotation
+        return (world - placed(self.scene.center, world)) @ placed(self.rotation, world)
 
     def _to_world(self, local: np.ndarray) -> np.ndarray:
-        return local @ self.rotation.T + self.scene.center
+        return local @ placed(self.rotation, local).T + placed(self.scene.center, local)

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from ..backend import array_module, to_host
 from ..geometry import Group, Hits, Intersector, filters, segment_overlaps
 from ..geometry.hits import box_corners, part_bounds, reported_id
 from ..mipmap import surface_footprint
@@ -51,30 +52,35 @@ class RayResults:
     @classmethod
     def empty(cls, n: int, origins: np.ndarray, directions: np.ndarray) -> RayResults:
         """N rays not ended yet (ending -1) at their origins, with nothing collected."""
+        xp = array_module(origins)
         return cls(
-            ending=np.full(n, -1, dtype=np.int8),
+            ending=xp.full(n, -1, dtype=np.int8),
             direction=directions.copy(),
             position=origins.copy(),
-            surface=np.zeros((n, 4)),
-            radiance=np.zeros((n, 3)),
-            transmittance=np.ones(n),
-            steps=np.zeros(n, dtype=np.int32),
-            energy_error=np.zeros(n),
-            redshift=np.full(n, np.nan),
-            clearance=np.full(n, np.inf),
-            clearance_box=np.full(n, -1, dtype=np.int64),
-            clearance_other=np.full(n, np.inf),
-            object_id=np.full(n, -1, dtype=np.int32),
-            tangent=np.zeros((n, 3)),
-            doppler=np.ones(n),
-            sky_jacobian=np.zeros((n, 0, 3)),
-            magnification=np.full(n, np.nan),
-            kinks=np.zeros(n, dtype=np.int64),
+            surface=xp.zeros((n, 4)),
+            radiance=xp.zeros((n, 3)),
+            transmittance=xp.ones(n),
+            steps=xp.zeros(n, dtype=np.int32),
+            energy_error=xp.zeros(n),
+            redshift=xp.full(n, np.nan),
+            clearance=xp.full(n, np.inf),
+            clearance_box=xp.full(n, -1, dtype=np.int64),
+            clearance_other=xp.full(n, np.inf),
+            object_id=xp.full(n, -1, dtype=np.int32),
+            tangent=xp.zeros((n, 3)),
+            doppler=xp.ones(n),
+            sky_jacobian=xp.zeros((n, 0, 3)),
+            magnification=xp.full(n, np.nan),
+            kinks=xp.zeros(n, dtype=np.int64),
         )
 
     def take(self, rows: slice | np.ndarray) -> RayResults:
         """The results of the rays ``rows`` (a slice or indices)."""
         return RayResults(**{f.name: getattr(self, f.name)[rows] for f in fields(self)})
+
+    def to_host(self) -> RayResults:
+        """These results with every field a numpy array (from a device: core.backend)."""
+        return RayResults(**{f.name: to_host(getattr(self, f.name)) for f in fields(self)})
 
     def accumulate(
         self, rows: np.ndarray, radiance: np.ndarray | None, trans: np.ndarray | None
@@ -103,7 +109,7 @@ class SceneGeometry:
     ) -> np.ndarray:
         """Record ``hits`` (of segments a -> b, possibly refined) and the volumes' light up
         to them in ``out``. Returns which segments hit a surface (M,)."""
-        rad, trans = self.volume_light(a, b, hits)
+        rad, trans = self._volume_light_on(array_module(a), a, b, hits)
         out.accumulate(rows, rad, trans)
         h = hits.hit
         out.ending[rows[h]] = ENDING["hit"]
@@ -125,7 +131,12 @@ class SceneGeometry:
 
         When most segments are near, all of them go (an intersector answers misses for the
         others; cheaper than gathering the near ones and scattering their hits back).
+        Intersectors work on the host (the Intersector protocol): a device's segments go
+        there and their hits come back (core.backend).
         """
+        xp = array_module(a)
+        if xp is not np:
+            return self.cast(to_host(a), to_host(b), to_host(footprint)).moved(xp)
         lo, hi = self.objects.bounds
         if np.any(lo > hi):  # an empty group; infinite planes have infinite bounds
             return Hits.miss(a.shape[0])
@@ -158,6 +169,14 @@ class SceneGeometry:
         reach = (reach + 1e-9 * (1.0 + np.linalg.norm(position, axis=1)))[:, None]
         hits = self.cast(position - reach * tangent, position + reach * tangent, footprint)
         return hits.color, hits.hit & (hits.object_id == object_id)
+
+    def _volume_light_on(self, xp: Any, a: np.ndarray, b: np.ndarray, hits: Hits) -> tuple:
+        """``volume_light`` of a device's segments, worked out on the host (volumes, like
+        intersectors, are host code), as arrays of ``xp``."""
+        if xp is np or not self.volumes:
+            return self.volume_light(a, b, hits)
+        host = Hits(*(to_host(getattr(hits, f.name)) for f in fields(hits)))
+        return tuple(xp.asarray(x) for x in self.volume_light(to_host(a), to_host(b), host))
 
     def volume_light(
         self, a: np.ndarray, b: np.ndarray, hits: Hits

@@ -45,7 +45,7 @@ def start_results(
     if shift is not None:
         out.doppler = shift
     if tangents is not None:
-        out.sky_jacobian = np.full(tangents.shape, np.nan)
+        out.sky_jacobian = np.full_like(tangents, np.nan)
     return out, tangents
 
 

@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..backend import array_module
+
 if TYPE_CHECKING:
     from .tracer_state import TracerState
 
@@ -85,13 +87,14 @@ class StepEnds:
         K = self.K.subset(rows)
         Q0, P0 = (x[:, rows] for x in self.start)
         h = self.h if np.ndim(self.h) == 0 else self.h[rows]
-        u = np.asarray(u, dtype=np.float64).copy()
-        X = np.full((3, rows.size), np.nan)
-        velocity = np.full((3, rows.size), np.nan)
-        ok = np.zeros(rows.size, dtype=bool)
+        xp = array_module(rows)
+        u = xp.asarray(u, dtype=np.float64).copy()
+        X = xp.full((3, rows.size), np.nan)
+        velocity = xp.full((3, rows.size), np.nan)
+        ok = xp.zeros(rows.size, dtype=bool)
         share = CROSSING_SHARE * self.tracer.options.tolerance
         reach = 0.0 if strict else CROSSING_REACH * math.sqrt(share)
-        todo = np.arange(rows.size)  # the rays not yet there
+        todo = xp.arange(rows.size)  # the rays not yet there
         with np.errstate(all="ignore"):
             for _ in range(CROSSING_ITERATIONS):
                 Kt = K.subset(todo) if todo.size < rows.size else K

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from .. import integrators
+from ..backend import array_module, placed
 from ..integrators.batch import Batch, run_batch
 from .crossings import along_paths
 from .differentials import axial_tangents
@@ -38,8 +39,9 @@ def trace_curved(
 ) -> None:  # fmt: skip
     """Rays straight to the model's region, then integrated through it (``Tracer.trace``)."""
     assert tracer.region is not None
+    xp = array_module(origins)
     X = tracer._to_local(origins)
-    D = directions @ tracer.rotation  # (N, 3) local components
+    D = directions @ placed(tracer.rotation, directions)  # (N, 3) local components
     start, inside = tracer.region.entry(X, D)
     outside = np.flatnonzero(~inside)
     if outside.size:
@@ -50,9 +52,9 @@ def trace_curved(
     if todo.size:
         camera = tracer._to_local(origins[todo]).T  # (3, M): where each ray is seen from
         if np.ndim(h):
-            h = np.asarray(h, dtype=np.float64)[todo]
-        local_tangents = None if tangents is None else tangents[todo] @ tracer.rotation
-        watch = None if clearance is None else np.asarray(clearance, np.float64)[todo]
+            h = xp.asarray(h, dtype=np.float64)[todo]
+        local_tangents = None if tangents is None else tangents[todo] @ placed(tracer.rotation, D)
+        watch = None if clearance is None else xp.asarray(clearance, np.float64)[todo]
         integrate(
             tracer, todo, start[todo].T.copy(), D[todo].T.copy(), out, h, cancel, camera,
             local_tangents, watch,
@@ -72,7 +74,7 @@ def integrate(
     coordinates are computed only for the rays that need them: segments near geometry
     (a local box around the objects and volumes), and rays that end.
     """
-    model = tracer.model
+    model, xp = tracer.model, array_module(X)
     Q, P = start_state(tracer, X, D)
     H0 = model.value_soa(Q, P)
     K = model.split_parts(H0) or integrators.PoincareTransformed(model, H0)
@@ -88,12 +90,12 @@ def integrate(
         state,
         {"K": K},
         {"idx": rows.copy(), "X": X, "camera": camera, "H0": H0,
-         "h": np.broadcast_to(np.asarray(h, dtype=np.float64), rows.shape).copy(),
-         "h0": np.broadcast_to(np.asarray(h, dtype=np.float64), rows.shape).copy(),
+         "h": xp.broadcast_to(xp.asarray(h, dtype=np.float64), rows.shape).copy(),
+         "h0": xp.broadcast_to(xp.asarray(h, dtype=np.float64), rows.shape).copy(),
          "heading": D / np.linalg.norm(D, axis=0),  # the last chord's direction
-         "streak": np.zeros(rows.size, dtype=np.int64),  # steps in a row off the cone
-         "watch": np.ones(rows.size) if watch is None else watch,
-         "kinks": np.zeros(rows.size, dtype=np.int64)},  # the model's kinks crossed
+         "streak": xp.zeros(rows.size, dtype=np.int64),  # steps in a row off the cone
+         "watch": xp.ones(rows.size) if watch is None else watch,
+         "kinks": xp.zeros(rows.size, dtype=np.int64)},  # the model's kinks crossed
     )  # fmt: skip
     if shares is not None:
         batch.arrays["axial"] = shares
@@ -156,7 +158,7 @@ def step_events(
             Q, P = tracer.method.qp(batch.state)
             S, X = Q[chart.offset :], np.where(redo, X_prev, X)
             paths, going = paths.without(redo), ok & ~redo
-    until = np.ones(X.shape[1])  # the share of the step each ray travels (to its hit)
+    until = array_module(X).ones(X.shape[1])  # the share of the step each ray travels (to its hit)
     if paths is not None:
         ended |= along_paths(tracer, idx, paths, out, step_ends, until)
     if tracer._watch is not None:  # the steps within the margin of the objects' box

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from ..backend import array_module
 from ..integrators import Method, PoincareTransformed
 from ..integrators._common import take
 
@@ -70,7 +71,7 @@ class Stepper:
         crossed (M,) int64: bit k for kink k; the sampler interpolates no block whose rays
         crossed different kinks: the image's map has a kink between them)."""
         new, ok, shell = self.step(K, state, h)
-        crossings = np.zeros(ok.shape, dtype=np.int64)
+        crossings = np.zeros_like(ok, dtype=np.int64)
         if self.kinks is None or self.kinks(self.method.qp(state)[0][:3]) is None:
             return new, ok, shell, crossings
         with np.errstate(all="ignore"):
@@ -132,11 +133,12 @@ class Stepper:
         with np.errstate(all="ignore"):
             u_lin = np.where(change, f0 / (f0 - f1), np.inf)
         k = np.argmin(u_lin, axis=0)
-        cols = np.arange(m)
-        a, fa = np.zeros(m), f0[k, cols]
-        b, fb = np.ones(m), f1[k, cols]
+        xp = array_module(f0)
+        cols = xp.arange(m)
+        a, fa = xp.zeros(m), f0[k, cols]
+        b, fb = xp.ones(m), f1[k, cols]
         u = u_lin[k, cols]
-        done = np.zeros(m, dtype=bool)
+        done = xp.zeros(m, dtype=bool)
         for _ in range(KINK_ITERATIONS):
             mid, _, _ = self.step(K, state, u * h, 0)
             with np.errstate(all="ignore"):
@@ -230,5 +232,6 @@ def _put(new: State, ok, shell, rows, end: State, ok_end, shell_end) -> None:
 
 def _bits(change: np.ndarray) -> np.ndarray:
     """(M,) int64 with bit k set where kink k changed sign ((k, M) bool; the first 63)."""
-    weights = np.left_shift(np.int64(1), np.arange(min(change.shape[0], 63), dtype=np.int64))
+    count = min(change.shape[0], 63)
+    weights = np.left_shift(np.int64(1), array_module(change).arange(count, dtype=np.int64))
     return (change[: weights.size] * weights[:, None]).sum(axis=0).astype(np.int64)

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from ..backend import array_module
 from ..motion import Motion
 from . import starts
 from .clearance import ClearanceBoxes
@@ -127,7 +128,7 @@ class Tracer(TracerState):
         out, static_tangents = start_results(self, origins, directions, tangents)
         directions = out.direction.copy()  # the static observer's
         if not self.curved:
-            straight(self, np.arange(n), origins, directions, out)
+            straight(self, array_module(origins).arange(n), origins, directions, out)
             if tangents is not None:
                 out.sky_jacobian[:] = static_tangents
         else:
