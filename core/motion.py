@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from .backend import placed
 from .blackbody import shifted_colour
 from .observer import ObserverError, killing_block, observer_frame
 
@@ -60,7 +61,7 @@ class Motion:
     def aberrate(self, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(the static observer's look directions (N, 3), g (N,)) of the moving camera's
         unit look directions (N, 3) (the module's formula)."""
-        v, gamma = self.velocity, self.gamma
+        v, gamma = placed(self.velocity, directions), self.gamma
         along = directions @ v
         g = self.doppler(directions)
         coefficient = gamma * gamma * along / (gamma + 1.0) - gamma
@@ -70,13 +71,13 @@ class Motion:
     def doppler(self, directions: np.ndarray) -> np.ndarray:
         """g = 1 / (γ (1 − n'·v)) (N,): the moving camera's frequency over the static
         observer's for light seen along the unit look directions n' (N, 3)."""
-        return 1.0 / (self.gamma * (1.0 - directions @ self.velocity))
+        return 1.0 / (self.gamma * (1.0 - directions @ placed(self.velocity, directions)))
 
     def colour_shift(self, directions: np.ndarray) -> np.ndarray:
         """The g (N,) colours take along the look directions (N, 3): doppler's, or 1 with
         ``shift_colours`` off."""
         if not self.shift_colours:
-            return np.ones(directions.shape[0])
+            return np.ones_like(directions[:, 0])
         return self.doppler(directions)
 
     def smallest_doppler(self, camera: Any, chunk: int = 1 << 18) -> float:

@@ -45,9 +45,9 @@ singular (a few float64 epsilons: the accuracy of the eigenvalues themselves).""
 def inverse_metric_soa(model, Q: np.ndarray) -> np.ndarray:
     """g^{ij}(q) as (N, n, n), read off a Hamiltonian quadratic in p: dH/dp_i at p = e_j."""
     n, n_rays = Q.shape
-    ginv = np.empty((n_rays, n, n))
+    ginv = np.empty_like(Q, shape=(n_rays, n, n))
     for j in range(n):
-        unit = np.zeros((n, n_rays))
+        unit = np.zeros_like(Q)
         unit[j] = 1.0
         _, dp = model.gradient_soa(Q, unit, wrt="p")
         ginv[:, :, j] = dp.T
@@ -109,7 +109,7 @@ def _observer_frames(model, chart, S: np.ndarray):
 def _metric(model, S: np.ndarray):
     """At spatial coords S (3, N): Q (4, N) at t = 0, g^ij and g_ij (N, 4, 4); g_ij None
     where g^ij cannot be inverted."""
-    Q = np.vstack([np.zeros((1, S.shape[1])), S])
+    Q = np.concatenate([np.zeros_like(S[:1]), S])
     with np.errstate(all="ignore"):
         ginv = inverse_metric_soa(model, Q)
         try:
@@ -120,7 +120,7 @@ def _metric(model, S: np.ndarray):
 
 def _axial_vector(chart, S: np.ndarray) -> np.ndarray:
     """ξ_φ (N, 4), the rotation about z, at spatial coords S (3, N)."""
-    xi_phi = np.zeros((S.shape[1], 4))
+    xi_phi = np.zeros_like(S, shape=(S.shape[1], 4))
     xi_phi[:, 1:] = chart.axial_killing(S).T
     return xi_phi
 
@@ -141,7 +141,7 @@ def killing_block(model, chart, S: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
         return model.killing_block_soa(S)
     _, _, g = _metric(model, S)
     if g is None:
-        nan = np.full(S.shape[1], np.nan)
+        nan = np.full_like(S[0], np.nan)
         return nan, nan, nan
     xi_phi = _axial_vector(chart, S)
     return g[:, 0, 0], np.einsum("ni,ni->n", g[:, 0, :], xi_phi), _dot(g, xi_phi, xi_phi)

@@ -180,9 +180,7 @@ class _Namespace:
     def __getattr__(self, name: str):
         value = getattr(np, name)
         if name in _HOST_DATA:
-            return lambda data, *args, **kwargs: DeviceArray(
-                np.array(_host(data), *args, **kwargs)
-            )
+            return lambda data, *args, **kwargs: DeviceArray(np.array(_host(data), *args, **kwargs))
         if name in _CREATION:
 
             def make(*args, **kwargs):

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from ..backend import array_module, to_host
 from ..geometry import Hits
 from ..geometry.disk import AccretionDisk
 from ..observer import killing_block, killing_energy, zamo_omega
@@ -132,13 +133,25 @@ class DiskLight:
         out.redshift; a ray whose g is not a finite positive number is flagged failed and
         gets no light."""
         Q, P, camera = (x[:, on] for x in state)
-        X = self.to_local(X_world).T
-        p_t, p_phi = self.momenta(Q, P)
-        g = self.redshift(X, p_t, p_phi, camera) * out.doppler[r]  # the camera's motion
+        g, rgb = self._seen(X_world, Q, P, camera, out.doppler[r])
         bad = ~(np.isfinite(g) & (g > 0))
         g = np.where(bad, np.nan, g)
         first = np.isnan(out.redshift[r])
         out.redshift[r[first]] = g[first]
         out.ending[r[bad]] = ENDING["failed"]
-        rgb = self.disk.colour(np.where(bad, 0.0, g), self.model.radius_at(X))
         return rgb, bad
+
+    def _seen(self, X_world, Q, P, camera, doppler) -> tuple[np.ndarray, np.ndarray]:
+        """(g (K,), RGB (K, 3)) of the disk at world points X_world (K, 3) reached in states
+        (Q, P) from local cameras (3, K) moving with ``doppler`` (no light where g is not a
+        finite positive number). A device's rays have theirs worked out on the host (the
+        observer frames and the black-body tables are host code: core.backend)."""
+        xp = array_module(Q)
+        if xp is not np:
+            host = (to_host(x) for x in (X_world, Q, P, camera, doppler))
+            return tuple(xp.asarray(x) for x in self._seen(*host))  # type: ignore[return-value]
+        X = self.to_local(X_world).T
+        p_t, p_phi = self.momenta(Q, P)
+        g = self.redshift(X, p_t, p_phi, camera) * doppler  # the camera's motion
+        bad = ~(np.isfinite(g) & (g > 0))
+        return g, self.disk.colour(np.where(bad, 0.0, g), self.model.radius_at(X))

@@ -1,0 +1,189 @@
+"""One core on any array library (issue 47): core.render through a CPU double of CuPy arrays
+(tests/device_double.py: it refuses every implicit host <-> device transfer, as CuPy does)
+gives the numpy path's images exactly, on every model of the registry and on the scene
+features a trace meets (a disk, a volume, a moving camera, ray differentials, a texture
+sky, a user metric). A stray ``np.asarray`` or host array in the trace fails here, not on a
+user's GPU. CI has no GPU: benchmarks/gpu.py runs the same scenes on CuPy where one is."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+
+import core
+from core import backend
+from core import hamiltonians as hm
+from core.models.registry import MODELS
+from core.tolerances import TRACE_SHARE
+from tests.device_double import DEVICE, XP, DeviceArray, HostTransferError
+
+WIDTH, HEIGHT = 16, 12
+
+
+def _camera(position=(0, -30, 2), width: int = WIDTH, height: int = HEIGHT) -> core.Camera:
+    return core.Camera.perspective(position=position, look_at=(0, 0, 0), up=(0, 0, 1),
+                                   fov_deg=40, width=width, height=height)  # fmt: skip
+
+
+def _objects() -> list:
+    """A textured board behind the centre and a ball beside it."""
+    board = core.Plane(point=(0, 12, 0), normal=(0, -1, 0), u_axis=(1, 0, 0), extent=(16, 16),
+                       color=core.checker(8, 8))  # fmt: skip
+    return [board, core.Sphere((3.0, 0.0, 1.0), 1.0, (0.3, 0.5, 1.0, 1.0))]
+
+
+TEXT_MODELS = {  # kinds read from text: a model of each that bends light
+    "index": lambda: hm.medium("1 + 0.5*exp(-(x*x + y*y + z*z))"),
+    "metric": lambda: hm.metric(
+        [["-exp(-2*phi)", "0", "0", "0"], ["0", "exp(2*phi)", "0", "0"],
+         ["0", "0", "exp(2*phi)", "0"], ["0", "0", "0", "exp(2*phi)"]],
+        parameters={"m": 0.5, "b": 1.0},
+        definitions=[("phi", "-m/sqrt(x**2 + y**2 + z**2 + b**2)")],
+    ),
+    "hamiltonian": lambda: hm.from_expression(
+        "0.5*(p_x**2 + p_y**2 + p_z**2)/(1 + 0.5*exp(-(x*x + y*y + z*z)))**2",
+        q=["x", "y", "z"], p=["p_x", "p_y", "p_z"],
+    ),
+}  # fmt: skip
+
+
+def _model(name: str):
+    """The registry kind ``name`` at its defaults (spin a/M 0.6, charge Q/M 0.3)."""
+    kind = MODELS[name]
+    if kind.inputs:
+        return TEXT_MODELS[kind.inputs]()
+    if kind.build is None:
+        return None
+    values = {p.name: p.default for p in kind.parameters} | {"spin": 0.6, "charge": 0.3}
+    return kind.build(**{n: values[n] for n in kind.parameter_names()})
+
+
+def _same(cpu: core.RenderResult, device: core.RenderResult) -> None:
+    """Every pass and the image equal to the last bit, and all of them numpy arrays."""
+    assert isinstance(device.rgba, np.ndarray)
+    np.testing.assert_array_equal(device.rgba, cpu.rgba)
+    assert device.passes.keys() == cpu.passes.keys()
+    for name, data in cpu.passes.items():
+        assert isinstance(device.passes[name], np.ndarray), name
+        np.testing.assert_array_equal(device.passes[name], data, err_msg=name)
+    for key in ("rays", "failed", "max_steps", "captured", "escaped", "hit"):
+        assert device.summary.get(key) == cpu.summary.get(key), key
+
+
+def _both(scene: core.Scene, camera: core.Camera, **options):
+    """(the numpy render, the double's render) of one scene, one worker (at 1e-5 rad, not
+    1e-8, unless asked: fewer steps, the same code)."""
+    options.setdefault("tolerance", 1e-5)
+    cpu = core.render(scene, camera, workers=1, **options)
+    return cpu, core.render(scene, camera, workers=1, device=DEVICE, **options)
+
+
+# --- the double refuses what CuPy refuses ----------------------------------------------------
+
+
+def test_the_double_refuses_implicit_transfers_and_dispatches_the_rest():
+    """np.asarray of a device array, a numpy array mixed into a device operation, as an
+    index or as a value set: TypeError. Scalars mix; numpy's functions return device
+    arrays; size-1 arrays read as Python numbers; to_host brings the data back."""
+    a = XP.arange(6.0)
+    with pytest.raises(HostTransferError):
+        np.asarray(a)
+    with pytest.raises(HostTransferError):
+        a + np.ones(6)
+    with pytest.raises(HostTransferError):
+        a[np.array([0, 1])]
+    with pytest.raises(HostTransferError):
+        a[:2] = np.zeros(2)
+    b = np.sqrt(2.0 * a + 1)
+    assert isinstance(b, DeviceArray) and isinstance(np.flatnonzero(a > 2), DeviceArray)
+    assert float(a.max()) == 5.0 and int(np.count_nonzero(a)) == 5 and bool(a.any())
+    assert backend.array_module(a) is XP and backend.array_module(np.ones(2), 1.0) is np
+    np.testing.assert_array_equal(backend.to_host(b), np.sqrt(2.0 * np.arange(6.0) + 1))
+
+
+def test_placed_constants_are_copied_once_per_device():
+    """A host constant beside numpy arrays is itself; beside a device's, its copy, made once."""
+    rotation = np.eye(3)
+    assert backend.placed(rotation, np.zeros(3)) is rotation
+    first = backend.placed(rotation, XP.zeros(3))
+    assert isinstance(first, DeviceArray) and backend.placed(rotation, XP.ones(2)) is first
+
+
+# --- every model, every feature: the same image ----------------------------------------------
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_every_model_renders_on_the_device_as_on_the_cpu(name):
+    """Each kind of the registry (flat, the holes, a medium, a user metric, a Hamiltonian
+    as text), its default method: image and passes equal to the numpy path's."""
+    model = _model(name)
+    scene = core.Scene(model=model, objects=_objects(), background="procedural")
+    _same(*_both(scene, _camera()))
+
+
+@pytest.mark.parametrize("method", ["blanes_moan_s6", "gauss4", "rk4"])
+def test_other_methods_render_on_the_device_as_on_the_cpu(method):
+    """An explicit splitting, the implicit Gauss method and a Runge-Kutta method."""
+    scene = core.Scene(model=hm.schwarzschild(rg=1.0), objects=_objects())
+    _same(*_both(scene, _camera(), method=method))
+
+
+def test_a_disk_a_volume_and_a_texture_sky_render_on_the_device_as_on_the_cpu():
+    """Kerr with an accretion disk (its redshift and colour), an emitting volume beside it,
+    an image sky filtered over each pixel's footprint."""
+    rng = np.random.default_rng(47)
+    sky = core.Background(0.2 + 0.6 * rng.random((32, 64, 3)))
+    volume = core.Volume((4, -2, -2), (8, 2, 2), density=lambda p: np.ones(len(p)),
+                         emission=lambda p: np.tile([0.3, 0.1, 0.0], (len(p), 1)),
+                         absorption=0.2)  # fmt: skip
+    scene = core.Scene(model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"),
+                       disk=core.AccretionDisk(r_out=8.0), volumes=[volume], background=sky)  # fmt: skip
+    _same(*_both(scene, _camera((0, -25, 4), 12, 9)))
+
+
+@pytest.mark.parametrize("observer", ["orbit", "infall"])
+def test_a_moving_camera_renders_on_the_device_as_on_the_cpu(observer):
+    """Aberration and Doppler shift of a camera orbiting or falling near a Kerr hole."""
+    scene = core.Scene(model=hm.kerr(rg=1.0, a=0.45), objects=_objects())
+    _same(*_both(scene, _camera((0, -16, 0), 12, 9), observer=observer))
+
+
+def test_ray_differentials_render_on_the_device_as_on_the_cpu():
+    """The magnification pass: tangents carried through the steps (DualRows) on the device."""
+    scene = core.Scene(model=hm.schwarzschild(rg=1.0), objects=_objects())
+    passes = (*core.render.__kwdefaults__["passes"], "magnification")
+    _same(*_both(scene, _camera(), passes=passes))
+
+
+def test_tolerance_px_on_the_device_traces_every_pixel_at_the_samplers_step():
+    """With tolerance_px a device traces every pixel centre at the integration's share of
+    it: the CPU's dense render at that tolerance, bit for bit."""
+    scene = core.Scene(model=hm.schwarzschild(rg=1.0), objects=_objects())
+    camera = _camera()
+    device = core.render(scene, camera, workers=1, device=DEVICE, tolerance_px=1.0)
+    pixel_angle = device.summary["pixel_angle"]
+    cpu = core.render(scene, camera, workers=1, tolerance=TRACE_SHARE * pixel_angle)
+    np.testing.assert_array_equal(device.rgba, cpu.rgba)
+    assert device.summary["rays"] == WIDTH * HEIGHT
+
+
+# --- refusals ----------------------------------------------------------------------------------
+
+
+def test_a_device_render_refuses_anti_aliasing_and_clusters_by_name():
+    """samples > 1 and a cluster client name themselves and the device."""
+    scene = core.Scene(model=hm.schwarzschild(rg=1.0))
+    with pytest.raises(ValueError, match="samples > 1.*device 'double'"):
+        core.render(scene, _camera(), device=DEVICE, samples=4, tolerance_px=1.0)
+    with pytest.raises(ValueError, match="device must be 'cpu' or 'cuda'"):
+        core.render(scene, _camera(), device="gpu")
+
+
+@pytest.mark.skipif(importlib.util.find_spec("cupy") is not None, reason="CuPy is installed")
+def test_cuda_without_cupy_names_the_package_to_install():
+    """No CuPy: "cuda" is refused with the package's name (CuPy is never required)."""
+    with pytest.raises(RuntimeError, match="needs CuPy.*pip install cupy"):
+        core.render(core.Scene(), _camera(), device="cuda")
+    assert "CuPy" in (backend.cuda_problem() or "")
