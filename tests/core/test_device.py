@@ -138,8 +138,9 @@ def test_a_disk_a_volume_and_a_texture_sky_render_on_the_device_as_on_the_cpu():
     volume = core.Volume((4, -2, -2), (8, 2, 2), density=lambda p: np.ones(len(p)),
                          emission=lambda p: np.tile([0.3, 0.1, 0.0], (len(p), 1)),
                          absorption=0.2)  # fmt: skip
-    scene = core.Scene(model=hm.kerr(rg=1.0, a=0.45, chart="kerr_schild"),
-                       disk=core.AccretionDisk(r_out=8.0), volumes=[volume], background=sky)  # fmt: skip
+    model = hm.kerr(rg=1.0, a=0.45, chart="kerr_schild")
+    scene = core.Scene(model=model, disk=core.AccretionDisk(r_out=8.0), volumes=[volume],
+                       background=sky)  # fmt: skip
     _same(*_both(scene, _camera((0, -25, 4), 12, 9)))
 
 
