@@ -73,7 +73,7 @@ def cuda_problem() -> str | None:
 def _cupy() -> ModuleType:
     """CuPy, or a clear error naming the package to install."""
     try:
-        import cupy  # type: ignore[import-not-found]
+        import cupy
     except ImportError as error:
         raise RuntimeError(
             f"device 'cuda' needs CuPy, which is not installed here ({CUPY_HINT})"

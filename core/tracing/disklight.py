@@ -149,7 +149,7 @@ class DiskLight:
         xp = array_module(Q)
         if xp is not np:
             host = (to_host(x) for x in (X_world, Q, P, camera, doppler))
-            return tuple(xp.asarray(x) for x in self._seen(*host))  # type: ignore[return-value]
+            return tuple(xp.asarray(x) for x in self._seen(*host))
         X = self.to_local(X_world).T
         p_t, p_phi = self.momenta(Q, P)
         g = self.redshift(X, p_t, p_phi, camera) * doppler  # the camera's motion
