@@ -12,6 +12,7 @@ optional dependency: without it, "cuda" is refused naming the package to install
 
 from __future__ import annotations
 
+import functools
 import weakref
 from dataclasses import dataclass
 from types import ModuleType
@@ -60,8 +61,10 @@ def device_of(device: str | Device) -> Device:
     raise ValueError(f"device must be 'cpu' or 'cuda', got {device!r}")
 
 
+@functools.lru_cache(maxsize=1)
 def cuda_problem() -> str | None:
-    """Why "cuda" cannot render here (CuPy missing, or no GPU it can use), or None."""
+    """Why "cuda" cannot render here (CuPy missing, or no GPU it can use), or None (asked
+    once per process: a panel asks at every redraw)."""
     try:
         cupy = _cupy()
         cupy.cuda.runtime.getDeviceCount()

@@ -120,6 +120,7 @@ class RENDER_PT_symray(SymRayPanelMixin, bpy.types.Panel):
         else:
             layout.prop(settings, "center")
             _model_settings(layout, settings)
+        _device_row(layout, context.scene.symray)
         layout.prop(settings, "quality")
         if settings.quality == "CUSTOM":
             layout.prop(settings, "tolerance_px")
@@ -132,6 +133,17 @@ class RENDER_PT_symray(SymRayPanelMixin, bpy.types.Panel):
         row = layout.row()
         row.scale_y = 1.3
         row.operator(SYMRAY_OT_render.bl_idname, icon="RENDER_STILL")
+
+
+def _device_row(layout: bpy.types.UILayout, settings) -> None:
+    """Device: CPU / GPU, as Cycles has it; greyed out with the reason where no GPU can
+    render (CuPy missing from Blender's Python, or no CUDA GPU)."""
+    problem = validation.gpu_problem()
+    row = layout.row()
+    row.enabled = problem is None or settings.device == "GPU"
+    row.prop(settings, "device")
+    if problem is not None and settings.device != "GPU":
+        layout.label(text=f"GPU: {textwrap.shorten(problem, 70)}", icon="INFO")
 
 
 def _scene_objects(layout: bpy.types.UILayout, scene: bpy.types.Scene) -> None:

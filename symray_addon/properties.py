@@ -16,6 +16,17 @@ PASSES = tuple((p.name, p.label, p.toggle) for p in core_passes.PASSES if p.labe
 core's table, core.passes): 'SymRay <label>' render passes and the operator's passes EXR
 layers. 'SymRay Error' is the core's ``error_px`` (pixels of the camera)."""
 
+DEVICE_ITEMS = [
+    ("CPU", "CPU", "Trace on the CPU's cores (adaptive sampling, anti-aliasing)"),
+    (
+        "GPU",
+        "GPU",
+        "Trace every pixel on an NVIDIA GPU through CuPy in Blender's Python (one ray per "
+        "pixel; meshes' hits and shading on the CPU)",
+    ),
+]
+"""Render Properties › Device, as Cycles has it (core.render's device "cpu" / "cuda")."""
+
 QUALITY_ITEMS = [
     ("PREVIEW", "Preview", "Every pixel within 1 px, one ray per pixel at most: quick look"),
     ("FINAL", "Final", "Every pixel within 0.25 px, up to 16 rays per pixel (anti-aliased)"),
@@ -288,6 +299,13 @@ class SymRaySettings(bpy.types.PropertyGroup):
         items=METHOD_ITEMS,
         default="AUTO",
         description="Integrator for Hamilton's equations",
+    )
+    device: bpy.props.EnumProperty(  # type: ignore[valid-type]
+        name="Device",
+        items=DEVICE_ITEMS,
+        default="CPU",
+        description="Where rays are traced: the CPU's cores, or an NVIDIA GPU through CuPy "
+        "(README: GPU rendering)",
     )
     quality: bpy.props.EnumProperty(  # type: ignore[valid-type]
         name="Quality",

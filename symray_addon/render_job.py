@@ -135,6 +135,7 @@ def prepare(
         "max_steps": int(settings.max_steps),
         "passes": passes,
         "parallel": settings.parallel.lower(),
+        **device_options(settings, warnings),
         "workers": int(settings.workers) or None,
         # Blender's own thread count (-t N on the command line, or Performance › Threads)
         # bounds the automatic one worker per core
@@ -145,6 +146,22 @@ def prepare(
     job = RenderJob(core_scene, camera, options, camera.width, camera.height, transparent)
     job.warnings = warnings
     return job
+
+
+GPU_SAMPLES_WARNING = (
+    "Device GPU traces one ray per pixel: the quality's anti-aliasing samples run on the CPU "
+    "only (set Device to CPU for them)"
+)
+
+
+def device_options(settings: Any, warnings: list[str]) -> dict[str, Any]:
+    """core.render's ``device`` for Render Properties › Device; on the GPU one sample a
+    pixel (a warning where the quality asked for more)."""
+    if settings.device != "GPU":
+        return {"device": "cpu"}
+    if settings.accuracy().get("samples", 1) > 1:
+        warnings.append(GPU_SAMPLES_WARNING)
+    return {"device": "cuda", "samples": 1}
 
 
 UNBAKED_WARNING = (

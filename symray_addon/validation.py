@@ -21,7 +21,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from ..core import checks, expressions
+from ..core import backend, checks, expressions
 from ..core.geometry.disk import check_spin, isco
 from ..core.integrators import METHODS
 from ..core.models.registry import MODELS
@@ -306,7 +306,23 @@ def settings_problems(settings: Any) -> list[str]:
             problems.append(str(err))
     if parameter_problem(settings):
         problems.append(parameter_problem(settings))
-    return problems + disk_problems(settings)
+    return problems + disk_problems(settings) + device_problems(settings)
+
+
+def device_problems(settings: Any) -> list[str]:
+    """Why the Device chosen cannot render here (GPU without CuPy or a CUDA GPU)."""
+    if getattr(settings, "device", "CPU") != "GPU":
+        return []
+    problem = gpu_problem()
+    if problem is None:
+        return []
+    return [f"Device GPU cannot render here: {problem}. Set Device to CPU, or install CuPy "
+            "into Blender's Python (README: GPU rendering)"]  # fmt: skip
+
+
+def gpu_problem() -> str | None:
+    """Why no GPU renders in this Blender (core.backend.cuda_problem), or None."""
+    return backend.cuda_problem()
 
 
 def disk_problems(settings: Any) -> list[str]:

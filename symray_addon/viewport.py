@@ -100,7 +100,7 @@ class ViewSession:
 
 
 _VIEW_OPTIONS = ("method", "max_steps", "parallel", "workers", "cores", "pixel_filter",
-                 "filter_size")  # fmt: skip
+                 "filter_size", "device")  # fmt: skip
 """Render options the viewport takes from the scene's (accuracy comes from Quality)."""
 
 

@@ -1,0 +1,84 @@
+"""Render Properties › Device (issue 47): CPU or GPU, as Cycles has it. Without CuPy in
+Blender's Python the GPU is refused by name before anything is traced; with a device (here
+the CPU double of CuPy arrays, tests/device_double.py, standing in for CuPy) F12 traces
+every pixel there and gives the CPU's dense image at the same step, bit for bit."""
+
+from __future__ import annotations
+
+import importlib.util
+import bpy
+import numpy as np
+import pytest
+
+from tests.device_double import XP
+
+from .conftest import operator_error
+from .test_first_contact import f12
+
+WIDTH, HEIGHT = 48, 36
+
+
+def _hole_scene(scene) -> None:
+    """The factory scene (its cube, camera and light) with a Kerr hole beside the cube, small."""
+    scene.cursor.location = (2.5, 0.0, 0.0)
+    assert bpy.ops.symray.add_black_hole(size=0.6, spin=0.6, disk=False) == {"FINISHED"}
+    scene.render.resolution_x, scene.render.resolution_y = WIDTH, HEIGHT
+    scene.render.resolution_percentage = 100
+    scene.symray.workers = 1  # one chunk: the device's batch, ray for ray
+    bpy.context.view_layer.update()
+
+
+@pytest.fixture
+def double_gpu(addon, monkeypatch):
+    """CuPy replaced by the double in the extension's core (a GPU that is the CPU)."""
+    backend, asked = addon.core.backend, []
+    monkeypatch.setattr(backend, "_cupy", lambda: asked.append(1) or XP)
+    monkeypatch.setattr(backend, "cuda_problem", lambda: None)
+    return asked
+
+
+def test_the_device_defaults_to_the_cpu(addon, factory_scene):
+    """A new scene renders on the CPU; the job asks core.render for "cpu"."""
+    assert factory_scene.symray.device == "CPU"
+    render_job = addon.module("symray_addon.render_job")
+    job = render_job.prepare(factory_scene, bpy.context.evaluated_depsgraph_get())
+    assert job.options["device"] == "cpu"
+
+
+@pytest.mark.skipif(importlib.util.find_spec("cupy") is not None, reason="CuPy is installed")
+def test_gpu_without_cupy_is_refused_by_name_before_tracing(addon, factory_scene, tmp_path):
+    """Device GPU where CuPy does not import: the panel's problems and F12 name CuPy and the
+    way back (Device CPU); the render writes nothing."""
+    scene = factory_scene
+    scene.symray.device = "GPU"
+    panel = addon.module("symray_addon.panel")
+    problems = panel.render_problems(scene)
+    assert any("Device GPU" in p and "CuPy" in p and "Device to CPU" in p for p in problems)
+    message = operator_error(lambda: bpy.ops.render.render(scene=scene.name))
+    assert "CuPy" in message
+
+
+def test_f12_on_the_gpu_is_the_cpus_dense_image_at_the_same_step(addon, factory_scene, tmp_path,
+                                                                  double_gpu):  # fmt: skip
+    """Preview (1 px) on the device: every pixel traced at the integration's share of the
+    tolerance (core.tolerances.TRACE_SHARE); the CPU's render at that tolerance in radians
+    (dense, one worker) is the same image. Final's 16 samples become 1, with a warning."""
+    scene = factory_scene
+    _hole_scene(scene)
+    scene.symray.device = "GPU"
+    gpu = f12(scene, tmp_path, "gpu")
+    assert double_gpu  # traced through the double
+    summary = addon.module("symray_addon.render_job").last_summary
+    assert summary["rays"] == WIDTH * HEIGHT and summary["parallel"] == "inline"
+    share = addon.core.tolerances.TRACE_SHARE
+    scene.symray.device = "CPU"
+    scene.symray.quality, scene.symray.tolerance = "RADIANS", share * summary["pixel_angle"]
+    cpu = f12(scene, tmp_path, "cpu")
+    np.testing.assert_array_equal(gpu, cpu)
+    shadow = gpu[..., :3].max(axis=-1) < 1e-3
+    assert 20 < shadow.sum() < WIDTH * HEIGHT / 4  # the hole is in the frame, not all of it
+    scene.symray.device, scene.symray.quality = "GPU", "FINAL"
+    render_job = addon.module("symray_addon.render_job")
+    job = render_job.prepare(scene, bpy.context.evaluated_depsgraph_get())
+    assert job.options["samples"] == 1 and job.options["device"] == "cuda"
+    assert render_job.GPU_SAMPLES_WARNING in job.warnings
