@@ -6,6 +6,7 @@ every pixel there and gives the CPU's dense image at the same step, bit for bit.
 from __future__ import annotations
 
 import importlib.util
+
 import bpy
 import numpy as np
 import pytest
