@@ -13,6 +13,7 @@ optional dependency: without it, "cuda" is refused naming the package to install
 from __future__ import annotations
 
 import functools
+import importlib.util
 import weakref
 from dataclasses import dataclass
 from types import ModuleType
@@ -78,8 +79,13 @@ def _cupy() -> ModuleType:
     try:
         import cupy
     except ImportError as error:
+        if importlib.util.find_spec("cupy") is None:
+            raise RuntimeError(
+                f"device 'cuda' needs CuPy, which is not installed here ({CUPY_HINT})"
+            ) from error
+        first = next((line for line in str(error).splitlines() if line.strip()), "")
         raise RuntimeError(
-            f"device 'cuda' needs CuPy, which is not installed here ({CUPY_HINT})"
+            f"device 'cuda': CuPy is installed but did not import ({first})"
         ) from error
     return cupy
 

@@ -316,8 +316,8 @@ def device_problems(settings: Any) -> list[str]:
     problem = gpu_problem()
     if problem is None:
         return []
-    return [f"Device GPU cannot render here: {problem}. Set Device to CPU, or install CuPy "
-            "into Blender's Python (README: GPU rendering)"]  # fmt: skip
+    return [f"Device GPU cannot render here (CuPy: {problem}). Set Device to CPU, or install "
+            "CuPy into Blender's Python (README: GPU rendering)"]  # fmt: skip
 
 
 def gpu_problem() -> str | None:

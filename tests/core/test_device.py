@@ -8,6 +8,7 @@ user's GPU. CI has no GPU: benchmarks/gpu.py runs the same scenes on CuPy where 
 from __future__ import annotations
 
 import importlib.util
+import sys
 
 import numpy as np
 import pytest
@@ -182,9 +183,14 @@ def test_a_device_render_refuses_anti_aliasing_and_clusters_by_name():
         core.render(scene, _camera(), device="gpu")
 
 
-@pytest.mark.skipif(importlib.util.find_spec("cupy") is not None, reason="CuPy is installed")
-def test_cuda_without_cupy_names_the_package_to_install():
-    """No CuPy: "cuda" is refused with the package's name (CuPy is never required)."""
+def test_cuda_without_cupy_names_the_package_to_install(monkeypatch):
+    """No CuPy: "cuda" is refused with the package's name (CuPy is never required); CuPy
+    without a GPU: with CUDA's reason."""
+    if importlib.util.find_spec("cupy") is None:
+        with pytest.raises(RuntimeError, match="needs CuPy.*pip install cupy"):
+            core.render(core.Scene(), _camera(), device="cuda")
+        assert "CuPy" in (backend.cuda_problem() or "")
+    monkeypatch.setitem(sys.modules, "cupy", None)  # as if not installed: import fails
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None)
     with pytest.raises(RuntimeError, match="needs CuPy.*pip install cupy"):
-        core.render(core.Scene(), _camera(), device="cuda")
-    assert "CuPy" in (backend.cuda_problem() or "")
+        backend.device_of("cuda")
