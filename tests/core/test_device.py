@@ -21,6 +21,14 @@ from core.tolerances import TRACE_SHARE
 from tests.device_double import DEVICE, XP, DeviceArray, HostTransferError
 
 WIDTH, HEIGHT = 16, 12
+OLD_NUMPY = int(np.__version__.split(".")[0]) < 2
+ULPS = 4
+"""numpy 1.26 (Blender 4.2) only: a pass's floats may differ by a few ulp. Where host code
+meets a device's rays (the volumes, the disk's light) it works on contiguous copies, and
+numpy 1.26 evaluates some functions on contiguous arrays (SIMD loops) and on strided views
+(scalar loops) to different last bits (seen: one error estimate of 108 off by 1.7e-17).
+numpy 2 agrees to the last bit, and there every pass is compared exactly; the images
+(rgba) are compared exactly on both."""
 
 
 def _camera(position=(0, -30, 2), width: int = WIDTH, height: int = HEIGHT) -> core.Camera:
@@ -68,7 +76,10 @@ def _same(cpu: core.RenderResult, device: core.RenderResult) -> None:
     assert device.passes.keys() == cpu.passes.keys()
     for name, data in cpu.passes.items():
         assert isinstance(device.passes[name], np.ndarray), name
-        np.testing.assert_array_equal(device.passes[name], data, err_msg=name)
+        if OLD_NUMPY and data.dtype.kind == "f":
+            np.testing.assert_array_max_ulp(device.passes[name], data, maxulp=ULPS)
+        else:
+            np.testing.assert_array_equal(device.passes[name], data, err_msg=name)
     for key in ("rays", "failed", "max_steps", "captured", "escaped", "hit"):
         assert device.summary.get(key) == cpu.summary.get(key), key
 
