@@ -136,14 +136,17 @@ class RENDER_PT_symray(SymRayPanelMixin, bpy.types.Panel):
 
 
 def _device_row(layout: bpy.types.UILayout, settings) -> None:
-    """Device: CPU / GPU, as Cycles has it; greyed out with the reason where no GPU can
-    render (CuPy missing from Blender's Python, or no CUDA GPU)."""
+    """Device: CPU / GPU, as Cycles has it; greyed out, the reason in its name, where no
+    GPU can render (CuPy missing from Blender's Python, or no CUDA GPU; the whole message
+    is a render problem once GPU is chosen)."""
     problem = validation.gpu_problem()
     row = layout.row()
     row.enabled = problem is None or settings.device == "GPU"
-    row.prop(settings, "device")
-    if problem is not None and settings.device != "GPU":
-        layout.label(text=f"GPU: {textwrap.shorten(problem, 70)}", icon="INFO")
+    if problem is None:
+        row.prop(settings, "device")
+    else:
+        reason = "GPU needs CuPy" if "not installed" in problem else "no usable GPU"
+        row.prop(settings, "device", text=f"Device ({reason})")
 
 
 def _scene_objects(layout: bpy.types.UILayout, scene: bpy.types.Scene) -> None:

@@ -5,6 +5,8 @@ every pixel there and gives the CPU's dense image at the same step, bit for bit.
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import bpy
 import numpy as np
 import pytest
@@ -13,6 +15,7 @@ from tests.device_double import XP
 
 from .conftest import operator_error
 from .test_first_contact import f12
+from .test_panel import FakeLayout
 
 WIDTH, HEIGHT = 48, 36
 
@@ -83,3 +86,43 @@ def test_f12_on_the_gpu_is_the_cpus_dense_image_at_the_same_step(addon, factory_
     job = render_job.prepare(scene, bpy.context.evaluated_depsgraph_get())
     assert job.options["samples"] == 1 and job.options["device"] == "cuda"
     assert render_job.GPU_SAMPLES_WARNING in job.warnings
+
+
+class _Recording(FakeLayout):
+    """A fake layout that also records each property's text and its row's enabled state."""
+
+    enabled = True
+
+    def _child(self, *_args, **_kwargs) -> _Recording:
+        return _Recording(self.log)
+
+    row = column = split = box = _child
+
+    def prop(self, data, name: str, text: str | None = None, **kwargs) -> None:
+        super().prop(data, name, **kwargs)
+        self.log.append(("shown", name, text, self.enabled))
+
+
+def _device_row(scene) -> tuple:
+    """(text, enabled) of the Device row the SymRay render panel draws."""
+    log: list = []
+    bpy.types.RENDER_PT_symray.draw(SimpleNamespace(layout=_Recording(log)),
+                                    SimpleNamespace(scene=scene))  # fmt: skip
+    (row,) = [entry[2:] for entry in log if entry[:2] == ("shown", "device")]
+    return row
+
+
+def test_the_device_row_is_greyed_with_its_reason_where_no_gpu_renders(addon, factory_scene,
+                                                                        monkeypatch):  # fmt: skip
+    """No CuPy: the row is greyed out and says why; chosen anyway (a .blend from a GPU
+    machine): it stays editable, so the way back to CPU is open; a GPU: a plain row."""
+    validation = addon.module("symray_addon.validation")
+    missing = "device 'cuda' needs CuPy, which is not installed here (pip install cupy)"
+    monkeypatch.setattr(validation, "gpu_problem", lambda: missing)
+    assert _device_row(factory_scene) == ("Device (GPU needs CuPy)", False)
+    monkeypatch.setattr(validation, "gpu_problem", lambda: "cudaErrorNoDevice")
+    assert _device_row(factory_scene) == ("Device (no usable GPU)", False)
+    factory_scene.symray.device = "GPU"
+    assert _device_row(factory_scene) == ("Device (no usable GPU)", True)
+    monkeypatch.setattr(validation, "gpu_problem", lambda: None)
+    assert _device_row(factory_scene) == (None, True)
