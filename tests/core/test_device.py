@@ -16,6 +16,7 @@ import pytest
 import core
 from core import backend
 from core import hamiltonians as hm
+from core.integrators import METHODS
 from core.models.registry import MODELS
 from core.tolerances import TRACE_SHARE
 from tests.device_double import DEVICE, XP, DeviceArray, HostTransferError
@@ -141,6 +142,24 @@ def test_other_methods_render_on_the_device_as_on_the_cpu(method):
     """An explicit splitting, the implicit Gauss method and a Runge-Kutta method."""
     scene = core.Scene(model=hm.schwarzschild(rg=1.0), objects=_objects())
     _same(*_both(scene, _camera(), method=method))
+
+
+@pytest.mark.parametrize("method", list(METHODS))
+def test_every_method_renders_on_the_device_or_is_refused_alike(method):
+    """Every method of core.METHODS on a Schwarzschild hole (8 x 6 px, at most 120 steps a
+    ray: the first-order methods' rays end as max_steps alike): the device's image equals
+    the CPU's, or both refuse with the same message (Tao's for a black hole)."""
+    scene = core.Scene(model=hm.schwarzschild(rg=1.0), objects=_objects())
+    camera, options = _camera(width=8, height=6), dict(method=method, tolerance=1e-4)
+    options |= dict(max_steps=120, workers=1)
+    try:
+        cpu = core.render(scene, camera, **options)
+    except ValueError as refused:
+        with pytest.raises(ValueError) as also:
+            core.render(scene, camera, device=DEVICE, **options)
+        assert str(also.value) == str(refused)
+        return
+    _same(cpu, core.render(scene, camera, device=DEVICE, **options))
 
 
 def test_a_disk_a_volume_and_a_texture_sky_render_on_the_device_as_on_the_cpu():
