@@ -1,20 +1,22 @@
 """A uniform grid over boxes, walked by whole batches of segments at once.
 
-For many boxes of about one size spread through space (a cloud of small spheres) a grid
-finds the boxes near a segment in O(1) per cell it passes, where a tree walks its depth for
-every window. Cells hold the boxes that overlap them widened by ``margin`` (compressed rows:
-``start``, ``box``; a border of empty cells around). Segments walk the cells they pass
-cell by cell (a 3-D DDA: Amanatides and Woo; one step moves every segment at once), in
-windows of WINDOW cells and more, nearest first; a window's boxes pass the tree's own test
-(boxtree._meets), so its pairs are those the tree finds there. Boxes larger than SPREAD
-cells go to a BoxTree of their own, walked first. ``index`` picks the grid where its cells
-stay thinly filled, else a tree.
+For many boxes spread through space (a cloud of small spheres) a grid finds the boxes near
+a segment for a few operations per cell it passes, where a tree walks its depth for every
+window. Cells hold the boxes within ``margin`` of them (compressed rows: ``start``,
+``box``; a border of empty cells around). Segments walk the cells they pass cell by cell
+(a 3-D DDA, Amanatides and Woo: one array step moves every segment of the batch), window
+by window, nearest first (WINDOW cells, then twice as many each time, up to LONGEST); the
+boxes of the cells a window walked that its part of the segment passes through (a slab
+test) are its pairs. Boxes over more than SPREAD cells on an axis go to a BoxTree beside
+the grid, walked first. ``index`` picks the grid where its cells stay thinly filled
+(CROWD), else a BoxTree.
 
-Rounding: a walk may miss a cell the segment clips within rounding of an edge or corner of
-it, never by more. Boxes enter every cell within ``margin`` (MARGIN cell widths) of them,
-so every box a segment passes within its own margin (boxtree.PAD (1 + |start|)) of is
-found while that is under half the grid's: segments starting farther away (some 10^4 cell
-widths) walk a BoxTree over the same boxes instead.
+Rounding: a walk may miss a cell the segment clips within its rounding of an edge or a
+corner, never by more, and boxes enter every cell within ``margin`` (a box's own margin,
+boxtree._padded, and MARGIN cell widths) of them: every box whose padded bounds a segment
+passes within its own margin (boxtree.PAD (1 + |start|)) of, as the tree finds them, is
+found, while that margin is below ``near`` (a quarter of MARGIN cell widths). Segments
+starting farther away (over ~10^4 cell widths) walk a BoxTree over the same boxes.
 """
 
 from __future__ import annotations
@@ -23,12 +25,12 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from .boxtree import BoxTree, Segments, _padded, _span
+from .boxtree import PAD, BoxTree, Segments, _span
 
-TEST_COST = 4.0
+TEST_COST = 2.0
 """What testing a box costs a walk, in cell steps: the cell width minimises a walk's
 expected cost per unit length, (1 + TEST_COST density (width + box size)^3) / width, the
-boxes spread evenly over their bounds (about 8 cells per box for small ones)."""
+boxes spread evenly over their bounds (a box test costs about two steps, as measured)."""
 MOST_CELLS = 32
 """Cells per box at most."""
 CROWD = 6.0
@@ -59,20 +61,22 @@ class BoxGrid:
         """Grid over boxes [lo[i], hi[i]] (finite, lo <= hi)."""
         self.lo = np.asarray(lo, np.float64).reshape(-1, 3)
         self.hi = np.asarray(hi, np.float64).reshape(-1, 3)
-        self.padded = _padded(self.lo, self.hi)
-        plo, phi = self.padded[0].T, self.padded[1].T
-        root_lo, root_hi = plo.min(axis=0), phi.max(axis=0)
-        shape, size = _cells(root_hi - root_lo, _cell_count(root_hi - root_lo, phi - plo))
-        self.margin = MARGIN * float(size.min())
-        """Boxes enter the cells within this of them (world units)."""
-        self.near = 0.25 * self.margin
+        root_lo, root_hi = self.lo.min(axis=0), self.hi.max(axis=0)
+        extent = root_hi - root_lo
+        shape, size = _cells(extent, _cell_count(extent, self.hi - self.lo))
+        pad = PAD * (1.0 + float(np.max(np.abs(np.concatenate([root_lo, root_hi])))))
+        # pad: over every box's own margin (boxtree._padded)
+        self.near = 0.25 * MARGIN * float(size.min())
         """Segments whose margin (Segments.reach) is at most this walk the grid."""
+        self.margin = pad + MARGIN * float(size.min())
+        """Boxes enter the cells within this of them (world units)."""
         self.origin = root_lo - self.margin
-        self.size = (root_hi - root_lo + 2 * self.margin) / shape
+        self.size = (extent + 2 * self.margin) / shape
         self.shape = shape + 2  # a border of empty cells: a walk may step one cell out
         self.root = (self.origin[:, None], (self.origin + shape * self.size)[:, None])
-        i0, i1 = self._cell(plo - self.margin), self._cell(phi + self.margin)
-        small = np.all(i1 - i0 < SPREAD, axis=1)
+        i0, i1 = self._cell(self.lo - self.margin), self._cell(self.hi + self.margin)
+        span = i1 - i0
+        small = (span[:, 0] < SPREAD) & (span[:, 1] < SPREAD) & (span[:, 2] < SPREAD)
         self.small = np.flatnonzero(small)
         self.rest = np.flatnonzero(~small)
         cell, box = self._refs(i0[small], i1[small], self.small)
@@ -89,11 +93,12 @@ class BoxGrid:
         self.occupied = count > 0
         self.box = box[np.argsort(cell)]  # within a cell, any order
         """The boxes in each cell, cell by cell."""
-        wide = 2 * self.near  # over any walking segment's margin: no test per segment
-        self.ref = (np.stack([x.take(self.box) for x in self.padded[0]]) - wide,
-                    np.stack([x.take(self.box) for x in self.padded[1]]) + wide)  # fmt: skip
-        """Each cell's boxes' padded bounds widened by twice ``near`` (3, refs) each, cell
-        by cell (as ``box``)."""
+        wide = pad + 2 * self.near  # over a box's and a walking segment's margins
+        self.ref = (np.ascontiguousarray((self.lo[self.box] - wide).T),
+                    np.ascontiguousarray((self.hi[self.box] + wide).T))  # fmt: skip
+        """Each cell's boxes widened by their margin and twice ``near`` (3, refs) each,
+        cell by cell (as ``box``): a walking segment's part passing within its margin
+        and the box's of a box (boxtree._meets) passes through its widened box."""
         self.tree = BoxTree(self.lo[self.rest], self.hi[self.rest]) if self.rest.size else None
         """The boxes over more than SPREAD cells on an axis (``rest``)."""
         self._far: BoxTree | None = None
@@ -141,10 +146,10 @@ class BoxGrid:
         walk = _Walk(self, seg, rows[going], enter[going], leave[going])
         cells = WINDOW
         while walk.row.size:
-            k, slot = self._slots(*walk.steps(cells, hit_t))
-            r = walk.row[k]
-            until = np.minimum(walk.leave, hit_t[walk.row])
-            keep = _crosses(seg, r, self.ref, slot, walk.start[k], until[k])
+            row, start, until = walk.row, walk.start, np.minimum(walk.leave, hit_t[walk.row])
+            k, slot = self._slots(*walk.steps(cells, until))
+            r = row[k]
+            keep = _crosses(seg, r, self.ref, slot, start[k], until[k])
             yield r[keep], self.box[slot[keep]]
             walk.go_on(hit_t)
             cells = min(2 * cells, LONGEST)
@@ -161,8 +166,10 @@ class _Walk:
     """Segments walking a grid cell by cell, all at once: each one's ``row``, ``cell`` (a
     flat index), the parameters where it next crosses a plane between cells on each axis
     (``next``) and between two on it (``delta``), how its cell index moves then (``move``),
-    the end of its part in the grid (``leave``), where its window began (``start``) and
-    whether it walks on in this window (``on``)."""
+    the end of its part in the grid (``leave``), where its window began (``start``), how
+    far the cells walked cover it (``covered``), where this window stops it (``limit``),
+    its position in the walk as the window began (``at``) and whether it walks on in this
+    window (``on``)."""
 
     def __init__(self, grid: BoxGrid, seg: Segments, rows, enter, leave) -> None:
         """The segments ``rows`` entering the grid at ``enter``, leaving at ``leave``."""
@@ -182,33 +189,39 @@ class _Walk:
             self.cell += i * stride[k]
             self.move.append(np.sign(d).astype(np.int64) * stride[k])
         self.on = np.ones(rows.size, bool)
+        self.covered, self.limit, self.at = enter, leave, np.arange(rows.size)
 
-    def steps(self, count: int, hit_t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Walk ``count`` cells (fewer where a segment leaves the grid or passes its hit
-        ``hit_t``): (k, cell) of the cells that hold boxes, ``k`` the segment's position."""
-        limit = np.minimum(self.leave, hit_t[self.row])
-        cell, on, occupied = self.cell, self.on, self.occupied
+    def steps(self, count: int, limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Walk ``count`` cells, fewer where a segment leaves the grid or passes its
+        ``limit`` (its hit so far, or its end): (k, cell) of the cells that hold boxes, ``k``
+        the segment's position in the walk as it was (those that stop are let go)."""
+        self.limit, self.at = limit, np.arange(self.row.size)
         ks, cells = [], []
-        for _ in range(count):
-            k = np.flatnonzero(occupied[cell] & on)
-            ks.append(k)
+        for step in range(count):
+            cell, on = self.cell, self.on
+            k = np.flatnonzero(self.occupied[cell] & on)
+            ks.append(self.at[k])
             cells.append(cell[k])
             t = np.minimum(np.minimum(self.next[0], self.next[1]), self.next[2])
-            on &= t <= limit
+            on &= t <= self.limit
             for nxt, delta, move in zip(self.next, self.delta, self.move, strict=True):
                 cross = (nxt == t) & on
                 np.add(nxt, delta, out=nxt, where=cross)
                 np.add(cell, move, out=cell, where=cross)
             self.covered = t  # the cells walked cover the segment up to here (where on)
+            if step % 2 and np.count_nonzero(on) < 0.75 * on.size:
+                self._keep(on)  # fewer to step
         return np.concatenate(ks), np.concatenate(cells)
 
     def go_on(self, hit_t: np.ndarray) -> None:
         """Keep walking the segments still in the grid whose hit so far (``hit_t``) lies
         beyond the cells walked, their next windows starting there."""
-        covered = self.covered
-        going = self.on & (hit_t[self.row] > covered)
-        self.start = covered[going]
-        for name in ("row", "leave", "cell"):
+        self._keep(self.on & (hit_t[self.row] > self.covered))
+        self.start = self.covered
+
+    def _keep(self, going: np.ndarray) -> None:
+        """Walk on only the segments ``going`` (in the order held)."""
+        for name in ("row", "leave", "cell", "limit", "covered", "at"):
             setattr(self, name, getattr(self, name)[going])
         for name in ("next", "delta", "move"):
             setattr(self, name, [v[going] for v in getattr(self, name)])
@@ -236,7 +249,8 @@ def _cell_count(extent: np.ndarray, sizes: np.ndarray) -> float:
     if dims.size == 0:
         return 1.0
     volume = float(np.prod(dims))
-    size = float(np.median(sizes.mean(axis=1)))
+    mean = (sizes[:, 0] + sizes[:, 1] + sizes[:, 2]) / 3.0
+    size = float(np.partition(mean, m // 2)[m // 2])  # the median
     width = (volume / m) ** (1.0 / dims.size) * np.geomspace(0.05, 2.0, 48)
     cost = (1 + TEST_COST * m / volume * (width + size) ** dims.size) / width
     best = width[int(np.argmin(cost))]

@@ -65,8 +65,8 @@ class BoxTree:
         root = float(np.linalg.norm(leaf_hi.max(axis=0) - leaf_lo.min(axis=0)))
         self.window = max(WINDOW * leaf, root / 64, 1e-300)
         """A length (world units) of segment queried at once: about WINDOW leaves, at most
-        64 windows across the whole tree (core.geometry.group walks long segments window
-        by window, nearest first, and stops each where it has hit)."""
+        64 windows across the whole tree (``windows`` walks long segments window by
+        window, nearest first, and stops each where it has hit)."""
 
     def span(self, seg: Segments) -> tuple[np.ndarray, np.ndarray]:
         """(enter, leave) (N,) of each segment in the root's box (enter > leave: misses it)."""

@@ -15,12 +15,12 @@ from .hits import _INF, Hits, _segments, filters, segment_overlaps
 from .primitives import Sphere, sphere_hits
 
 FEW = 8
-"""Up to this many members with finite bounds, each is asked in turn (no tree)."""
-_OWN_ROWS = "spheres"
-"""Members whose answer for a segment depends on that segment alone, to the last bit (core's
-Spheres, exactly that type): asked only about the segments that reach their box. Others
-are asked, once the broad phase finds
-a segment reaching them, about every segment whose bounds overlap theirs, as one by one
+"""Up to this many members with finite bounds, each is asked in turn (no broad phase)."""
+_OWN_ROWS = (Sphere,)
+"""Members whose answer for a segment depends on that segment alone, to the last bit (of
+exactly these types): asked only about the segments that reach their box. Others are
+asked, once the broad phase finds a segment reaching them, about every segment whose
+bounds overlap theirs, as one by one
 (planes and annuli take dot products by BLAS, whose last bit follows the batch; meshes
 break ties between faces in an order that follows it; nested groups, the add-on's
 intersectors: unknown)."""
@@ -32,8 +32,9 @@ class Group:
     Object ids: member k reports ``ids[k]`` (default: k, its position in the list; an id
     None keeps the ids the member reports itself). Hits equal those of asking every member
     in turn (``intersect_each``): the nearest, the earlier member on a tie. Beyond FEW
-    members with finite bounds, a bounding-volume hierarchy over their boxes (BoxTree)
-    finds the segments that reach each; spheres of one colour are then hit all at once.
+    members with finite bounds, a grid or a bounding-volume hierarchy over their boxes
+    (core.geometry.boxgrid.index) finds the segments that reach each; spheres of one
+    colour are then hit all at once.
     """
 
     def __init__(self, objects: Sequence[Any], ids: Sequence[int | None] | None = None) -> None:
@@ -61,7 +62,8 @@ class Group:
         self.filters = any(filters(self.objects[k]) for k in np.flatnonzero(~plain).tolist())
         """Whether a member colours over footprints (core.geometry.hits.filters; a plain
         sphere's colour does not)."""
-        bounded = np.all(np.isfinite(lo) & np.isfinite(hi), axis=1)
+        finite = np.isfinite(lo) & np.isfinite(hi)
+        bounded = finite[:, 0] & finite[:, 1] & finite[:, 2]
         self._broad = _BroadPhase(self, read, bounded) if bounded.sum() > FEW else None
 
     def intersect(self, a: np.ndarray, b: np.ndarray, footprint: np.ndarray | None = None) -> Hits:
@@ -147,9 +149,9 @@ def _ask(obj: Any, a: np.ndarray, b: np.ndarray, footprint: np.ndarray | None, r
 
 
 class _BroadPhase:
-    """A Group's members split for the broad phase: unbounded ones (infinite planes) asked
-    in turn, bounded ones in a BoxTree (None: FEW or fewer), plain spheres (one constant
-    colour each) in arrays hit all at once."""
+    """A Group's members split for the broad phase (more than FEW bounded ones): unbounded
+    ones (infinite planes) asked in turn, bounded ones in a grid or tree (``index``),
+    plain spheres (one constant colour each) in arrays hit all at once."""
 
     def __init__(self, group: Group, read: _Read, bounded: np.ndarray) -> None:
         """Split the ``group``'s members (``read`` from them; ``bounded`` (M,): finite)."""
@@ -163,12 +165,12 @@ class _BroadPhase:
         row = where[self.boxed]
         self.ball = row >= 0
         self.ball[self.ball] = read.plain[row[self.ball]]
-        self.own_rows = row >= 0  # _OWN_ROWS
+        self.own_rows = row >= 0  # the Spheres read: _OWN_ROWS
         s = row[self.ball]
         every = s.size == len(read.radius)  # every sphere read is plain and bounded
         radius = read.radius if every else [read.radius[k] for k in s.tolist()]
         colour = read.colour if every else [read.colour[k] for k in s.tolist()]
-        self.centre = read.centre[s]
+        self.centre = read.centre if every else read.centre[s]
         self.radius = np.array(radius, np.float64)
         self.radius2 = np.array([r**2 for r in radius], np.float64)  # as Sphere's (Python's)
         self.colour = np.concatenate(colour).reshape(-1, 4) if colour else np.zeros((0, 4))

@@ -1,6 +1,7 @@
 """What a tracer holds for one scene and options (the state the tracing modules share).
 
-Interface: ``TracerState(scene, options, extent)``: a PlacedPlan (core/tracing/plan.py: the
+Interface: ``TracerState(scene, options, extent, objects=None)`` (``objects``: the scene's
+intersector, where made already): a PlacedPlan (core/tracing/plan.py: the
 plan, ``plan``, and its ``curved``, ``model``, ``method``, ``order``, ``chart``, ``region``,
 ``step``, ``captured``; the scene's ``rotation`` and frame, ``_to_local`` / ``_to_world``),
 its ``geometry`` and the local boxes
