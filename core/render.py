@@ -850,6 +850,7 @@ def _scene_extent(scene: Scene, camera, objects: Any = None) -> float:
     if not finite.all():
         lo, hi = lo[finite], hi[finite]
     if lo.size:  # a box's farthest corner takes the farther end on every axis
-        reach = np.maximum(np.abs(lo - scene.center), np.abs(hi - scene.center))  # (M, 3)
-        far = max(far, float(np.max(np.linalg.norm(reach, axis=1))))
+        c = np.asarray(scene.center)[:, None]  # by axis: numpy's loops run long
+        reach = np.maximum(np.abs(lo.T - c), np.abs(hi.T - c))  # (3, M)
+        far = max(far, float(np.max(np.linalg.norm(reach, axis=0))))
     return float(max(far, 1e-9))

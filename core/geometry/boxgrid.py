@@ -61,9 +61,10 @@ class BoxGrid:
         """Grid over boxes [lo[i], hi[i]] (finite, lo <= hi)."""
         self.lo = np.asarray(lo, np.float64).reshape(-1, 3)
         self.hi = np.asarray(hi, np.float64).reshape(-1, 3)
-        root_lo, root_hi = self.lo.min(axis=0), self.hi.max(axis=0)
+        lo3, hi3 = np.ascontiguousarray(self.lo.T), np.ascontiguousarray(self.hi.T)  # (3, M)
+        root_lo, root_hi = lo3.min(axis=1), hi3.max(axis=1)
         extent = root_hi - root_lo
-        shape, size = _cells(extent, _cell_count(extent, self.hi - self.lo))
+        shape, size = _cells(extent, _cell_count(extent, hi3 - lo3))
         pad = PAD * (1.0 + float(np.max(np.abs(np.concatenate([root_lo, root_hi])))))
         # pad: over every box's own margin (boxtree._padded)
         self.near = 0.25 * MARGIN * float(size.min())
@@ -74,12 +75,12 @@ class BoxGrid:
         self.size = (extent + 2 * self.margin) / shape
         self.shape = shape + 2  # a border of empty cells: a walk may step one cell out
         self.root = (self.origin[:, None], (self.origin + shape * self.size)[:, None])
-        i0, i1 = self._cell(self.lo - self.margin), self._cell(self.hi + self.margin)
+        i0, i1 = self._cell(lo3 - self.margin), self._cell(hi3 + self.margin)
         span = i1 - i0
-        small = (span[:, 0] < SPREAD) & (span[:, 1] < SPREAD) & (span[:, 2] < SPREAD)
+        small = (span[0] < SPREAD) & (span[1] < SPREAD) & (span[2] < SPREAD)
         self.small = np.flatnonzero(small)
         self.rest = np.flatnonzero(~small)
-        cell, box = self._refs(i0[small], i1[small], self.small)
+        cell, box = self._refs(i0[:, small], i1[:, small], self.small)
         count = np.bincount(cell, minlength=int(self.shape.prod()))
         self.suits = (
             bool(count @ count <= CROWD * max(1, cell.size))
@@ -94,8 +95,7 @@ class BoxGrid:
         self.box = box[np.argsort(cell)]  # within a cell, any order
         """The boxes in each cell, cell by cell."""
         wide = pad + 2 * self.near  # over a box's and a walking segment's margins
-        self.ref = (np.ascontiguousarray((self.lo[self.box] - wide).T),
-                    np.ascontiguousarray((self.hi[self.box] + wide).T))  # fmt: skip
+        self.ref = (np.take(lo3, self.box, axis=1) - wide, np.take(hi3, self.box, axis=1) + wide)
         """Each cell's boxes widened by their margin and twice ``near`` (3, refs) each,
         cell by cell (as ``box``): a walking segment's part passing within its margin
         and the box's of a box (boxtree._meets) passes through its widened box."""
@@ -104,18 +104,18 @@ class BoxGrid:
         self._far: BoxTree | None = None
 
     def _cell(self, x: np.ndarray) -> np.ndarray:
-        """(M, 3) the cell indices of points x (M, 3), within the grid but its border."""
-        i = np.floor((x - self.origin) / self.size) + 1
-        return np.clip(i, 1, self.shape - 2).astype(np.int64)
+        """(3, M) the cell indices of points x (3, M), within the grid but its border."""
+        i = np.floor((x - self.origin[:, None]) / self.size[:, None]) + 1
+        return np.clip(i, 1, self.shape[:, None] - 2).astype(np.int64)
 
     def _refs(self, i0: np.ndarray, i1: np.ndarray, boxes: np.ndarray):
         """(cell, box): each cell (flat index) a box of ``boxes`` overlaps, from its first
-        and last cells i0, i1 (K, 3) (at most SPREAD apart), with the box."""
+        and last cells i0, i1 (3, K) (at most SPREAD apart), with the box."""
         stride = (int(self.shape[1] * self.shape[2]), int(self.shape[2]), 1)
-        cell = i0[:, 0] * stride[0] + i0[:, 1] * stride[1] + i0[:, 2]
-        src, span = np.arange(i0.shape[0]), i1 - i0
+        cell = i0[0] * stride[0] + i0[1] * stride[1] + i0[2]
+        src, span = np.arange(i0.shape[1]), i1 - i0
         for k in range(3):
-            more = span[src, k]
+            more = span[k].take(src)
             cell = np.concatenate(
                 [cell, *(cell[more >= o] + o * stride[k] for o in range(1, SPREAD))]
             )
@@ -204,11 +204,12 @@ class _Walk:
             cells.append(cell[k])
             t = np.minimum(np.minimum(self.next[0], self.next[1]), self.next[2])
             on &= t <= self.limit
+            self.covered = t  # the cells walked cover the segment up to here (where on)
+            t = np.where(on, t, np.nan)  # no plane is crossed at NaN: those stopped stay
             for nxt, delta, move in zip(self.next, self.delta, self.move, strict=True):
-                cross = (nxt == t) & on
+                cross = nxt == t
                 np.add(nxt, delta, out=nxt, where=cross)
                 np.add(cell, move, out=cell, where=cross)
-            self.covered = t  # the cells walked cover the segment up to here (where on)
             if step % 2 and np.count_nonzero(on) < 0.75 * on.size:
                 self._keep(on)  # fewer to step
         return np.concatenate(ks), np.concatenate(cells)
@@ -243,13 +244,13 @@ def _crosses(seg: Segments, rows, boxes, slots, t_from, t_to) -> np.ndarray:
 
 
 def _cell_count(extent: np.ndarray, sizes: np.ndarray) -> float:
-    """How many cells to cut ``extent`` (3,) into for boxes of ``sizes`` (M, 3) (TEST_COST)."""
-    m = sizes.shape[0]
+    """How many cells to cut ``extent`` (3,) into for boxes of ``sizes`` (3, M) (TEST_COST)."""
+    m = sizes.shape[1]
     dims = extent[extent > 0]
     if dims.size == 0:
         return 1.0
     volume = float(np.prod(dims))
-    mean = (sizes[:, 0] + sizes[:, 1] + sizes[:, 2]) / 3.0
+    mean = (sizes[0] + sizes[1] + sizes[2]) / 3.0
     size = float(np.partition(mean, m // 2)[m // 2])  # the median
     width = (volume / m) ** (1.0 / dims.size) * np.geomspace(0.05, 2.0, 48)
     cost = (1 + TEST_COST * m / volume * (width + size) ** dims.size) / width

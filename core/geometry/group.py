@@ -129,11 +129,11 @@ def _read(objects: list[Any]) -> _Read:
     radius = [s.radius for s in balls]
     colour = [s.color for s in balls]
     plain = np.array([not callable(c) for c in colour], bool).reshape(-1)
-    r = np.array(radius, np.float64).reshape(-1, 1)
+    r, axes = np.array(radius, np.float64), centre.T  # by axis: numpy's loops run long
     if at.size == m:
-        return _Read(centre - r, centre + r, at, centre, radius, colour, plain)
+        return _Read((axes - r).T, (axes + r).T, at, centre, radius, colour, plain)
     lo, hi = np.empty((m, 3)), np.empty((m, 3))
-    lo[at], hi[at] = centre - r, centre + r
+    lo[at], hi[at] = (axes - r).T, (axes + r).T
     rest = np.flatnonzero(~sphere)
     if rest.size:
         boxes = np.array([objects[k].bounds for k in rest.tolist()], dtype=np.float64)
@@ -158,7 +158,9 @@ class _BroadPhase:
         objects = group.objects
         self.unbounded = np.flatnonzero(~bounded)
         self.boxed = np.flatnonzero(bounded)
-        self.index: BoxGrid | BoxTree = boxgrid.index(read.lo[self.boxed], read.hi[self.boxed])
+        every = self.boxed.size == bounded.size
+        lo, hi = (read.lo, read.hi) if every else (read.lo[self.boxed], read.hi[self.boxed])
+        self.index: BoxGrid | BoxTree = boxgrid.index(lo, hi)
         """A grid or tree over the bounded members' boxes (core.geometry.boxgrid.index)."""
         where = np.full(len(objects), -1)  # member -> its row among the spheres read
         where[read.spheres] = np.arange(read.spheres.size)
