@@ -62,11 +62,26 @@ class BoxGrid:
         self.lo = np.asarray(lo, np.float64).reshape(-1, 3)
         self.hi = np.asarray(hi, np.float64).reshape(-1, 3)
         lo3, hi3 = np.ascontiguousarray(self.lo.T), np.ascontiguousarray(self.hi.T)  # (3, M)
+        pad = self._frame(lo3, hi3)
+        i0, i1 = self._cell(lo3 - self.margin), self._cell(hi3 + self.margin)
+        span = i1 - i0
+        small = (span[0] < SPREAD) & (span[1] < SPREAD) & (span[2] < SPREAD)
+        self.small, self.rest = np.flatnonzero(small), np.flatnonzero(~small)
+        cell, box = self._refs(i0[:, small], i1[:, small], self.small)
+        count = np.bincount(cell, minlength=int(self.shape.prod()))
+        crowd = count @ count <= CROWD * max(1, cell.size)
+        self.suits = bool(crowd) and 2 * self.rest.size <= self.small.size
+        if self.suits:
+            self._fill(count, cell, box, (lo3, hi3), pad + 2 * self.near)
+
+    def _frame(self, lo3: np.ndarray, hi3: np.ndarray) -> float:
+        """Place the cells around boxes (lo3, hi3) (3, M) each: ``origin``, ``size``,
+        ``shape``, ``root``, ``margin``, ``near``. Returns a margin over every box's own
+        (boxtree._padded)."""
         root_lo, root_hi = lo3.min(axis=1), hi3.max(axis=1)
         extent = root_hi - root_lo
         shape, size = _cells(extent, _cell_count(extent, hi3 - lo3))
         pad = PAD * (1.0 + float(np.max(np.abs(np.concatenate([root_lo, root_hi])))))
-        # pad: over every box's own margin (boxtree._padded)
         self.near = 0.25 * MARGIN * float(size.min())
         """Segments whose margin (Segments.reach) is at most this walk the grid."""
         self.margin = pad + MARGIN * float(size.min())
@@ -75,26 +90,18 @@ class BoxGrid:
         self.size = (extent + 2 * self.margin) / shape
         self.shape = shape + 2  # a border of empty cells: a walk may step one cell out
         self.root = (self.origin[:, None], (self.origin + shape * self.size)[:, None])
-        i0, i1 = self._cell(lo3 - self.margin), self._cell(hi3 + self.margin)
-        span = i1 - i0
-        small = (span[0] < SPREAD) & (span[1] < SPREAD) & (span[2] < SPREAD)
-        self.small = np.flatnonzero(small)
-        self.rest = np.flatnonzero(~small)
-        cell, box = self._refs(i0[:, small], i1[:, small], self.small)
-        count = np.bincount(cell, minlength=int(self.shape.prod()))
-        self.suits = (
-            bool(count @ count <= CROWD * max(1, cell.size))
-            and 2 * self.rest.size <= self.small.size
-        )
-        if not self.suits:
-            return
+        return pad
+
+    def _fill(self, count: np.ndarray, cell: np.ndarray, box: np.ndarray, boxes, wide: float):
+        """Hold the boxes ``box`` in cells ``cell`` (``count`` a cell), widened by ``wide``
+        from ``boxes`` ((lo, hi) (3, M) each), and a BoxTree of the rest."""
         self.start = np.zeros(count.size + 1, np.int64)
         np.cumsum(count, out=self.start[1:])
         """Where each cell's boxes begin in ``box`` (cells + 1,)."""
         self.occupied = count > 0
         self.box = box[np.argsort(cell)]  # within a cell, any order
         """The boxes in each cell, cell by cell."""
-        wide = pad + 2 * self.near  # over a box's and a walking segment's margins
+        lo3, hi3 = boxes
         self.ref = (np.take(lo3, self.box, axis=1) - wide, np.take(hi3, self.box, axis=1) + wide)
         """Each cell's boxes widened by their margin and twice ``near`` (3, refs) each,
         cell by cell (as ``box``): a walking segment's part passing within its margin
