@@ -28,7 +28,7 @@ from . import sampling as sampling_module
 from . import workers as workers_module
 from .backend import CPU, Device, device_of
 from .blackbody import XYZ_FROM_RGB
-from .geometry import Intersector
+from .geometry import Group, Intersector
 from .geometry.group import member_bounds
 from .geometry.hits import box_corners
 from .imageio import FAILED_COLOR
@@ -170,7 +170,8 @@ def render(
               shift_colours)  # fmt: skip
     probe = dict(zip(PROBE_OPTIONS, values, strict=True))
     scene = disk_exposure(scene, camera, **probe)
-    extent = _scene_extent(scene, camera)
+    objects = scene.intersector()  # built once: its members' bounds give the extent too
+    extent = _scene_extent(scene, camera, objects)
     options = camera_options(scene, options, extent, camera.frame.position)
     placed = PlacedPlan(scene, options, extent)  # no geometry yet: checks and motion
     if placed.curved:
@@ -180,7 +181,7 @@ def render(
     if moving is not None:  # the tolerances hold in the static frame (core.motion)
         tol = tol.narrowed(min(1.0, moving.smallest_doppler(camera)), tolerance)
         options = replace(options, tolerance=tol.trace)
-    tracer = Tracer(scene, options, extent)  # built once
+    tracer = Tracer(scene, options, extent, objects)  # built once
     tracer.set_motion(moving)
     tol = tol.for_plan(tracer)
     background = Background.of(scene.background)
@@ -905,19 +906,27 @@ def shade(rays: RayResults, background: Background, footprint=None) -> np.ndarra
     return color.astype(np.float32)
 
 
-def _scene_extent(scene: Scene, camera) -> float:
-    """Largest distance from the model's centre to the camera or to any object's bounds."""
+def _scene_extent(scene: Scene, camera, objects: Any = None) -> float:
+    """Largest distance from the model's centre to the camera or to any object's bounds
+    (``objects``: the scene's intersector where already made, whose members' bounds are
+    read where it is the Group of a list of objects and the disk's annulus)."""
     far = np.linalg.norm(camera.frame.position - scene.center)
-    objects = scene.objects
-    lo, hi = member_bounds([objects] if isinstance(objects, Intersector) else list(objects))
     extra = [(v.lo, v.hi) for v in scene.volumes]
-    annulus = scene.disk_annulus()
-    if annulus is not None:
-        extra.append(annulus.bounds)
+    if isinstance(objects, Group) and not isinstance(scene.objects, Intersector):
+        lo, hi = objects.member_bounds  # the list's and the annulus's
+    else:
+        one = scene.objects
+        lo, hi = member_bounds([one] if isinstance(one, Intersector) else list(one))
+        annulus = scene.disk_annulus()
+        if annulus is not None:
+            extra.append(annulus.bounds)
     more = np.array([np.asarray(box, np.float64).reshape(2, 3) for box in extra]).reshape(-1, 2, 3)
-    boxes = np.concatenate([np.stack([lo, hi], axis=1), more])
-    finite = np.all(np.isfinite(boxes), axis=(1, 2))
-    if finite.any():  # a box's farthest corner takes the farther end on every axis
-        reach = np.max(np.abs(boxes[finite] - scene.center), axis=1)  # (M, 3)
-        far = max(far, float(np.max(np.linalg.norm(reach, axis=1))))
+    lo, hi = np.concatenate([lo, more[:, 0]]), np.concatenate([hi, more[:, 1]])
+    finite = np.isfinite(lo).all(axis=1) & np.isfinite(hi).all(axis=1)
+    if not finite.all():
+        lo, hi = lo[finite], hi[finite]
+    if lo.size:  # a box's farthest corner takes the farther end on every axis
+        c = np.asarray(scene.center)[:, None]  # by axis: numpy's loops run long
+        reach = np.maximum(np.abs(lo.T - c), np.abs(hi.T - c))  # (3, M)
+        far = max(far, float(np.max(np.linalg.norm(reach, axis=0))))
     return float(max(far, 1e-9))

@@ -22,7 +22,7 @@ PAD = 1e-9
 more than their rounding (a few ulp of those sizes), so a segment that reaches a box is
 never lost to it."""
 WINDOW = 4
-"""Leaves a window of a segment crosses, about (BoxTree.window)."""
+"""Leaves a window of a segment crosses, about (BoxTree.window, BoxTree.windows)."""
 PAIRS = 1 << 20
 """(segment, node) pairs tested at once at most: segments are queried in chunks."""
 
@@ -65,15 +65,8 @@ class BoxTree:
         root = float(np.linalg.norm(leaf_hi.max(axis=0) - leaf_lo.min(axis=0)))
         self.window = max(WINDOW * leaf, root / 64, 1e-300)
         """A length (world units) of segment queried at once: about WINDOW leaves, at most
-        64 windows across the whole tree (core.geometry.group walks long segments window
-        by window, nearest first, and stops each where it has hit)."""
-
-    def segments(self, a: np.ndarray, b: np.ndarray) -> Segments:
-        """Segments a -> b (N, 3) made ready for queries (``pairs``)."""
-        with np.errstate(divide="ignore"):
-            inv_d = 1.0 / (b - a)
-        reach = PAD * (1.0 + np.abs(a).max(axis=1, initial=0.0))
-        return Segments(a, b, np.ascontiguousarray(a.T), np.ascontiguousarray(inv_d.T), reach)
+        64 windows across the whole tree (``windows`` walks long segments window by
+        window, nearest first, and stops each where it has hit)."""
 
     def span(self, seg: Segments) -> tuple[np.ndarray, np.ndarray]:
         """(enter, leave) (N,) of each segment in the root's box (enter > leave: misses it)."""
@@ -81,18 +74,36 @@ class BoxTree:
         root = np.zeros(n, np.int64)
         return _span(seg, np.arange(n), self.levels[0], root, np.zeros(n), np.ones(n))
 
+    def windows(self, seg: Segments, hit_t: np.ndarray, rows: np.ndarray | None = None):
+        """Yield (rows, boxes) (``pairs``) window by window along the segments (``rows``,
+        default all), nearest first, about ``window`` long each; a segment goes on while
+        ``hit_t`` (N,), its nearest hit so far, which the caller lowers in place between
+        windows, lies beyond the window's end."""
+        enter, leave = self.span(seg)
+        rows = np.arange(enter.size) if rows is None else rows
+        todo = rows[enter[rows] <= leave[rows]]
+        length = np.linalg.norm(seg.b - seg.a, axis=1)
+        step = self.window / np.maximum(length, 1e-300)
+        start = enter.copy()
+        while todo.size:
+            ahead = np.maximum(start[todo] + step[todo], np.nextafter(start[todo], 2.0))
+            stop = np.minimum(ahead, leave[todo])
+            yield self.pairs(seg, todo, start[todo], np.minimum(stop, hit_t[todo]))
+            going = (hit_t[todo] > stop) & (stop < leave[todo])  # nothing hit up to its end
+            start[todo[going]] = stop[going]
+            todo = todo[going]
+
     def pairs(
         self, seg: Segments, rows: np.ndarray, t_from: np.ndarray, t_to: np.ndarray
     ) -> tuple[np.ndarray, np.ndarray]:
         """(rows, boxes): each segment ``rows`` (M,) with each box its part [t_from, t_to]
-        (M,) passes through and whose bounds overlap the box, sorted by box, then row."""
+        (M,) passes through and whose bounds overlap the box, each pair once, unsorted."""
         chunk = max(1, PAIRS // (2 * LEAF * len(self.levels)))
         found = [self._pairs(seg, rows[s : s + chunk], t_from[s : s + chunk], t_to[s : s + chunk])
                  for s in range(0, rows.size, chunk)]  # fmt: skip
         rows = np.concatenate([f[0] for f in found]) if found else np.zeros(0, np.int64)
         boxes = np.concatenate([f[1] for f in found]) if found else np.zeros(0, np.int64)
-        order = np.lexsort((rows, boxes))
-        return rows[order], boxes[order]
+        return rows, boxes
 
     def _pairs(self, seg: Segments, rows, t_from, t_to) -> tuple[np.ndarray, np.ndarray]:
         """The pairs of the segments ``rows``, walking the tree level by level."""
@@ -112,15 +123,26 @@ class BoxTree:
         return r[keep], self.member[slots[keep]]
 
 
+def segments(a: np.ndarray, b: np.ndarray) -> Segments:
+    """Segments a -> b (N, 3) made ready for queries (BoxTree.pairs, BoxGrid.pairs)."""
+    d = b - a
+    with np.errstate(divide="ignore"):
+        inv_d = 1.0 / d
+    reach = PAD * (1.0 + np.abs(a).max(axis=1, initial=0.0))
+    axes = np.ascontiguousarray
+    return Segments(a, b, axes(a.T), axes(inv_d.T), reach, axes(d.T))
+
+
 class Segments(NamedTuple):
     """A batch of segments a -> b (N, 3) for BoxTree queries: a and 1 / (b - a) by axis
-    (3, N) and each one's rounding margin (PAD (1 + |a|))."""
+    (3, N), each one's rounding margin (PAD (1 + |a|)) and b - a by axis (3, N)."""
 
     a: np.ndarray
     b: np.ndarray
     a_axes: np.ndarray
     inv_axes: np.ndarray
     reach: np.ndarray
+    d_axes: np.ndarray
 
 
 def _padded(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

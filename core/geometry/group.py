@@ -3,20 +3,24 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from itertools import compress
+from typing import Any, NamedTuple
 
 import numpy as np
 
-from .boxtree import BoxTree
+from . import boxgrid
+from .boxgrid import BoxGrid
+from .boxtree import BoxTree, segments
 from .hits import _INF, Hits, _segments, filters, segment_overlaps
 from .primitives import Sphere, sphere_hits
 
 FEW = 8
-"""Up to this many members with finite bounds, each is asked in turn (no tree)."""
+"""Up to this many members with finite bounds, each is asked in turn (no broad phase)."""
 _OWN_ROWS = (Sphere,)
-"""Members whose answer for a segment depends on that segment alone, to the last bit:
-asked only about the segments that reach their box. Others are asked, once the tree finds
-a segment reaching them, about every segment whose bounds overlap theirs, as one by one
+"""Members whose answer for a segment depends on that segment alone, to the last bit (of
+exactly these types): asked only about the segments that reach their box. Others are
+asked, once the broad phase finds a segment reaching them, about every segment whose
+bounds overlap theirs, as one by one
 (planes and annuli take dot products by BLAS, whose last bit follows the batch; meshes
 break ties between faces in an order that follows it; nested groups, the add-on's
 intersectors: unknown)."""
@@ -28,8 +32,9 @@ class Group:
     Object ids: member k reports ``ids[k]`` (default: k, its position in the list; an id
     None keeps the ids the member reports itself). Hits equal those of asking every member
     in turn (``intersect_each``): the nearest, the earlier member on a tie. Beyond FEW
-    members with finite bounds, a bounding-volume hierarchy over their boxes (BoxTree)
-    finds the segments that reach each; spheres of one colour are then hit all at once.
+    members with finite bounds, a grid or a bounding-volume hierarchy over their boxes
+    (core.geometry.boxgrid.index) finds the segments that reach each; spheres of one
+    colour are then hit all at once.
     """
 
     def __init__(self, objects: Sequence[Any], ids: Sequence[int | None] | None = None) -> None:
@@ -42,7 +47,8 @@ class Group:
         )
         if len(self.ids) != len(self.objects):
             raise ValueError("ids must have one entry per object")
-        self.member_bounds = lo, hi = member_bounds(self.objects)
+        read = _read(self.objects)
+        self.member_bounds = lo, hi = read.lo, read.hi
         """(lo, hi) (M, 3): each member's bounds."""
         if np.isnan(lo).any() or np.isnan(hi).any():
             k = int(np.flatnonzero(np.isnan(lo).any(axis=1) | np.isnan(hi).any(axis=1))[0])
@@ -51,11 +57,14 @@ class Group:
             self.bounds = (lo.min(axis=0), hi.max(axis=0))
         else:
             self.bounds = (np.full(3, _INF), np.full(3, -_INF))
-        self.filters = any(filters(obj) for obj in self.objects)
-        """Whether a member colours over footprints (core.geometry.hits.filters)."""
-        self._broad = _BroadPhase(self.objects, self.ids, lo, hi) if self.objects else None
-        if self._broad is not None and self._broad.tree is None:
-            self._broad = None
+        plain = np.zeros(len(self.objects), bool)
+        plain[read.spheres[read.plain]] = True
+        self.filters = any(filters(self.objects[k]) for k in np.flatnonzero(~plain).tolist())
+        """Whether a member colours over footprints (core.geometry.hits.filters; a plain
+        sphere's colour does not)."""
+        finite = np.isfinite(lo) & np.isfinite(hi)
+        bounded = finite[:, 0] & finite[:, 1] & finite[:, 2]
+        self._broad = _BroadPhase(self, read, bounded) if bounded.sum() > FEW else None
 
     def intersect(self, a: np.ndarray, b: np.ndarray, footprint: np.ndarray | None = None) -> Hits:
         """Nearest hit of each segment a -> b (N, 3) over all members, those that filter
@@ -89,10 +98,47 @@ class Group:
 
 def member_bounds(objects: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi) (M, 3) of every intersector's bounds, at once."""
-    if not objects:
-        return np.zeros((0, 3)), np.zeros((0, 3))
-    boxes = np.array([o.bounds for o in objects], dtype=np.float64).reshape(-1, 2, 3)
-    return boxes[:, 0], boxes[:, 1]
+    read = _read(list(objects))
+    return read.lo, read.hi
+
+
+class _Read(NamedTuple):
+    """What one pass over a group's members reads: every member's bounds (lo, hi) (M, 3);
+    the positions of its Spheres (``spheres`` (S,), exactly core's Sphere), their centres
+    (S, 3), radii (S Python floats) and colours (S), and which of them are plain
+    (``plain`` (S,): one constant colour)."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+    spheres: np.ndarray
+    centre: np.ndarray
+    radius: list[float]
+    colour: list[Any]
+    plain: np.ndarray
+
+
+def _read(objects: list[Any]) -> _Read:
+    """The members' bounds, and their Spheres' centres and radii, in one pass each: a
+    Sphere's bounds are its centre -/+ its radius (as Sphere makes them)."""
+    m = len(objects)
+    kinds = [type(o) is Sphere for o in objects]
+    sphere = np.array(kinds, bool).reshape(m)
+    at = np.flatnonzero(sphere)
+    balls = objects if at.size == m else list(compress(objects, kinds))
+    centre = np.concatenate([s.center for s in balls]).reshape(-1, 3) if balls else np.zeros((0, 3))
+    radius = [s.radius for s in balls]
+    colour = [s.color for s in balls]
+    plain = np.array([not callable(c) for c in colour], bool).reshape(-1)
+    r, axes = np.array(radius, np.float64), centre.T  # by axis: numpy's loops run long
+    if at.size == m:
+        return _Read((axes - r).T, (axes + r).T, at, centre, radius, colour, plain)
+    lo, hi = np.empty((m, 3)), np.empty((m, 3))
+    lo[at], hi[at] = (axes - r).T, (axes + r).T
+    rest = np.flatnonzero(~sphere)
+    if rest.size:
+        boxes = np.array([objects[k].bounds for k in rest.tolist()], dtype=np.float64)
+        lo[rest], hi[rest] = boxes.reshape(-1, 2, 3)[:, 0], boxes.reshape(-1, 2, 3)[:, 1]
+    return _Read(lo, hi, at, centre, radius, colour, plain)
 
 
 def _ask(obj: Any, a: np.ndarray, b: np.ndarray, footprint: np.ndarray | None, rows) -> Hits:
@@ -103,59 +149,63 @@ def _ask(obj: Any, a: np.ndarray, b: np.ndarray, footprint: np.ndarray | None, r
 
 
 class _BroadPhase:
-    """A Group's members split for the broad phase: unbounded ones (infinite planes) asked
-    in turn, bounded ones in a BoxTree (None: FEW or fewer), plain spheres (one constant
-    colour each) in arrays hit all at once."""
+    """A Group's members split for the broad phase (more than FEW bounded ones): unbounded
+    ones (infinite planes) asked in turn, bounded ones in a grid or tree (``index``),
+    plain spheres (one constant colour each) in arrays hit all at once."""
 
-    def __init__(self, objects: list[Any], ids: list[int | None], lo, hi) -> None:
-        """Split ``objects`` (with ``ids``, bounds ``lo``, ``hi``)."""
-        bounded = np.all(np.isfinite(lo) & np.isfinite(hi), axis=1)
+    def __init__(self, group: Group, read: _Read, bounded: np.ndarray) -> None:
+        """Split the ``group``'s members (``read`` from them; ``bounded`` (M,): finite)."""
+        objects = group.objects
         self.unbounded = np.flatnonzero(~bounded)
         self.boxed = np.flatnonzero(bounded)
-        self.tree = BoxTree(lo[self.boxed], hi[self.boxed]) if self.boxed.size > FEW else None
-        kind = [type(objects[k]) for k in self.boxed]
-        self.ball = np.array([t is Sphere and not callable(objects[k].color)
-                              for t, k in zip(kind, self.boxed, strict=True)], bool)  # fmt: skip
-        self.own_rows = np.array([t in _OWN_ROWS for t in kind], bool)
-        balls = [objects[k] for k in self.boxed[self.ball]]
-        self.centre = np.array([s.center for s in balls]).reshape(-1, 3)
-        self.radius = np.array([s.radius for s in balls], np.float64)
-        self.radius2 = np.array([s.radius**2 for s in balls], np.float64)  # as Sphere's
-        self.colour = np.array([s.color for s in balls]).reshape(-1, 4)
-        self.ball_id = np.array([_id(s, oid) for s, oid in
-                                 zip(balls, np.array(ids, object)[self.boxed[self.ball]],
-                                     strict=True)], np.int32)  # fmt: skip
+        every = self.boxed.size == bounded.size
+        lo, hi = (read.lo, read.hi) if every else (read.lo[self.boxed], read.hi[self.boxed])
+        self.index: BoxGrid | BoxTree = boxgrid.index(lo, hi)
+        """A grid or tree over the bounded members' boxes (core.geometry.boxgrid.index)."""
+        where = np.full(len(objects), -1)  # member -> its row among the spheres read
+        where[read.spheres] = np.arange(read.spheres.size)
+        row = where[self.boxed]
+        self.ball = row >= 0
+        self.ball[self.ball] = read.plain[row[self.ball]]
+        self.own_rows = row >= 0  # the Spheres read: _OWN_ROWS
+        s = row[self.ball]
+        every = s.size == len(read.radius)  # every sphere read is plain and bounded
+        radius = read.radius if every else [read.radius[k] for k in s.tolist()]
+        colour = read.colour if every else [read.colour[k] for k in s.tolist()]
+        self.centre = read.centre if every else read.centre[s]
+        self.radius = np.array(radius, np.float64)
+        self.radius2 = np.array([r**2 for r in radius], np.float64)  # as Sphere's (Python's)
+        self.colour = np.concatenate(colour).reshape(-1, 4) if colour else np.zeros((0, 4))
+        members = self.boxed[self.ball]
+        whole = members.size == len(objects)
+        ids = group.ids if whole else [group.ids[k] for k in members.tolist()]
+        self.ball_id = _ids(objects if whole else [objects[k] for k in members.tolist()], ids)
         self.ball_index = np.cumsum(self.ball) - 1  # boxed position -> row in the arrays
 
     def intersect(self, group: Group, a: np.ndarray, b: np.ndarray, footprint) -> Hits:
-        """The group's hits (Group.intersect) through the tree."""
-        assert self.tree is not None
+        """The group's hits (Group.intersect) through the grid or tree, window by window
+        along the segments (``index.windows``: each reads the hits found so far)."""
+        index = self.index
+        assert index is not None
         out, won = Hits.miss(a.shape[0]), np.full(a.shape[0], len(group.objects))
         for k in self.unbounded.tolist():
             rows = np.flatnonzero(segment_overlaps(a, b, *group.objects[k].bounds))
             self._member(group, k, rows, a, b, footprint, out, won)
-        seg = self.tree.segments(a, b)
-        enter, leave = self.tree.span(seg)
-        todo = np.flatnonzero(enter <= leave)
-        step = self.tree.window / np.maximum(np.linalg.norm(b - a, axis=1), 1e-300)
-        start = enter.copy()
         asked: set[int] = set()  # members asked about all their rows (not _OWN_ROWS)
-        while todo.size:  # window by window along the segments, nearest first
-            ahead = np.maximum(start[todo] + step[todo], np.nextafter(start[todo], 2.0))
-            stop = np.minimum(ahead, leave[todo])
-            rows, boxed = self.tree.pairs(seg, todo, start[todo], np.minimum(stop, out.t[todo]))
+        for rows, boxed in index.windows(segments(a, b), out.t):  # nearest first
             self._window(group, rows, boxed, a, b, footprint, out, won, asked)
-            going = (out.t[todo] > stop) & (stop < leave[todo])  # nothing hit up to its end
-            start[todo[going]] = stop[going]
-            todo = todo[going]
         return out
 
     def _window(self, group: Group, rows, boxed, a, b, footprint, out: Hits, won, asked) -> None:
-        """The hits of the (segment ``rows``, member ``boxed``) pairs a window found
-        (members in ``asked`` have answered for all their rows already)."""
+        """The hits of the (segment ``rows``, member ``boxed``) pairs a window found, in
+        any order, maybe repeated (members in ``asked`` have answered for all their rows
+        already)."""
         balls = self.ball[boxed]
         self._balls(rows[balls], boxed[balls], a, b, out, won)
-        rows, boxed = rows[~balls], boxed[~balls]
+        if balls.all():
+            return
+        pair = np.unique(boxed[~balls] * a.shape[0] + rows[~balls])  # by member, then row
+        rows, boxed = pair % a.shape[0], pair // a.shape[0]
         ends = np.r_[np.flatnonzero(np.diff(boxed, prepend=-1)), boxed.size]  # each member's pairs
         for start, stop in zip(ends[:-1], ends[1:], strict=True):
             k = int(self.boxed[boxed[start]])
@@ -192,9 +242,15 @@ class _BroadPhase:
         _keep(out, won, r, hits, member[first], None)
 
 
-def _id(obj: Any, oid: int | None) -> int:
-    """The id a member's hits report: the group's for it, else its own."""
-    return int(obj.object_id) if oid is None else int(oid)
+def _ids(balls: list[Any], ids: list[int | None]) -> np.ndarray:
+    """(B,) int32: the ids the members ``balls`` report: the group's ``ids`` for them,
+    their own where None."""
+    if None not in ids:
+        return np.array(ids, np.int64).reshape(-1).astype(np.int32)
+    out = np.array([0 if oid is None else oid for oid in ids], np.int64).reshape(-1)
+    own = [k for k, oid in enumerate(ids) if oid is None]
+    out[own] = [int(balls[k].object_id) for k in own]
+    return out.astype(np.int32)
 
 
 def _keep(out: Hits, won: np.ndarray, rows: np.ndarray, hits: Hits, member, oid) -> None:

@@ -72,11 +72,10 @@ class Scene:
                 return self.objects
             return Group([self.objects, annulus], ids=[None, DISK_ID])
         objects = list(self.objects)
-        ids: list[int | None] = list(range(len(objects)))
-        if annulus is not None:
-            objects.append(annulus)
-            ids.append(DISK_ID)
-        return Group(objects, ids=ids)
+        if annulus is None:
+            return Group(objects)  # ids: their positions
+        ids: list[int | None] = [*range(len(objects)), DISK_ID]
+        return Group([*objects, annulus], ids=ids)
 
     def disk_annulus(self) -> Disk | None:
         """The disk as a flat annulus in the world (None without a disk)."""

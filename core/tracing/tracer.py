@@ -8,7 +8,7 @@ against the scene's intersector, only where the segment's bounds meet the geomet
 Rays end as escaped, captured, hit, failed or max_steps (``ENDING``); ended rays leave
 the batch, so the work per step shrinks as the image resolves.
 
-Interface: ``Tracer(scene, options, extent)``: ``trace``, ``watch_geometry``,
+Interface: ``Tracer(scene, options, extent, objects=None)``: ``trace``, ``watch_geometry``,
 ``without_clearance``, ``set_motion``, ``supports_tangents`` / ``check_tangents``,
 ``error_bound``, ``objects`` and what it holds (``TracerState``: the plan's attributes,
 frame, geometry, disk, motion). ``TraceOptions``, ``TracePlan``, ``plan_trace`` and

@@ -1,6 +1,7 @@
 """What a tracer holds for one scene and options (the state the tracing modules share).
 
-Interface: ``TracerState(scene, options, extent)``: a PlacedPlan (core/tracing/plan.py: the
+Interface: ``TracerState(scene, options, extent, objects=None)`` (``objects``: the scene's
+intersector, where made already): a PlacedPlan (core/tracing/plan.py: the
 plan, ``plan``, and its ``curved``, ``model``, ``method``, ``order``, ``chart``, ``region``,
 ``step``, ``captured``; the scene's ``rotation`` and frame, ``_to_local`` / ``_to_world``),
 its ``geometry`` and the local boxes
@@ -11,6 +12,8 @@ one, with the public methods; the tracing modules take it as ``tracer``.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
@@ -48,9 +51,13 @@ class TracerState(PlacedPlan):
     """Each object's (and volume's) local box, where there are 2 to NEAR_BOXES: a step is
     near geometry where its path may pass one of them, not only their union's box."""
 
-    def __init__(self, scene: Scene, options: TraceOptions, extent: float = 1.0):
-        """The plan of ``scene`` with ``options`` (PlacedPlan), and what it needs."""
-        self.geometry = SceneGeometry(scene.intersector(), list(scene.volumes))
+    def __init__(
+        self, scene: Scene, options: TraceOptions, extent: float = 1.0, objects: Any = None
+    ) -> None:
+        """The plan of ``scene`` with ``options`` (PlacedPlan), and what it needs;
+        ``objects``: the scene's intersector (``scene.intersector()``) where already made."""
+        objects = scene.intersector() if objects is None else objects
+        self.geometry = SceneGeometry(objects, list(scene.volumes))
         super().__init__(scene, options, extent)
         self.stepper: Stepper | None = None
         self._near: tuple[np.ndarray, np.ndarray] | None = None

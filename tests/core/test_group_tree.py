@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import core
+from core.geometry import boxgrid
 from core.geometry import group as group_module
 from core.intersect import Disk, Group, Hits, Plane, Sphere, TriangleMesh, checker, segment_overlaps
 
@@ -157,12 +158,83 @@ def test_many_small_spheres_equal_brute_force(count):
 
 
 def test_windows_walk_long_segments_nearest_first(monkeypatch):
-    """Windows of one leaf (many per segment) find the same hits as one window for all."""
+    """Windows of one leaf, or one cell, (many per segment) find the same hits as one
+    window for all."""
     objects, ids = mixed_scene(count=400, rng=np.random.default_rng(3))
     a, b = segments(np.random.default_rng(4), 3000)
     ref = brute_force(objects, ids, a, b)
+    with monkeypatch.context() as m:
+        m.setattr(boxgrid, "WINDOW", 1)
+        m.setattr(boxgrid, "LONGEST", 1)
+        group = Group(objects, ids=ids)
+        assert isinstance(group._broad.index, boxgrid.BoxGrid)
+        assert_same(group.intersect(a, b), ref)
     monkeypatch.setattr(core.geometry.boxtree, "WINDOW", 1)
-    assert_same(Group(objects, ids=ids).intersect(a, b), ref)
+    monkeypatch.setattr(boxgrid, "CROWD", 0.0)  # the tree instead of the grid
+    group = Group(objects, ids=ids)
+    assert isinstance(group._broad.index, core.geometry.boxtree.BoxTree)
+    assert_same(group.intersect(a, b), ref)
+
+
+def test_grid_with_mixed_sizes_equals_brute_force():
+    """Many small spheres, a few big ones (beside the grid, in its own tree), rectangles,
+    annuli, meshes and an infinite plane: the grid's hits equal the brute force's."""
+    rng = np.random.default_rng(451)
+    objects, ids = mixed_scene(count=3000, rng=rng)
+    radii = (1.5, 2.0, 2.5, 3.0, 1.2, 4.0)
+    big = [Sphere(c, r, color=rng.uniform(0, 1, 4))
+           for c, r in zip(rng.uniform(-5, 5, (6, 3)), radii, strict=True)]  # fmt: skip
+    objects, ids = [*big, *objects], [*range(900, 906), *ids]
+    group = Group(objects, ids=ids)
+    index = group._broad.index
+    assert isinstance(index, boxgrid.BoxGrid) and index.tree is not None
+    assert {0, 1, 2, 3, 5} <= set(group._broad.boxed[index.rest].tolist())
+    a, b = segments(rng, 5000)
+    ga, gb = grazing(objects, rng)
+    a, b = np.concatenate([a, ga]), np.concatenate([b, gb])
+    ref = brute_force(objects, ids, a, b)
+    assert_same(group.intersect(a, b), ref)
+    assert np.isin(ref.object_id, range(900, 906)).any()  # the big ones are hit
+
+
+def test_grid_sends_far_segments_to_a_tree():
+    """Segments starting farther than the grid's margin covers (1e-4 cell widths over
+    boxtree.PAD) walk a tree over its boxes: the same hits as the brute force, near and
+    far segments mixed. (From 1e6 away, tree and grid alike lose a few grazing hits of
+    these small spheres, whose arithmetic rounds at 1e-3 there.)"""
+    rng = np.random.default_rng(452)
+    objects = [Sphere(c, 0.05, color=rng.uniform(0, 1, 4)) for c in rng.uniform(-3, 3, (4000, 3))]
+    ids = list(range(len(objects)))
+    group = Group(objects)
+    index = group._broad.index
+    assert isinstance(index, boxgrid.BoxGrid)
+    target = rng.uniform(-3, 3, (3000, 3))
+    away = rng.normal(size=(3000, 3))
+    away *= 3e4 / np.linalg.norm(away, axis=1, keepdims=True)
+    a = np.where(np.arange(3000)[:, None] % 2, target * 2, away)
+    b = a + 3 * (target - a)
+    ref = brute_force(objects, ids, a, b)
+    far = core.geometry.boxtree.segments(a, b).reach > index.near
+    assert far.sum() == 1500
+    assert_same(group.intersect(a, b), ref)
+    assert ref.hit[far].any() and ref.hit[~far].any()
+
+
+def test_crowded_boxes_take_the_tree():
+    """Boxes clustered far from the rest crowd a grid's cells: the tree is used, with the
+    brute force's hits."""
+    rng = np.random.default_rng(453)
+    centres = np.concatenate(
+        [rng.normal(scale=0.01, size=(2000, 3)), rng.uniform(-50, 50, (20, 3))]
+    )
+    objects = [Sphere(c, 0.005, color=rng.uniform(0, 1, 4)) for c in centres]
+    group = Group(objects)
+    assert isinstance(group._broad.index, core.geometry.boxtree.BoxTree)
+    a = rng.normal(scale=0.02, size=(3000, 3)) + (0, -1, 0)
+    b = a + (0, 2, 0)
+    ref = brute_force(objects, list(range(len(objects))), a, b)
+    assert_same(group.intersect(a, b), ref)
+    assert ref.hit.mean() > 0.1
 
 
 def test_render_unchanged_by_the_tree(monkeypatch):
