@@ -63,6 +63,13 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
         "--tolerance", type=float, default=None, help="radians (sets quality Radians)"
     )
     parser.add_argument(
+        "--device",
+        default=None,
+        choices=("CPU", "GPU"),
+        help="Render Properties › Device (GPU: CuPy in this Python, README: GPU rendering); "
+        "default: the scene's (CPU for a built scene)",
+    )
+    parser.add_argument(
         "--method",
         default="AUTO",
         help="integrator (AUTO: the add-on's default, the measured cheapest for the model)",
@@ -192,6 +199,8 @@ def main() -> None:
         scene.symray.tolerance_px = args.tolerance_px
         scene.symray.samples = args.samples
         scene.symray.method = args.method
+    if args.device is not None:
+        scene.symray.device = args.device
     scene.render.engine = "SYMRAY"
     scene.view_settings.view_transform = "Standard"
     if args.save_blend:

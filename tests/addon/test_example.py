@@ -59,3 +59,18 @@ def test_render_scene_example(addon, tmp_path):
     )
     assert again.returncode == 0, again.stdout + again.stderr
     assert (tmp_path / "y.png").stat().st_size > 0
+
+
+def test_render_scene_device_gpu_without_a_gpu_fails_by_name(addon, tmp_path):
+    """--device GPU where CuPy or a GPU is missing: the run fails naming CuPy and writes no
+    image (a farm script learns why, not a wrong frame)."""
+    if addon.core.backend.cuda_problem() is None:
+        pytest.skip("a GPU renders here")
+    png = tmp_path / "gpu.png"
+    run = subprocess.run(
+        [sys.executable, str(REPO / "examples" / "render_scene.py"), "--out", str(png),
+         "--width", "8", "--height", "6", "--tolerance", "1e-4", "--device", "GPU"],
+        env=dict(os.environ), capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert run.returncode != 0 and "CuPy" in run.stdout + run.stderr
+    assert not png.exists()
