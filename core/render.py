@@ -231,6 +231,7 @@ def render(
     image.draw_stars(pixel_filter, filter_size, tracer, was_cancelled)
     result = image.result(camera, passes, time.perf_counter() - start_time, was_cancelled, tracer)
     result.summary["parallel"] = f"{count} {kind}" if kind != "inline" else "inline"
+    result.summary["device"] = dev.name
     result.summary["pixel_angle"] = tol.pixel_angle
     if scene.disk is not None:
         result.summary["disk_exposure"] = scene.disk.exposure

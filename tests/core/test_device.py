@@ -200,6 +200,7 @@ def test_tolerance_px_on_the_device_traces_every_pixel_at_the_samplers_step():
     cpu = core.render(scene, camera, workers=1, tolerance=TRACE_SHARE * pixel_angle)
     np.testing.assert_array_equal(device.rgba, cpu.rgba)
     assert device.summary["rays"] == WIDTH * HEIGHT
+    assert (device.summary["device"], cpu.summary["device"]) == ("double", "cpu")
 
 
 # --- refusals ----------------------------------------------------------------------------------
