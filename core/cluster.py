@@ -8,7 +8,10 @@ chunk is then one small task naming it and a span, submitted most expensive firs
 caller's bounded buffers: the caller keeps at most what it has not stored yet.
 
 A worker lost mid-render costs its tasks a rerun elsewhere (Dask's scheduler reschedules
-them, up to its ``allowed-failures``); a task that raises stops the render with its error.
+them, up to its ``allowed-failures``). Where it held the job's last copy (Dask's memory
+manager keeps one of a broadcast where no task waits for more), the scheduler cancels the
+tasks instead: the job is scattered again and they are resubmitted. A task that raises
+stops the render with its error.
 A cancel (``should_cancel``) cancels the tasks not yet finished; a chunk already running
 finishes on its worker and is dropped. The workers import ``core`` (SymRay installed, or
 its folder on their ``PYTHONPATH``): only the job's data travels.
@@ -18,7 +21,7 @@ from __future__ import annotations
 
 import itertools
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterator, Sequence
 from typing import Any
 
 from .workers import keep_freed_memory
@@ -29,6 +32,7 @@ _POLL_S = 0.05  # how often the caller checks for finished tasks and for a cance
 _TOKENS = itertools.count()
 
 Span = tuple[int, int]
+Task = tuple[int, tuple[Span, float]]  # a chunk's index, its span and its priority
 
 
 def require_dask():
@@ -102,32 +106,75 @@ def run_on_client(
 ) -> Iterator[tuple[Span, Any]]:
     """Run job(span, cancel) for every span as Dask tasks (higher ``priorities`` first);
     yield (span, result) as each finishes. Stops once ``cancelled()`` (the tasks not yet
-    finished are cancelled), and on a task's error (raised here, the rest cancelled)."""
+    finished are cancelled), and on a task's error (raised here, the rest cancelled).
+    Tasks whose job was lost with a worker are sent again (``_LOST_JOB_RETRIES``)."""
     distributed = require_dask()
     token = next(_TOKENS)
-    [shared] = client.scatter([job], broadcast=True, hash=False)
-    futures = {
-        client.submit(
-            _run_chunk, shared, span, key=f"symray-{token}-{k}", priority=p, pure=False
-        ): span
-        for k, (span, p) in enumerate(zip(spans, priorities, strict=True))
-    }
-    finished = distributed.as_completed(list(futures))
+    finished = distributed.as_completed()
+    futures: dict[Any, Task] = {}
+    todo: list[Task] = list(enumerate(zip(spans, priorities, strict=True)))
+    shared = None
     try:
-        while futures:
-            if cancelled():
+        for attempt in range(_LOST_JOB_RETRIES + 1):
+            shared = _send(client, job, shared)
+            for k, (span, p) in todo:
+                key = f"symray-{token}-{k}" + (f"-{attempt}" if attempt else "")
+                future = client.submit(_run_chunk, shared, span, key=key, priority=p, pure=False)
+                futures[future] = (k, (span, p))
+                finished.add(future)
+            todo = yield from _collect(finished, futures, cancelled)
+            if not todo:
                 return
-            if not finished.has_ready():
-                time.sleep(_POLL_S)
-                continue
-            for future in finished.next_batch(block=False):
-                span, result = futures.pop(future), future.result()
-                del future  # the result lives in the caller's buffers, not on the cluster
-                yield span, result
+        raise RuntimeError(
+            f"the cluster lost this render's scene {_LOST_JOB_RETRIES + 1} times (its workers "
+            "keep dying): see the Dask workers' logs"
+        )
     finally:
         if futures:
             client.cancel(list(futures))
-        shared.release()
+        if shared is not None:
+            shared.release()
+
+
+_LOST_JOB_RETRIES = 3
+"""How many times tasks whose job was lost are sent again before the render fails."""
+
+
+def _send(client: Any, job: Any, previous: Any) -> Any:
+    """The job on every worker (Client.scatter, broadcast), replacing ``previous``."""
+    if previous is not None:
+        previous.release()
+    [shared] = client.scatter([job], broadcast=True, hash=False)
+    return shared
+
+
+def _collect(
+    finished: Any, futures: dict[Any, Task], cancelled: Callable[[], bool]
+) -> Generator[tuple[Span, Any], None, list[Task]]:
+    """Yield (span, result) as ``futures`` finish, until none is left or ``cancelled()``;
+    return the (index, (span, priority)) of those cancelled by the cluster. A scattered job
+    has no lineage: once Dask's memory manager has dropped its extra copies, a worker that
+    dies takes the last one, and the scheduler cancels every task needing it ("already
+    forgotten") instead of rerunning them."""
+    from distributed.client import FutureCancelledError
+
+    lost: list[Task] = []
+    while futures:
+        if cancelled():
+            return []
+        if not finished.has_ready():
+            time.sleep(_POLL_S)
+            continue
+        for future in finished.next_batch(block=False):
+            item = futures.pop(future)
+            try:
+                result = future.result()
+            except FutureCancelledError:  # also when lost between finishing and gathering
+                lost.append(item)
+                continue
+            del future  # the result lives in the caller's buffers, not on the cluster
+            yield item[1][0], result
+    return lost
 
 
 def connect(address: str, timeout_s: float = 10.0) -> Any:
