@@ -84,6 +84,11 @@ TILE_ROUNDS = 6
 TILE_ROUNDS rounds (core.sampling.quadtree.ROUND_RAYS each: its refine's, retraces and
 centres) at the ~0.5 rays a pixel most scenes trace (benchmarks/honesty.py at 160 x
 120)."""
+SQUARES_FROM = 8
+"""Near-square tiles replace bands only from this many tiles (4 workers on): with fewer,
+a band's extra lattice rows cost little and the squares gained nothing measurable (1080p
+Kerr board Preview, 2 workers, 3 alternated runs: bands 9.93-11.17 s, 4 squares of 960 x
+544 9.86-11.42 s)."""
 PROBE_SCALE = 1 / 8
 """Automatic disk exposure: the probe render's size per side, relative to the frame's
 (rounded up: the Rendered viewport's first level, core.viewport, is this probe) ..."""
@@ -460,7 +465,11 @@ def _tiles_for(camera, workers: int) -> list[Tile]:
     bands = min(bands, math.ceil(h / (stride - 1)))  # bands of at least STRIDE - 1 rows
     band = (cols, math.ceil(h / bands))
     square = _square_tile(w, h, bands, stride)
-    if square[0] * square[1] <= most and _lattice_nodes(w, h, square) < _lattice_nodes(w, h, band):
+    if (
+        bands >= SQUARES_FROM
+        and square[0] * square[1] <= most
+        and _lattice_nodes(w, h, square) < _lattice_nodes(w, h, band)
+    ):
         return tiles(w, h, *square)
     return tiles(w, h, *band)
 

@@ -1,5 +1,8 @@
 """The core renderer against independent references (straight casts, exact deflection)."""
 
+import importlib
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from scipy.integrate import quad
@@ -303,3 +306,38 @@ def test_the_pass_table_says_which_passes_are_interpolated():
     assert np.all(out.passes["error"][between][seen] > 0)
     assert np.all(out.passes["error"][between][~seen] == 0)  # the shadow's inside: black
     assert np.all(np.isfinite(out.passes["direction"][between][seen]))
+
+
+@pytest.mark.parametrize("workers", [1, 2, 4, 8, 16])
+@pytest.mark.parametrize("size", [(1920, 1080), (960, 540), (160, 90), (333, 77)])
+def test_tiles_cover_the_frame_once_and_squares_only_where_they_save_lattice_nodes(size, workers):
+    """render._tiles_for: every pixel in exactly one tile; near-square tiles (whole coarsest
+    blocks a side) only from SQUARES_FROM tiles and only where their lattices hold fewer
+    coarsest nodes than the bands would (counted independently here: each tile's
+    (ceil(w / STRIDE) + 1) x (ceil(h / STRIDE) + 1) nodes)."""
+    from core.sampling import lattice, tiling
+
+    render_module = importlib.import_module("core.render")  # core.render is the function
+
+    width, height = size
+    camera = SimpleNamespace(width=width, height=height)  # all the tiling reads
+    chosen = render_module._tiles_for(camera, workers)
+    cover = np.zeros((height, width), int)
+    for tile in chosen:
+        cover[tile.y0 : tile.y1, tile.x0 : tile.x1] += 1
+    assert (cover == 1).all()
+
+    def nodes(tiles):
+        stride = lattice.STRIDE
+        return sum(
+            (-(-(t.x1 - t.x0) // stride) + 1) * (-(-(t.y1 - t.y0) // stride) + 1) for t in tiles
+        )
+
+    if all(t.x1 - t.x0 == width for t in chosen):  # bands of whole rows
+        return
+    assert len(chosen) >= render_module.SQUARES_FROM
+    assert all((t.x1 - t.x0) % lattice.STRIDE == 0 for t in chosen if t.x1 < width)
+    band_rows = -(-height // len(chosen))
+    bands = [tiling.Tile(0, y, width, min(y + band_rows, height))
+             for y in range(0, height, band_rows)]  # fmt: skip
+    assert nodes(chosen) < nodes(bands)
