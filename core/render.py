@@ -132,6 +132,7 @@ def render(
     shift_colours: bool = True,
     client: Any = None,
     device: str | Device = "cpu",
+    interpolate: bool = True,
 ) -> RenderResult:
     """Render ``scene`` seen by ``camera`` (docs/design.md, "Rendering in the core").
 
@@ -161,8 +162,11 @@ def render(
     would take, no interpolation), the intersectors and the shading on the host; images
     equal the CPU's dense render at the same step. ``samples`` > 1 and ``client`` are
     refused there.
+    ``interpolate`` False (with ``tolerance_px``): every pixel centre traced, nothing
+    interpolated, with the same promise (the same step, the error pass, rays over their
+    budget or near a miss traced again): what the adaptive image is weighed against.
     """
-    passes = _check_render_call(passes, chunk_size, workers, cores)
+    passes = _check_render_call(passes, chunk_size, workers, cores, interpolate)
     dev = _device_for_render(device, samples, client)
     cluster_threads = cluster.check_client(client) if client is not None else None
     _check_sampling(tolerance_px, samples, pixel_filter, filter_size)
@@ -206,12 +210,12 @@ def render(
     if not dev.on_host:  # every pixel centre, in batches as large as the device holds
         sampled, kind, count, chunk_size = False, "inline", 1, DEVICE_CHUNK
     if sampled:
-        if tol.interpolation > 0 or samples > 1:  # blocks and anti-aliasing need clearance
+        if tol.interpolation > 0 or samples > 1:  # blocks, near misses, anti-aliasing
             tracer.watch_geometry(_watch_margin(tracer, camera, tol.pixel_angle))
         sampler = TileSampler(
             tracer, camera, background, shade, tol, samples=samples,
             pixel_filter=pixel_filter, filter_size=filter_size, with_error=with_error,
-            tangents=with_tangents, magnification=with_tangents,
+            tangents=with_tangents, magnification=with_tangents, every_pixel=not interpolate,
         )  # fmt: skip
         tile_list = _tiles_for(camera, count)
         chunks = [(k, k + 1) for k in range(len(tile_list))]
@@ -539,8 +543,11 @@ def _summarise_px(summary: dict, pixel_angle: float) -> None:
         summary[f"error_px_{key}"] = None if value is None else value / pixel_angle
 
 
-def _check_render_call(passes, chunk_size, workers, cores) -> tuple[str, ...]:
-    """ValueError for what core.render refuses beyond TraceOptions; -> the passes."""
+def _check_render_call(passes, chunk_size, workers, cores, interpolate) -> tuple[str, ...]:
+    """ValueError (TypeError for ``interpolate``) for what core.render refuses beyond
+    TraceOptions; -> the passes."""
+    if not isinstance(interpolate, bool):
+        raise TypeError(f"interpolate must be True or False, got {interpolate!r}")
     passes = tuple(passes)
     unknown = set(passes) - set(ALL_PASSES)
     if unknown:

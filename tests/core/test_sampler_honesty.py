@@ -14,6 +14,7 @@ import core
 from core import hamiltonians as hm
 from core.presets import mirage_view
 from core.sky import procedural_sky
+from core.tolerances import TRACE_SHARE
 from tests.core.test_sampling import true_error_px
 
 REFERENCE = dict(method="dopri5", tolerance=1e-10, max_steps=10**6)
@@ -544,3 +545,28 @@ def test_spared_companions_leave_no_pixel_near_geometry_under_reported():
     assert np.count_nonzero(est[near] < truth[near] / 3) == 0
     apart = np.isinf(truth)
     assert np.all(est[apart] >= 1.0)
+
+
+def test_every_pixel_traced_keeps_the_promise_a_plain_dense_render_breaks():
+    """core.render(interpolate=False): every pixel centre traced, with tolerance_px's promise
+    (clearance watched, near misses and rays over budget traced again). Rows 52-54 of the
+    mirage at 160 x 90 (rays grazing the hot ground 7.7 m away): its endings are the
+    dopri5 reference's at every pixel, and every other pixel is within 3x the tolerance;
+    a plain render of every pixel at the same step (``tolerance`` = TRACE_SHARE px, no
+    companions' retraces) shows sky where the reference hits the ground: the bar
+    benchmarks/honesty.py weighs the adaptive image against is the former."""
+    scene, _ = mirage_view("fig10", 160, 90)
+    cam = _camera((0, 0, 0.4), (1, 0, 0.34), 160, 90, 16)
+    rows = cam.resized(160, 90, region=(0, 160, 35, 38))  # rows 52-54 from the top
+    ref = core.render(scene, rows, passes=PASSES, **REFERENCE)
+    every = core.render(scene, rows, tolerance_px=1.0, interpolate=False, passes=PASSES)
+    step = TRACE_SHARE * 1.0 * every.summary["pixel_angle"]
+    plain = core.render(scene, rows, tolerance=step, passes=PASSES)
+    assert every.summary["rays"] >= rows.n_pixels  # every centre traced, none interpolated
+    assert np.array_equal(every.passes["ending"], ref.passes["ending"])
+    truth = true_error_px(ref, every, rows.frame.position)
+    assert np.nanmax(truth) <= 3.0
+    lost = np.count_nonzero(plain.passes["ending"] != ref.passes["ending"])
+    assert lost > 0, "the plain render no longer loses grazing hits here: pick a harder row"
+    with np.testing.assert_raises(TypeError):
+        core.render(scene, rows, tolerance_px=1.0, interpolate="no")
