@@ -53,7 +53,8 @@ and user_metric, and the graded-index lenses (issue 50) fisheye_matched, fisheye
 luneburg_matched and luneburg_jump (a scene core.render refuses is printed as refused,
 with its message, and has no row). 2 cores: --quick ~2.5 min with its references rendered
 (~1.6 min of it);
-the full 160x90 run ~5 min (references ~3 min, cached after the first run).
+the full 160x90 run ~6 min (references ~3 min, cached after the first run; each row also
+renders the scene twice with every pixel traced: ``x every`` and ``x dense``).
 
 A table row per (scene, T), a line counting the rows that miss each target, and the CSV
 out/bench/honesty.csv; ``--save-images DIR``: per scene at the loosest T, reference | run
