@@ -203,23 +203,25 @@ class _Walk:
         ``limit`` (its hit so far, or its end): (k, cell) of the cells that hold boxes, ``k``
         the segment's position in the walk as it was (those that stop are let go)."""
         self.limit, self.at = limit, np.arange(self.row.size)
-        ks, cells = [], []
+        ats, cells = [], []
         for step in range(count):
             cell, on = self.cell, self.on
-            k = np.flatnonzero(self.occupied[cell] & on)
-            ks.append(self.at[k])
-            cells.append(cell[k])
+            ats.append(self.at)
+            cells.append(cell * on)  # a stopped segment's: 0, a border cell (empty)
             t = np.minimum(np.minimum(self.next[0], self.next[1]), self.next[2])
             on &= t <= self.limit
             self.covered = t  # the cells walked cover the segment up to here (where on)
             t = np.where(on, t, np.nan)  # no plane is crossed at NaN: those stopped stay
-            for nxt, delta, move in zip(self.next, self.delta, self.move, strict=True):
+            for axis in range(3):  # np.where, not np.add(where=): 5x faster on this
+                nxt = self.next[axis]
                 cross = nxt == t
-                np.add(nxt, delta, out=nxt, where=cross)
-                np.add(cell, move, out=cell, where=cross)
+                self.next[axis] = np.where(cross, nxt + self.delta[axis], nxt)
+                cell += self.move[axis] * cross
             if step % 2 and np.count_nonzero(on) < 0.75 * on.size:
                 self._keep(on)  # fewer to step
-        return np.concatenate(ks), np.concatenate(cells)
+        walked = np.concatenate(cells)
+        k = np.flatnonzero(self.occupied.take(walked))
+        return np.concatenate(ats)[k], walked[k]
 
     def go_on(self, hit_t: np.ndarray) -> None:
         """Keep walking the segments still in the grid whose hit so far (``hit_t``) lies
