@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from itertools import compress
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -121,14 +120,18 @@ class _Read(NamedTuple):
 
 
 def _read(objects: list[Any]) -> _Read:
-    """The members' bounds, and their Spheres' records (Sphere._row: joined as bytes, one
-    pass): a Sphere's bounds are its centre -/+ its radius (as Sphere makes them)."""
+    """The members' bounds, and their Spheres' records (Sphere._row, joined as bytes in one
+    pass over the members): a Sphere's bounds are its centre -/+ its radius (as Sphere
+    makes them)."""
     m = len(objects)
-    kinds = [type(o) is Sphere for o in objects]
-    sphere = np.array(kinds, bool).reshape(m)
+    views: list[Any] = [o._view if type(o) is Sphere else None for o in objects]  # one pass
+    try:
+        joined, sphere = b"".join(views), np.ones(m, bool)  # every member a Sphere
+    except TypeError:  # some are not (None)
+        sphere = np.array([v is not None for v in views], bool).reshape(m)
+        joined = b"".join([v for v in views if v is not None])
     at = np.flatnonzero(sphere)
-    balls = objects if at.size == m else list(compress(objects, kinds))
-    rec = np.frombuffer(b"".join([s._row for s in balls]), np.float64).reshape(-1, SPHERE_ROW)
+    rec = np.frombuffer(joined, np.float64).reshape(-1, SPHERE_ROW)
     axes, r = rec[:, :3].T, rec[:, 3]  # by axis: numpy's loops run long
     read = (at, rec[:, :3], r, rec[:, 4], rec[:, 5:9], rec[:, 9] == 1.0)
     if at.size == m:
@@ -170,9 +173,10 @@ class _BroadPhase:
         self.ball[self.ball] = read.plain[row[self.ball]]
         self.own_rows = row >= 0  # the Spheres read: _OWN_ROWS
         s = row[self.ball]
-        self.centre, self.radius = read.centre[s], read.radius[s]
-        self.radius2 = read.radius2[s]  # as Sphere's (Python's radius**2)
-        self.colour = read.colour[s]
+        arrays = [read.centre, read.radius, read.radius2, read.colour]  # radius2: Python's
+        if s.size != read.radius.size:  # not every Sphere read (else no copies)
+            arrays = [v[s] for v in arrays]
+        self.centre, self.radius, self.radius2, self.colour = arrays
         members = self.boxed[self.ball]
         if group._by_position:
             self.ball_id = members.astype(np.int32)

@@ -123,7 +123,8 @@ class Sphere(_Primitive):
     ``center``, ``radius`` and ``color`` are kept in one float64 record (``_row``,
     SPHERE_ROW: centre, radius, Python's radius**2, rgba, 1 if the colour is constant)
     that a Group reads for thousands of spheres at once (core.geometry.group._read);
-    ``center`` and a constant ``color`` are views of it, set through their properties.
+    ``center`` and a constant ``color`` are views of it, set through their properties;
+    ``_view``, a memoryview of it (Python joins those faster than numpy's buffers).
     """
 
     def __init__(
@@ -131,10 +132,19 @@ class Sphere(_Primitive):
     ) -> None:
         """Sphere of the given centre and radius (> 0)."""
         self._row = np.zeros(SPHERE_ROW)
+        self._view = memoryview(self._row)
         self.center = center
         self.radius = radius
         self.color = color
         self.object_id = int(object_id)
+
+    def __getstate__(self) -> dict:
+        """Pickled without ``_view`` (a memoryview does not pickle)."""
+        return {k: v for k, v in self.__dict__.items() if k != "_view"}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self._view = memoryview(self._row)
 
     @property
     def center(self) -> np.ndarray:
