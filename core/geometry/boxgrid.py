@@ -153,20 +153,24 @@ class BoxGrid:
         walk = _Walk(self, seg, rows[going], enter[going], leave[going])
         cells = WINDOW
         while walk.row.size:
-            row, start, until = walk.row, walk.start, np.minimum(walk.leave, hit_t[walk.row])
-            k, slot = self._slots(*walk.steps(cells, until))
-            r = row[k]
-            keep = _crosses(seg, r, self.ref, slot, start[k], until[k])
+            row, until = walk.row, np.minimum(walk.leave, hit_t[walk.row])
+            k, cell, t_in, t_out = walk.steps(cells, until)
+            pick, slot = self._slots(cell)
+            r = row.take(k.take(pick))
+            parts = t_in.take(pick), t_out.take(pick)
+            keep = _crosses(seg, r, self.ref, slot, *parts, _axes(seg, row))
             yield r[keep], self.box[slot[keep]]
             walk.go_on(hit_t)
             cells = min(2 * cells, LONGEST)
 
-    def _slots(self, k: np.ndarray, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(k, slots): the boxes in cells ``cell`` (their places in ``box``), each with its
-        cell's ``k``."""
-        first = self.start[cell]
-        pick, off = _expand(self.start[cell + 1] - first)
-        return k[pick], first[pick] + off
+    def _slots(self, cell: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(pick, slots): the boxes in cells ``cell`` (their places in ``box``), each with
+        its cell's position in ``cell`` (one repeat: numpy's take is ~6x faster)."""
+        first = self.start.take(cell)
+        count = self.start.take(cell + 1) - first
+        pick = np.arange(cell.size).repeat(count)
+        shift = first - (np.cumsum(count) - count)  # a cell's slots less their positions
+        return pick, np.arange(pick.size) + shift.take(pick)
 
 
 class _Walk:
@@ -198,17 +202,21 @@ class _Walk:
         self.on = np.ones(rows.size, bool)
         self.covered, self.limit, self.at = enter, leave, np.arange(rows.size)
 
-    def steps(self, count: int, limit: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def steps(self, count: int, limit: np.ndarray) -> tuple[np.ndarray, ...]:
         """Walk ``count`` cells, fewer where a segment leaves the grid or passes its
-        ``limit`` (its hit so far, or its end): (k, cell) of the cells that hold boxes, ``k``
-        the segment's position in the walk as it was (those that stop are let go)."""
+        ``limit`` (its hit so far, or its end): (k, cell, t_in, t_out) of the cells that
+        hold boxes, ``k`` the segment's position in the walk as it was (those that stop
+        are let go), [t_in, t_out] the part of it the walk put in the cell (the parts
+        tile the segment: each next one begins where the last one ended)."""
         self.limit, self.at = limit, np.arange(self.row.size)
-        ats, cells = [], []
+        ats, cells, ins, outs = [], [], [], []
         for step in range(count):
             cell, on = self.cell, self.on
             ats.append(self.at)
             cells.append(cell * on)  # a stopped segment's: 0, a border cell (empty)
+            ins.append(self.covered)
             t = np.minimum(np.minimum(self.next[0], self.next[1]), self.next[2])
+            outs.append(t)
             on &= t <= self.limit
             self.covered = t  # the cells walked cover the segment up to here (where on)
             t = np.where(on, t, np.nan)  # no plane is crossed at NaN: those stopped stay
@@ -221,7 +229,7 @@ class _Walk:
                 self._keep(on)  # fewer to step
         walked = np.concatenate(cells)
         k = np.flatnonzero(self.occupied.take(walked))
-        return np.concatenate(ats)[k], walked[k]
+        return np.concatenate(ats)[k], walked[k], np.concatenate(ins)[k], np.concatenate(outs)[k]
 
     def go_on(self, hit_t: np.ndarray) -> None:
         """Keep walking the segments still in the grid whose hit so far (``hit_t``) lies
@@ -238,18 +246,30 @@ class _Walk:
         self.on = np.ones(self.row.size, bool)
 
 
-def _crosses(seg: Segments, rows, boxes, slots, t_from, t_to) -> np.ndarray:
-    """(P,) bool: the part [t_from, t_to] of segment ``rows[i]`` meets box ``slots[i]`` of
-    ``boxes`` ((lo, hi) (3, K) each; a slab test as boxtree._span, without its margin)."""
-    enter, leave = t_from, t_to
+def _axes(seg: Segments, rows: np.ndarray) -> list[int]:
+    """The axes, those the segments ``rows`` move least along first (a box's slab on them
+    turns away the most pairs: _crosses)."""
+    move = [float(np.abs(seg.d_axes[k].take(rows)).sum()) for k in range(3)]
+    return sorted(range(3), key=move.__getitem__)
+
+
+def _crosses(seg: Segments, rows, boxes, slots, t_from, t_to, axes=(0, 1, 2)) -> np.ndarray:
+    """(P',) the pairs i whose part [t_from, t_to] of segment ``rows[i]`` (its part in a
+    cell) meets box ``slots[i]`` of ``boxes`` ((lo, hi) (3, K) each; a slab test as
+    boxtree._span, without its margin), axis by axis in the order ``axes``, the pairs
+    the first turns away dropped (enter only grows, leave only falls: the same pairs)."""
+    keep, enter, leave = np.arange(0), t_from, t_to
     with np.errstate(invalid="ignore", over="ignore"):
-        for k in range(3):
+        for i, k in enumerate(axes):
             a, inv = seg.a_axes[k].take(rows), seg.inv_axes[k].take(rows)
             t1 = (boxes[0][k].take(slots) - a) * inv
             t2 = (boxes[1][k].take(slots) - a) * inv
             enter = np.fmax(enter, np.fmin(t1, t2))  # fmin/fmax skip 0 * inf's NaN
             leave = np.fmin(leave, np.fmax(t1, t2))
-    return enter <= leave
+            if i == 0:
+                keep = np.flatnonzero(enter <= leave)
+                rows, slots, enter, leave = (v.take(keep) for v in (rows, slots, enter, leave))
+    return keep[enter <= leave]
 
 
 def _cell_count(extent: np.ndarray, sizes: np.ndarray) -> float:
@@ -282,12 +302,3 @@ def _cells(extent: np.ndarray, target: float) -> tuple[np.ndarray, np.ndarray]:
     shape = np.where(ext > 0, np.clip(np.round(ext / width), 1, None), 1).astype(np.int64)
     size = np.where(ext > 0, ext / shape, 1.0)
     return shape, size
-
-
-def _expand(count: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(which, offset) (sum(count),): position i repeated count[i] times, with 0, 1, ...
-    counted within each."""
-    count = np.asarray(count, np.int64)
-    which = np.repeat(np.arange(count.size), count)
-    first = np.cumsum(count) - count
-    return which, np.arange(which.size) - first[which]
