@@ -45,6 +45,7 @@ WINDOW = 6
 up to LONGEST."""
 LONGEST = 48
 """Cells a window walks at most."""
+_BIG = float(np.finfo(np.float64).max)
 
 
 def index(lo: np.ndarray, hi: np.ndarray) -> BoxGrid | BoxTree:
@@ -196,7 +197,8 @@ class _Walk:
             plane = grid.origin[k] + (i - 1 + (d > 0)) * grid.size[k]
             with np.errstate(invalid="ignore"):
                 self.next.append(np.where(d != 0, (plane - a) * inv, np.inf))
-            self.delta.append(np.where(d != 0, grid.size[k] * np.abs(inv), np.inf))
+            delta = np.where(d != 0, grid.size[k] * np.abs(inv), np.inf)
+            self.delta.append(np.minimum(delta, _BIG))  # finite: delta * False is 0
             self.cell += i * stride[k]
             self.move.append(np.sign(d).astype(np.int64) * stride[k])
         self.on = np.ones(rows.size, bool)
@@ -217,14 +219,13 @@ class _Walk:
             ins.append(self.covered)
             t = np.minimum(np.minimum(self.next[0], self.next[1]), self.next[2])
             outs.append(t)
-            on &= t <= self.limit
+            on &= t <= self.limit  # those stopped step on unseen (their cells: 0 above)
             self.covered = t  # the cells walked cover the segment up to here (where on)
-            t = np.where(on, t, np.nan)  # no plane is crossed at NaN: those stopped stay
-            for axis in range(3):  # np.where, not np.add(where=): 5x faster on this
-                nxt = self.next[axis]
-                cross = nxt == t
-                self.next[axis] = np.where(cross, nxt + self.delta[axis], nxt)
-                cell += self.move[axis] * cross
+            with np.errstate(over="ignore"):  # those stopped may run far
+                for nxt, delta, move in zip(self.next, self.delta, self.move, strict=True):
+                    cross = nxt == t  # products, not np.add(where=cross): ~5x faster
+                    nxt += delta * cross
+                    cell += move * cross
             if step % 2 and np.count_nonzero(on) < 0.75 * on.size:
                 self._keep(on)  # fewer to step
         walked = np.concatenate(cells)
