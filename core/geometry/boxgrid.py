@@ -214,11 +214,12 @@ class _Walk:
         ats, cells, ins, outs = [], [], [], []
         for step in range(count):
             cell, on = self.cell, self.on
-            ats.append(self.at)
-            cells.append(cell * on)  # a stopped segment's: 0, a border cell (empty)
-            ins.append(self.covered)
+            occ = np.flatnonzero(self.occupied.take(cell * on))  # stopped: 0, border
+            ats.append(self.at.take(occ))
+            cells.append(cell.take(occ))
+            ins.append(self.covered.take(occ))
             t = np.minimum(np.minimum(self.next[0], self.next[1]), self.next[2])
-            outs.append(t)
+            outs.append(t.take(occ))
             on &= t <= self.limit  # those stopped step on unseen (their cells: 0 above)
             self.covered = t  # the cells walked cover the segment up to here (where on)
             with np.errstate(over="ignore"):  # those stopped may run far
@@ -228,9 +229,7 @@ class _Walk:
                     cell += move * cross
             if step % 2 and np.count_nonzero(on) < 0.75 * on.size:
                 self._keep(on)  # fewer to step
-        walked = np.concatenate(cells)
-        k = np.flatnonzero(self.occupied.take(walked))
-        return np.concatenate(ats)[k], walked[k], np.concatenate(ins)[k], np.concatenate(outs)[k]
+        return tuple(np.concatenate(v) for v in (ats, cells, ins, outs))
 
     def go_on(self, hit_t: np.ndarray) -> None:
         """Keep walking the segments still in the grid whose hit so far (``hit_t``) lies
