@@ -25,7 +25,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-from .boxtree import PAD, BoxTree, Segments, _span
+from .boxtree import PAD, BoxTree, Segments, _by_axis, _span
 
 TEST_COST = 2.0
 """What testing a box costs a walk, in cell steps: the cell width minimises a walk's
@@ -79,7 +79,7 @@ class BoxGrid:
         """Place the cells around boxes (lo3, hi3) (3, M) each: ``origin``, ``size``,
         ``shape``, ``root``, ``margin``, ``near``. Returns a margin over every box's own
         (boxtree._padded)."""
-        root_lo, root_hi = lo3.min(axis=1), hi3.max(axis=1)
+        root_lo, root_hi = _by_axis(np.min, lo3.T), _by_axis(np.max, hi3.T)
         extent = root_hi - root_lo
         shape, size = _cells(extent, _cell_count(extent, hi3 - lo3))
         pad = PAD * (1.0 + float(np.max(np.abs(np.concatenate([root_lo, root_hi])))))

@@ -9,7 +9,7 @@ import numpy as np
 
 from . import boxgrid
 from .boxgrid import BoxGrid
-from .boxtree import BoxTree, segments
+from .boxtree import BoxTree, _by_axis, segments
 from .hits import _INF, Hits, _segments, filters, segment_overlaps
 from .primitives import SPHERE_ROW, Sphere, sphere_hits
 
@@ -55,7 +55,7 @@ class Group:
             k = int(np.flatnonzero(np.isnan(lo).any(axis=1) | np.isnan(hi).any(axis=1))[0])
             raise ValueError(f"object {k} has NaN bounds (non-finite vertices?)")
         if self.objects:
-            self.bounds = (lo.min(axis=0), hi.max(axis=0))
+            self.bounds = (_by_axis(np.min, lo), _by_axis(np.max, hi))
         else:
             self.bounds = (np.full(3, _INF), np.full(3, -_INF))
         plain = np.zeros(len(self.objects), bool)
@@ -134,8 +134,8 @@ def _read(objects: list[Any]) -> _Read:
     rec = np.frombuffer(joined, np.float64).reshape(-1, SPHERE_ROW)
     axes, r = rec[:, :3].T, rec[:, 3]  # by axis: numpy's loops run long
     read = (at, rec[:, :3], r, rec[:, 4], rec[:, 5:9], rec[:, 9] == 1.0)
-    if at.size == m:
-        return _Read((axes - r).T, (axes + r).T, *read)
+    if at.size == m:  # (3, M) arrays: each axis's bounds contiguous
+        return _Read(np.subtract(axes, r, order="C").T, np.add(axes, r, order="C").T, *read)
     lo, hi = np.empty((m, 3)), np.empty((m, 3))
     lo[at], hi[at] = (axes - r).T, (axes + r).T
     rest = np.flatnonzero(~sphere)
