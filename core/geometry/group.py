@@ -234,16 +234,30 @@ class _BroadPhase:
         once; each segment's nearest kept where nearer (``_keep``)."""
         s = self.ball_index[boxed]
         hit, t, p, n, uv = sphere_hits(
-            a[rows], b[rows], self.centre[s], self.radius[s], self.radius2[s]
-        )
+            a.take(rows, axis=0), b.take(rows, axis=0), self.centre[s], self.radius[s],
+            self.radius2[s],
+        )  # fmt: skip
         rows, boxed, s = rows[hit], boxed[hit], s[hit]
         member = self.boxed[boxed]
-        order = np.lexsort((member, t, rows))  # per segment: nearest, then earliest member
-        first = order[np.r_[True, rows[order][1:] != rows[order][:-1]]] if rows.size else order
+        first = _firsts(a.shape[0], rows, t, member)
         r = rows[first]
         hits = Hits(np.ones(r.size, bool), t[first], self.ball_id[s[first]], p[first], n[first],
                     uv[first], self.colour[s[first]].copy())  # fmt: skip
         _keep(out, won, r, hits, member[first], None)
+
+
+def _firsts(n: int, rows: np.ndarray, *keys: np.ndarray) -> np.ndarray:
+    """The position i of each segment's first pair (``rows`` (P,) in range(n)) by
+    ``keys`` in turn (the least first), then by i: a stable sort's firsts, unsorted."""
+    pick = np.arange(rows.size)
+    for key in (*keys, None):
+        key = pick if key is None else key[pick]
+        r = rows[pick]
+        top = np.inf if key.dtype.kind == "f" else np.iinfo(key.dtype).max
+        least = np.full(n, top, key.dtype)
+        np.minimum.at(least, r, key)
+        pick = pick[key == least[r]]
+    return pick
 
 
 def _ids(balls: list[Any], ids: list[int | None]) -> np.ndarray:
