@@ -100,7 +100,7 @@ class BoxGrid:
         np.cumsum(count, out=self.start[1:])
         """Where each cell's boxes begin in ``box`` (cells + 1,)."""
         self.occupied = count > 0
-        self.box = box[np.argsort(cell)]  # within a cell, any order
+        self.box = box[_order(cell, count.size)]  # within a cell, any order
         """The boxes in each cell, cell by cell."""
         lo3, hi3 = boxes
         self.ref = (np.take(lo3, self.box, axis=1) - wide, np.take(hi3, self.box, axis=1) + wide)
@@ -239,10 +239,11 @@ class _Walk:
 
     def _keep(self, going: np.ndarray) -> None:
         """Walk on only the segments ``going`` (in the order held)."""
+        keep = np.flatnonzero(going)  # once, then takes: a mask per array costs more
         for name in ("row", "leave", "cell", "limit", "covered", "at"):
-            setattr(self, name, getattr(self, name)[going])
+            setattr(self, name, getattr(self, name).take(keep))
         for name in ("next", "delta", "move"):
-            setattr(self, name, [v[going] for v in getattr(self, name)])
+            setattr(self, name, [v.take(keep) for v in getattr(self, name)])
         self.on = np.ones(self.row.size, bool)
 
 
@@ -270,6 +271,16 @@ def _crosses(seg: Segments, rows, boxes, slots, t_from, t_to, axes=(0, 1, 2)) ->
                 keep = np.flatnonzero(enter <= leave)
                 rows, slots, enter, leave = (v.take(keep) for v in (rows, slots, enter, leave))
     return keep[enter <= leave]
+
+
+def _order(keys: np.ndarray, top: int) -> np.ndarray:
+    """The positions that sort int ``keys`` (K,) in [0, top), stably: one np.sort of
+    key * 2^b + position where that fits in 63 bits (numpy's sort runs ~2x faster
+    than its argsort)."""
+    bits = int(keys.size).bit_length()
+    if top <= 1 << (62 - bits):
+        return np.sort((keys << bits) | np.arange(keys.size)) & ((1 << bits) - 1)
+    return np.argsort(keys, kind="stable")
 
 
 def _cell_count(extent: np.ndarray, sizes: np.ndarray) -> float:
