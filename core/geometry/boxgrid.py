@@ -6,17 +6,20 @@ window. Cells hold the boxes within ``margin`` of them (compressed rows: ``start
 ``box``; a border of empty cells around). Segments walk the cells they pass cell by cell
 (a 3-D DDA, Amanatides and Woo: one array step moves every segment of the batch), window
 by window, nearest first (WINDOW cells, then twice as many each time, up to LONGEST); the
-boxes of the cells a window walked that its part of the segment passes through (a slab
-test) are its pairs. Boxes over more than SPREAD cells on an axis go to a BoxTree beside
-the grid, walked first. ``index`` picks the grid where its cells stay thinly filled
-(CROWD), else a BoxTree.
+boxes of each cell walked that the segment's part in that cell passes through (a slab
+test, the axis it moves least along first) are its pairs. Boxes over more than SPREAD
+cells on an axis go to a BoxTree beside the grid, walked first. ``index`` picks the grid
+where its cells stay thinly filled (CROWD), else a BoxTree.
 
 Rounding: a walk may miss a cell the segment clips within its rounding of an edge or a
 corner, never by more, and boxes enter every cell within ``margin`` (a box's own margin,
 boxtree._padded, and MARGIN cell widths) of them: every box whose padded bounds a segment
 passes within its own margin (boxtree.PAD (1 + |start|)) of, as the tree finds them, is
 found, while that margin is below ``near`` (a quarter of MARGIN cell widths). Segments
-starting farther away (over ~10^4 cell widths) walk a BoxTree over the same boxes.
+starting farther away (over ~10^4 cell widths) walk a BoxTree over the same boxes. The
+parts the walk puts in cells (between the planes it crossed) tile the segment: a point of
+a box on the segment lies in some cell's part, a cell the box entered (within ``margin``
+of it), whose part is tested against the box widened by ``near`` and its own margin.
 """
 
 from __future__ import annotations
@@ -30,7 +33,8 @@ from .boxtree import PAD, BoxTree, Segments, _by_axis, _span
 TEST_COST = 2.0
 """What testing a box costs a walk, in cell steps: the cell width minimises a walk's
 expected cost per unit length, (1 + TEST_COST density (width + box size)^3) / width, the
-boxes spread evenly over their bounds (a box test costs about two steps, as measured)."""
+boxes spread evenly over their bounds (a box test costs about two steps, as measured;
+1 and 4 measured no better, 10^2 to 10^5 spheres in a shell)."""
 MOST_CELLS = 32
 """Cells per box at most."""
 CROWD = 6.0
