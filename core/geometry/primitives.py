@@ -143,6 +143,11 @@ class Sphere(_Primitive):
         return {k: v for k, v in self.__dict__.items() if k != "_view"}
 
     def __setstate__(self, state: dict) -> None:
+        if "_row" not in state:  # pickled before the record: made again
+            state = dict(state)
+            centre, radius, colour = (state.pop(k) for k in ("center", "radius", "color"))
+            Sphere.__init__(self, centre, radius, colour, state.pop("object_id", 0))
+            state.pop("bounds", None)
         self.__dict__.update(state)
         self._view = memoryview(self._row)
 

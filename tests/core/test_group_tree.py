@@ -275,6 +275,10 @@ def test_sphere_records_follow_their_attributes():
     objects[2].color = checker(2, 2)  # a texture: asked in turn
     objects[3].color = (1, 0, 0)
     objects[4] = pickle.loads(pickle.dumps(objects[4]))
+    old = Sphere.__new__(Sphere)  # as pickled before the record
+    old.__setstate__({"center": objects[6].center.copy(), "radius": 0.3, "object_id": 0,
+                      "color": objects[6].color.copy(), "bounds": objects[6].bounds})  # fmt: skip
+    assert np.array_equal(old._row, objects[6]._row)
     objects[5].center[1] += 0.25
     assert objects[5].center[1] == objects[5]._row[1] and objects[4]._view.obj is objects[4]._row
     broad = Group(objects)._broad
