@@ -937,10 +937,11 @@ def _scene_extent(scene: Scene, camera, objects: Any = None) -> float:
         annulus = scene.disk_annulus()
         if annulus is not None:
             extra.append(annulus.bounds)
-    more = np.array([np.asarray(box, np.float64).reshape(2, 3) for box in extra]).reshape(-1, 2, 3)
-    lo, hi = np.concatenate([lo, more[:, 0]]), np.concatenate([hi, more[:, 1]])
-    finite = np.isfinite(lo).all(axis=1) & np.isfinite(hi).all(axis=1)
-    if not finite.all():
+    if extra:
+        more = np.array([np.asarray(box, np.float64).reshape(2, 3) for box in extra])
+        lo, hi = np.concatenate([lo, more[:, 0]]), np.concatenate([hi, more[:, 1]])
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+        finite = np.isfinite(lo).all(axis=1) & np.isfinite(hi).all(axis=1)
         lo, hi = lo[finite], hi[finite]
     if lo.size:  # a box's farthest corner takes the farther end on every axis
         c = np.asarray(scene.center)[:, None]  # by axis: numpy's loops run long

@@ -123,6 +123,12 @@ class BoxTree:
         return r[keep], self.member[slots[keep]]
 
 
+def _by_axis(reduce, x: np.ndarray) -> np.ndarray:
+    """(3,) ``reduce`` (np.min, np.max) of each column of x (M, 3), column by column
+    (numpy's reductions of a 2-D array along either axis run ~10x slower)."""
+    return np.array([reduce(column) for column in x.T])
+
+
 def segments(a: np.ndarray, b: np.ndarray) -> Segments:
     """Segments a -> b (N, 3) made ready for queries (BoxTree.pairs, BoxGrid.pairs)."""
     d = b - a

@@ -3,16 +3,15 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from itertools import compress
 from typing import Any, NamedTuple
 
 import numpy as np
 
 from . import boxgrid
 from .boxgrid import BoxGrid
-from .boxtree import BoxTree, segments
+from .boxtree import BoxTree, _by_axis, segments
 from .hits import _INF, Hits, _segments, filters, segment_overlaps
-from .primitives import Sphere, sphere_hits
+from .primitives import SPHERE_ROW, Sphere, sphere_hits
 
 FEW = 8
 """Up to this many members with finite bounds, each is asked in turn (no broad phase)."""
@@ -47,6 +46,8 @@ class Group:
         )
         if len(self.ids) != len(self.objects):
             raise ValueError("ids must have one entry per object")
+        self._by_position = ids is None
+        """Whether each member's id is its position (the default ``ids``)."""
         read = _read(self.objects)
         self.member_bounds = lo, hi = read.lo, read.hi
         """(lo, hi) (M, 3): each member's bounds."""
@@ -54,7 +55,7 @@ class Group:
             k = int(np.flatnonzero(np.isnan(lo).any(axis=1) | np.isnan(hi).any(axis=1))[0])
             raise ValueError(f"object {k} has NaN bounds (non-finite vertices?)")
         if self.objects:
-            self.bounds = (lo.min(axis=0), hi.max(axis=0))
+            self.bounds = (_by_axis(np.min, lo), _by_axis(np.max, hi))
         else:
             self.bounds = (np.full(3, _INF), np.full(3, -_INF))
         plain = np.zeros(len(self.objects), bool)
@@ -105,40 +106,43 @@ def member_bounds(objects: Sequence[Any]) -> tuple[np.ndarray, np.ndarray]:
 class _Read(NamedTuple):
     """What one pass over a group's members reads: every member's bounds (lo, hi) (M, 3);
     the positions of its Spheres (``spheres`` (S,), exactly core's Sphere), their centres
-    (S, 3), radii (S Python floats) and colours (S), and which of them are plain
-    (``plain`` (S,): one constant colour)."""
+    (S, 3), radii and Python's radius**2 (S,), constant colours (S, 4) and which of them
+    are plain (``plain`` (S,): one constant colour)."""
 
     lo: np.ndarray
     hi: np.ndarray
     spheres: np.ndarray
     centre: np.ndarray
-    radius: list[float]
-    colour: list[Any]
+    radius: np.ndarray
+    radius2: np.ndarray
+    colour: np.ndarray
     plain: np.ndarray
 
 
 def _read(objects: list[Any]) -> _Read:
-    """The members' bounds, and their Spheres' centres and radii, in one pass each: a
-    Sphere's bounds are its centre -/+ its radius (as Sphere makes them)."""
+    """The members' bounds, and their Spheres' records (Sphere._row, joined as bytes in one
+    pass over the members): a Sphere's bounds are its centre -/+ its radius (as Sphere
+    makes them)."""
     m = len(objects)
-    kinds = [type(o) is Sphere for o in objects]
-    sphere = np.array(kinds, bool).reshape(m)
+    views: list[Any] = [o._view if type(o) is Sphere else None for o in objects]  # one pass
+    try:
+        joined, sphere = b"".join(views), np.ones(m, bool)  # every member a Sphere
+    except TypeError:  # some are not (None)
+        sphere = np.array([v is not None for v in views], bool).reshape(m)
+        joined = b"".join([v for v in views if v is not None])
     at = np.flatnonzero(sphere)
-    balls = objects if at.size == m else list(compress(objects, kinds))
-    centre = np.concatenate([s.center for s in balls]).reshape(-1, 3) if balls else np.zeros((0, 3))
-    radius = [s.radius for s in balls]
-    colour = [s.color for s in balls]
-    plain = np.array([not callable(c) for c in colour], bool).reshape(-1)
-    r, axes = np.array(radius, np.float64), centre.T  # by axis: numpy's loops run long
-    if at.size == m:
-        return _Read((axes - r).T, (axes + r).T, at, centre, radius, colour, plain)
+    rec = np.frombuffer(joined, np.float64).reshape(-1, SPHERE_ROW)
+    axes, r = rec[:, :3].T, rec[:, 3]  # by axis: numpy's loops run long
+    read = (at, rec[:, :3], r, rec[:, 4], rec[:, 5:9], rec[:, 9] == 1.0)
+    if at.size == m:  # (3, M) arrays: each axis's bounds contiguous
+        return _Read(np.subtract(axes, r, order="C").T, np.add(axes, r, order="C").T, *read)
     lo, hi = np.empty((m, 3)), np.empty((m, 3))
     lo[at], hi[at] = (axes - r).T, (axes + r).T
     rest = np.flatnonzero(~sphere)
     if rest.size:
         boxes = np.array([objects[k].bounds for k in rest.tolist()], dtype=np.float64)
         lo[rest], hi[rest] = boxes.reshape(-1, 2, 3)[:, 0], boxes.reshape(-1, 2, 3)[:, 1]
-    return _Read(lo, hi, at, centre, radius, colour, plain)
+    return _Read(lo, hi, *read)
 
 
 def _ask(obj: Any, a: np.ndarray, b: np.ndarray, footprint: np.ndarray | None, rows) -> Hits:
@@ -169,17 +173,17 @@ class _BroadPhase:
         self.ball[self.ball] = read.plain[row[self.ball]]
         self.own_rows = row >= 0  # the Spheres read: _OWN_ROWS
         s = row[self.ball]
-        every = s.size == len(read.radius)  # every sphere read is plain and bounded
-        radius = read.radius if every else [read.radius[k] for k in s.tolist()]
-        colour = read.colour if every else [read.colour[k] for k in s.tolist()]
-        self.centre = read.centre if every else read.centre[s]
-        self.radius = np.array(radius, np.float64)
-        self.radius2 = np.array([r**2 for r in radius], np.float64)  # as Sphere's (Python's)
-        self.colour = np.concatenate(colour).reshape(-1, 4) if colour else np.zeros((0, 4))
+        arrays = [read.centre, read.radius, read.radius2, read.colour]  # radius2: Python's
+        if s.size != read.radius.size:  # not every Sphere read (else no copies)
+            arrays = [v[s] for v in arrays]
+        self.centre, self.radius, self.radius2, self.colour = arrays
         members = self.boxed[self.ball]
-        whole = members.size == len(objects)
-        ids = group.ids if whole else [group.ids[k] for k in members.tolist()]
-        self.ball_id = _ids(objects if whole else [objects[k] for k in members.tolist()], ids)
+        if group._by_position:
+            self.ball_id = members.astype(np.int32)
+        else:
+            whole = members.size == len(objects)
+            ids = group.ids if whole else [group.ids[k] for k in members.tolist()]
+            self.ball_id = _ids(objects if whole else [objects[k] for k in members.tolist()], ids)
         self.ball_index = np.cumsum(self.ball) - 1  # boxed position -> row in the arrays
 
     def intersect(self, group: Group, a: np.ndarray, b: np.ndarray, footprint) -> Hits:
@@ -230,16 +234,30 @@ class _BroadPhase:
         once; each segment's nearest kept where nearer (``_keep``)."""
         s = self.ball_index[boxed]
         hit, t, p, n, uv = sphere_hits(
-            a[rows], b[rows], self.centre[s], self.radius[s], self.radius2[s]
-        )
+            a.take(rows, axis=0), b.take(rows, axis=0), self.centre[s], self.radius[s],
+            self.radius2[s],
+        )  # fmt: skip
         rows, boxed, s = rows[hit], boxed[hit], s[hit]
         member = self.boxed[boxed]
-        order = np.lexsort((member, t, rows))  # per segment: nearest, then earliest member
-        first = order[np.r_[True, rows[order][1:] != rows[order][:-1]]] if rows.size else order
+        first = _firsts(a.shape[0], rows, t, member)
         r = rows[first]
         hits = Hits(np.ones(r.size, bool), t[first], self.ball_id[s[first]], p[first], n[first],
                     uv[first], self.colour[s[first]].copy())  # fmt: skip
         _keep(out, won, r, hits, member[first], None)
+
+
+def _firsts(n: int, rows: np.ndarray, *keys: np.ndarray) -> np.ndarray:
+    """The position i of each segment's first pair (``rows`` (P,) in range(n)) by
+    ``keys`` in turn (the least first), then by i: a stable sort's firsts, unsorted."""
+    pick = np.arange(rows.size)
+    for key in (*keys, None):
+        key = pick if key is None else key[pick]
+        r = rows[pick]
+        top = np.inf if key.dtype.kind == "f" else np.iinfo(key.dtype).max
+        least = np.full(n, top, key.dtype)
+        np.minimum.at(least, r, key)
+        pick = pick[key == least[r]]
+    return pick
 
 
 def _ids(balls: list[Any], ids: list[int | None]) -> np.ndarray:

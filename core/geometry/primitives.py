@@ -110,23 +110,86 @@ def sphere_hits(a: np.ndarray, b: np.ndarray, center: Any, radius: Any, radius2:
     return rows, t, p, n, uv
 
 
+SPHERE_ROW = 10
+"""The length of a Sphere's record (Sphere)."""
+
+
 # -- analytic primitives ---------------------------------------------------------------------
 
 
 class Sphere(_Primitive):
-    """Sphere; uv = (longitude around +Z from +X, latitude), each in [0, 1]."""
+    """Sphere; uv = (longitude around +Z from +X, latitude), each in [0, 1].
+
+    ``center``, ``radius`` and ``color`` are kept in one float64 record (``_row``,
+    SPHERE_ROW: centre, radius, Python's radius**2, rgba, 1 if the colour is constant)
+    that a Group reads for thousands of spheres at once (core.geometry.group._read);
+    ``center`` and a constant ``color`` are views of it, set through their properties;
+    ``_view``, a memoryview of it (Python joins those faster than numpy's buffers).
+    """
 
     def __init__(
         self, center: Any, radius: float, color: Any = (1, 1, 1, 1), object_id: int = 0
     ) -> None:
         """Sphere of the given centre and radius (> 0)."""
-        self.center = _vec(center, "center")
-        if not radius > 0:
-            raise ValueError(f"radius must be positive, got {radius}")
-        self.radius = float(radius)
-        self.color = _rgba(color)
+        self._row = np.zeros(SPHERE_ROW)
+        self._view = memoryview(self._row)
+        self.center = center
+        self.radius = radius
+        self.color = color
         self.object_id = int(object_id)
-        self.bounds = (self.center - radius, self.center + radius)
+
+    def __getstate__(self) -> dict:
+        """Pickled without ``_view`` (a memoryview does not pickle)."""
+        return {k: v for k, v in self.__dict__.items() if k != "_view"}
+
+    def __setstate__(self, state: dict) -> None:
+        if "_row" not in state:  # pickled before the record: made again
+            state = dict(state)
+            centre, radius, colour = (state.pop(k) for k in ("center", "radius", "color"))
+            Sphere.__init__(self, centre, radius, colour, state.pop("object_id", 0))
+            state.pop("bounds", None)
+        self.__dict__.update(state)
+        self._view = memoryview(self._row)
+
+    @property
+    def center(self) -> np.ndarray:
+        """(3,) the centre (a view of the record: written in place, the record follows)."""
+        return self._row[:3]
+
+    @center.setter
+    def center(self, value: Any) -> None:
+        self._row[:3] = _vec(value, "center")
+        self._bound()
+
+    @property
+    def radius(self) -> float:
+        """The radius (> 0)."""
+        return self._radius
+
+    @radius.setter
+    def radius(self, value: float) -> None:
+        if not value > 0:
+            raise ValueError(f"radius must be positive, got {value}")
+        self._radius = r = float(value)
+        self._row[3:5] = r, r**2
+        self._bound()
+
+    @property
+    def color(self) -> np.ndarray | Texture:
+        """rgba (4,) (a view of the record) or a texture callable."""
+        return self._row[5:9] if self._texture is None else self._texture
+
+    @color.setter
+    def color(self, value: Any) -> None:
+        c = _rgba(value)
+        self._texture = c if callable(c) else None
+        self._row[5:9] = np.nan if callable(c) else c
+        self._row[9] = self._texture is None
+
+    def _bound(self) -> None:
+        """``bounds`` from the centre and radius (once both are set)."""
+        if hasattr(self, "_radius"):
+            self.bounds = (self.center - self._radius, self.center + self._radius)
 
     def _hit(self, a, b):
         return (*sphere_hits(a, b, self.center, self.radius, self.radius**2), None)

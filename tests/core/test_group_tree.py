@@ -1,6 +1,7 @@
 """The Group's broad phase (issue 45.6: a BVH over objects) against the brute force it
 replaces: every member asked in turn about the segments whose bounds overlap its box."""
 
+import pickle
 from dataclasses import fields
 
 import numpy as np
@@ -262,3 +263,28 @@ def test_few_members_are_asked_in_turn():
     objects = [Sphere((k, 0, 0), 0.4) for k in range(group_module.FEW)]
     assert Group(objects)._broad is None
     assert Group([*objects, Sphere((9, 0, 0), 0.4)])._broad is not None
+
+
+def test_sphere_records_follow_their_attributes():
+    """What a Group reads of a Sphere (its record, Sphere._row) follows its centre, radius
+    and colour as set, its centre as written in place, and survives pickling."""
+    rng = np.random.default_rng(46)
+    objects = [Sphere(c, 0.3, color=rng.uniform(0, 1, 3)) for c in rng.uniform(-4, 4, (60, 3))]
+    objects[0].center = (0.5, 0.5, 0.5)
+    objects[1].radius = 0.9
+    objects[2].color = checker(2, 2)  # a texture: asked in turn
+    objects[3].color = (1, 0, 0)
+    objects[4] = pickle.loads(pickle.dumps(objects[4]))
+    old = Sphere.__new__(Sphere)  # as pickled before the record
+    old.__setstate__({"center": objects[6].center.copy(), "radius": 0.3, "object_id": 0,
+                      "color": objects[6].color.copy(), "bounds": objects[6].bounds})  # fmt: skip
+    assert np.array_equal(old._row, objects[6]._row)
+    objects[5].center[1] += 0.25
+    assert objects[5].center[1] == objects[5]._row[1] and objects[4]._view.obj is objects[4]._row
+    broad = Group(objects)._broad
+    assert np.array_equal(broad.centre, [o.center for k, o in enumerate(objects) if k != 2])
+    assert broad.radius2[1] == 0.9**2 and np.array_equal(broad.colour[2], (1, 0, 0, 1))
+    a, b = segments(rng, 3000)
+    ids = list(range(len(objects)))
+    objects[5].center = objects[5].center  # its bounds too, as the brute force reads them
+    assert_same(Group(objects).intersect(a, b), brute_force(objects, ids, a, b))
