@@ -2,7 +2,7 @@
 
     PYTHONPATH=. python benchmarks/scale.py [--counts 100,1000,10000,100000]
         [--size 160x120] [--models flat,schwarzschild] [--baseline DIR] [--timeout 300]
-        [--env 16384x8192] [--only spheres,env] [--csv PATH]
+        [--runs 3] [--env 16384x8192] [--only spheres,env] [--csv PATH]
 
 - ``spheres``: N small spheres (N = 10^2 .. 10^5) in a shell 4 < r < 12 around the origin,
   their radius 11.8 / sqrt(N) (about one sphere's cross-section along a ray through the
@@ -18,7 +18,7 @@
   Target: peak <= 2x the image's bytes.
 
 Each figure comes from a fresh subprocess (``--child``), so one run's memory or caches do
-not reach the next.
+not reach the next; a figure under ten seconds is the fastest of ``--runs`` (3) such runs.
 """
 
 from __future__ import annotations
@@ -107,6 +107,21 @@ def run_child(checkout: str, args: list[str], timeout: float) -> dict | None:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
+def best_of(checkout: str, flags: list[str], args) -> dict | None:
+    """The fastest of ``args.runs`` fresh runs of a figure that takes under REPEAT_BELOW
+    seconds (one run otherwise): on a shared machine a 0.06 s figure moved 0.06-0.31 s
+    between runs; None if it ran past ``args.timeout``."""
+    rows = [run_child(checkout, flags, args.timeout)]
+    while rows[0] is not None and rows[0]["seconds"] < REPEAT_BELOW and len(rows) < args.runs:
+        rows.append(run_child(checkout, flags, args.timeout))
+    done = [r for r in rows if r is not None]
+    return min(done, key=lambda r: r["seconds"]) if done else None
+
+
+REPEAT_BELOW = 10.0
+"""Seconds: figures shorter than this are run ``--runs`` times, the fastest kept."""
+
+
 def _cell(row: dict | None, timeout: float) -> str:
     """'seconds (us/ray)' or '> N s'."""
     if row is None:
@@ -124,8 +139,8 @@ def spheres(args) -> list[dict]:
     for model in args.models.split(","):
         for count in counts:
             flags = ["spheres", str(count), model, str(width), str(height)]
-            new = run_child(ROOT, flags, args.timeout)
-            old = run_child(args.baseline, flags, args.timeout) if args.baseline else None
+            new = best_of(ROOT, flags, args)
+            old = best_of(args.baseline, flags, args) if args.baseline else None
             before = _cell(old, args.timeout) if args.baseline else ""
             print(f"{model:14s} {count:8d} {_cell(new, args.timeout)} {before:>20s}", flush=True)
             for name, row in (("this", new), ("baseline", old)):
@@ -182,6 +197,7 @@ def main() -> None:
     parser.add_argument("--models", default="flat,schwarzschild", help="flat and/or schwarzschild")
     parser.add_argument("--baseline", default=None, help="a checkout of the original commit")
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds per run at most")
+    parser.add_argument("--runs", type=int, default=3, help="fresh runs of a short figure (best)")
     parser.add_argument("--env", default="16384x8192", help="sky size WxH; 0: skip")
     parser.add_argument("--only", default="spheres,env")
     parser.add_argument("--csv", default=None, help="write the figures to this CSV")
