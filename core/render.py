@@ -192,7 +192,7 @@ def render(
         options = replace(options, tolerance=tol.trace)
     tracer = Tracer(scene, options, extent, objects)  # built once
     tracer.set_motion(moving)
-    tol = tol.for_plan(tracer)
+    tol = tol.for_plan(tracer, interpolate)
     background = Background.of(scene.background)
     n = camera.n_pixels
     # with tolerance_px the companion run always goes: its estimate picks the rays to redo
@@ -210,12 +210,12 @@ def render(
     if not dev.on_host:  # every pixel centre, in batches as large as the device holds
         sampled, kind, count, chunk_size = False, "inline", 1, DEVICE_CHUNK
     if sampled:
-        if tol.interpolation > 0 or samples > 1:  # blocks, near misses, anti-aliasing
+        if tol.interpolation > 0 or samples > 1 or not interpolate:  # near misses too
             tracer.watch_geometry(_watch_margin(tracer, camera, tol.pixel_angle))
         sampler = TileSampler(
             tracer, camera, background, shade, tol, samples=samples,
             pixel_filter=pixel_filter, filter_size=filter_size, with_error=with_error,
-            tangents=with_tangents, magnification=with_tangents, every_pixel=not interpolate,
+            tangents=with_tangents, magnification=with_tangents,
         )  # fmt: skip
         tile_list = _tiles_for(camera, count)
         chunks = [(k, k + 1) for k in range(len(tile_list))]

@@ -52,14 +52,15 @@ class Tolerances:
         Doppler factor); ``tolerance`` radians where none was given in pixels."""
         return Tolerances.of(tolerance, self.px, self.pixel_angle * factor)
 
-    def for_plan(self, placed: Any) -> Tolerances:
+    def for_plan(self, placed: Any, interpolate: bool = True) -> Tolerances:
         """With the far field and budget of a planned trace (a PlacedPlan or Tracer: its
-        mass and region); interpolation only where rays bend."""
+        mass and region); interpolation only where rays bend and ``interpolate`` (0: the
+        sampler traces every pixel)."""
         far_field = 0.0
         if placed.curved and placed.region is not None and placed.region.radius is not None:
             far_field = FAR_FIELD_CONSTANT * (placed.mass / placed.region.radius) ** 2
         budget = math.inf
         if self.px is not None:
             budget = max(self.px * self.pixel_angle - far_field, 0.1 * self.trace)
-        interpolation = self.interpolation if placed.curved else 0.0
+        interpolation = self.interpolation if placed.curved and interpolate else 0.0
         return replace(self, far_field=far_field, budget=budget, interpolation=interpolation)

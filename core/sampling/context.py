@@ -52,7 +52,6 @@ class TileContext:
         with_error: bool = False,
         tangents: bool = False,
         magnification: bool = False,
-        every_pixel: bool = False,
     ) -> None:
         self.tracer, self.camera, self.background, self.shade = tracer, camera, background, shade
         self._colour_tracer = (
@@ -60,7 +59,6 @@ class TileContext:
         )  # for sub-pixel samples (supersample.sample)
         self.tolerances = tolerances  # made once by core.render; its radians, read below
         self.interpolation = tolerances.interpolation  # 0: trace every pixel
-        self.every_pixel = every_pixel  # every pixel traced, the tolerance's promise kept
         self.samples = int(samples)
         self.unit = stratified_points(self.samples)  # (S, 2), jittered per pixel
         self.pixel_filter, self.filter_size = pixel_filter, filter_size

@@ -39,7 +39,7 @@ class TileSampler(TileContext):
     def _render_tile(self, tile: Tile, cancel: Cancel) -> TileResult | None:
         self.rays = self.error_rays = self.companion_rays = 0
         h, w = tile.shape
-        s = lattice.STRIDE if self.interpolation > 0 and not self.every_pixel else 1
+        s = lattice.STRIDE if self.interpolation > 0 else 1
         ny, nx = 1 + s * math.ceil((h + 1) / s), 1 + s * math.ceil((w + 1) / s)
         origin = (tile.y0 - 1, tile.x0 - 1)  # image (row, column) of node (0, 0)
         self.origin = origin
