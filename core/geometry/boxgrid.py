@@ -24,6 +24,7 @@ of it), whose part is tested against the box widened by ``near`` and its own mar
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterator
 
 import numpy as np
@@ -122,17 +123,17 @@ class BoxGrid:
 
     def _refs(self, i0: np.ndarray, i1: np.ndarray, boxes: np.ndarray):
         """(cell, box): each cell (flat index) a box of ``boxes`` overlaps, from its first
-        and last cells i0, i1 (3, K) (at most SPREAD apart), with the box."""
+        and last cells i0, i1 (3, K) (at most SPREAD apart), with the box: each box's cells
+        its first one's plus the offsets of its block's shape (_blocks), taken at once."""
         stride = (int(self.shape[1] * self.shape[2]), int(self.shape[2]), 1)
-        cell = i0[0] * stride[0] + i0[1] * stride[1] + i0[2]
-        src, span = np.arange(i0.shape[1]), i1 - i0
-        for k in range(3):
-            more = span[k].take(src)
-            cell = np.concatenate(
-                [cell, *(cell[more >= o] + o * stride[k] for o in range(1, SPREAD))]
-            )
-            src = np.concatenate([src, *(src[more >= o] for o in range(1, SPREAD))])
-        return cell, boxes[src]
+        offsets, counts = _blocks(stride)
+        span = i1 - i0
+        shape = (span[0] * SPREAD + span[1]) * SPREAD + span[2]  # the block's row in offsets
+        each = counts.take(shape)
+        src = np.arange(boxes.size).repeat(each)
+        slot = np.arange(src.size) - (np.cumsum(each) - each).take(src)  # within the block
+        cell = (np.array(stride) @ i0).take(src) + offsets.take(shape.take(src) * SPREAD**3 + slot)
+        return cell, boxes.take(src)
 
     def windows(self, seg: Segments, hit_t: np.ndarray) -> Iterator[tuple[np.ndarray, np.ndarray]]:
         """Yield (rows, boxes): every (segment, box) whose segment passes through the box
@@ -285,6 +286,20 @@ def _order(keys: np.ndarray, top: int) -> np.ndarray:
     if top <= 1 << (62 - bits):
         return np.sort((keys << bits) | np.arange(keys.size)) & ((1 << bits) - 1)
     return np.argsort(keys, kind="stable")
+
+
+@functools.lru_cache(maxsize=8)
+def _blocks(stride: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """(offsets (SPREAD^6,), counts (SPREAD^3,)): for each block of n0 x n1 x n2 cells (n
+    in 1..SPREAD; row ((n0 - 1) SPREAD + n1 - 1) SPREAD + n2 - 1), the flat offsets of its
+    cells from its first one (grid ``stride``), padded to SPREAD^3 a row, and how many."""
+    corner = np.indices((SPREAD,) * 3).reshape(3, -1)  # every cell of the largest block
+    offsets, counts = np.zeros((SPREAD**3, SPREAD**3), np.int64), np.zeros(SPREAD**3, np.int64)
+    for row, n in enumerate(corner.T + 1):
+        inside = np.array(stride) @ corner[:, np.all(corner < n[:, None], axis=0)]
+        offsets[row, : inside.size], counts[row] = inside, inside.size
+    offsets.flags.writeable = counts.flags.writeable = False  # cached: shared by grids
+    return offsets.reshape(-1), counts
 
 
 def _cell_count(extent: np.ndarray, sizes: np.ndarray) -> float:

@@ -6,6 +6,7 @@ sent to the intersector, and only the volumes a segment's bounds meet are integr
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, fields
 from typing import Any
 
@@ -205,7 +206,7 @@ class SceneGeometry:
         all of them (which made every hit a near miss, traced again, error pi)."""
         group = self.objects if isinstance(self.objects, Group) else None
         members = [self.objects] if group is None else group.objects
-        ids: list[int | None] = [None] if group is None else group.ids
+        ids: Sequence[int | None] = [None] if group is None else group.ids
         boxes: list[Bound] = [(np.asarray(v.lo, float), np.asarray(v.hi, float), None, VOLUME_ID)
                               for v in self.volumes]  # fmt: skip
         for obj, oid in zip(members, ids, strict=True):
