@@ -32,3 +32,14 @@ def rounds_free(monkeypatch: pytest.MonkeyPatch) -> None:
     from core.sampling import quadtree
 
     monkeypatch.setattr(quadtree, "ROUND_RAYS", 0)
+
+
+@pytest.fixture
+def tiles_refined(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every tile is refined, however small (core.sampling.quadtree.refining_pays, the cost
+    guard, patched True; the rounds cost as much as ever): a test of the interpolation's
+    honesty on a 160 x 90 frame (two tiles of 7200 pixels, which the guard traces at
+    every pixel) tests the interpolation still (forked workers inherit the setting)."""
+    from core.sampling import quadtree
+
+    monkeypatch.setattr(quadtree, "refining_pays", lambda pixels: True)

@@ -1,12 +1,13 @@
 """The quadtree: refining a tile's blocks level by level, and what a round of tracing costs.
 
 Offers ``refine`` (trace and accept blocks from the coarsest down to ``FINEST``, the nodes
-of blocks refused there all traced), ``dense_pays`` (whether tracing a level's refused
-blocks densely costs less than refining them), ``first_lattice`` (how far down the first
-round traces at once), ``block_nodes``, and ``FINEST`` and ``ROUND_RAYS``. ``ROUND_RAYS``
-is read here at each call (patch it here: core.render reads it from this module too).
-Needs a TileContext, the lattice, core.sampling.anchors (tracing nodes) and
-core.sampling.acceptance.
+of blocks refused there all traced), ``refining_pays`` (the cost guard: whether a tile is
+refined at all, or its every pixel traced from the start), ``dense_pays`` (whether tracing
+a level's refused blocks densely costs less than refining them), ``first_lattice`` (how
+far down the first round traces at once), ``block_nodes``, and ``FINEST`` and
+``ROUND_RAYS``. ``ROUND_RAYS`` is read here at each call (patch it here: core.render reads
+it from this module too). Needs a TileContext, the lattice, core.sampling.anchors (tracing
+nodes) and core.sampling.acceptance.
 """
 
 from __future__ import annotations
@@ -31,6 +32,26 @@ and stars). refine weighs rounds against rays with it: how far down the quadtree
 first round traces at once (first_lattice), and where tracing every remaining node of a
 tile's refused blocks in one round costs less than refining them (refine). A constant,
 not a timing: the same scene gives the same image on any machine."""
+
+REFINE_ROUNDS = 6
+"""Rounds of tracing a refined tile takes (its first lattice, its levels, retraces, the
+pixel centres interpolation missed and those the colour test asks for) ...."""
+DENSE_ROUNDS = 2
+"""... and one whose every pixel is traced (its nodes, retraces) ..."""
+REFINED_SHARE = 0.5
+"""... and the share of a tile's pixels refining traces at best (benchmarks/honesty.py's
+family at 160 x 90 traced 0.44-1.11 rays a pixel, median 0.87; at 640 x 360 ~0.3-0.5):
+refining_pays weighs them."""
+
+
+def refining_pays(pixels: int) -> bool:
+    """Whether refining a tile of ``pixels`` can cost less than tracing its every pixel
+    from the start (the cost guard): the rounds it adds (REFINE_ROUNDS - DENSE_ROUNDS,
+    ROUND_RAYS each) against the rays it saves at best ((1 - REFINED_SHARE) of them).
+    A tile where it cannot is traced at every pixel, as core.render(interpolate=False)
+    traces one: the same image."""
+    added = (REFINE_ROUNDS - DENSE_ROUNDS) * ROUND_RAYS
+    return added < (1.0 - REFINED_SHARE) * pixels
 
 
 def refine(

@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from ..passes import BY_NAME, STORED
-from . import lattice
+from . import lattice, quadtree
 from .anchors import settle, trace_nodes
 from .context import Cancel, TileContext
 from .footprints import filter_sky, filter_surfaces
@@ -32,14 +32,16 @@ class TileSampler(TileContext):
     of the sampler, as a TileContext, in core.sampling's modules."""
 
     def render_tile(self, tile: Tile, cancel: Cancel = None) -> TileResult | None:
-        """Colour and passes of one tile (None if cancelled). Threads share the sampler:
-        each tile works on its own shallow copy (its origin and ray counts)."""
+        """Colour and passes of one tile (None if cancelled): refined, or where that cannot
+        pay (quadtree.refining_pays) every pixel traced. Threads share the sampler: each
+        tile works on its own shallow copy (its origin and ray counts)."""
         return copy.copy(self)._render_tile(tile, cancel)
 
     def _render_tile(self, tile: Tile, cancel: Cancel) -> TileResult | None:
         self.rays = self.error_rays = self.companion_rays = 0
         h, w = tile.shape
-        s = lattice.STRIDE if self.interpolation > 0 else 1
+        refined = self.interpolation > 0 and quadtree.refining_pays(h * w)  # the cost guard
+        s = lattice.STRIDE if refined else 1
         ny, nx = 1 + s * math.ceil((h + 1) / s), 1 + s * math.ceil((w + 1) / s)
         origin = (tile.y0 - 1, tile.x0 - 1)  # image (row, column) of node (0, 0)
         self.origin = origin

@@ -1,6 +1,7 @@
 """A ray's clearance from the scene's shapes (core/tracing/clearance.py) against brute force."""
 
 import numpy as np
+import pytest
 
 import core
 from core import hamiltonians as hm
@@ -64,6 +65,7 @@ def test_what_lies_behind_a_hit_is_not_on_the_rays_path():
         assert others[0] > 0.2, (model, others[0])
 
 
+@pytest.mark.usefixtures("tiles_refined")
 def test_a_floor_under_an_opaque_disk_costs_no_extra_rays():
     """Issue 51: a floor 1 unit under a hole's opaque disk. The disk's rays used to record
     the floor as touched (their last step's chord ran on past the disk down to it) and

@@ -432,6 +432,7 @@ def test_translucent_disk_adds_its_light_to_what_lies_behind():
     )
 
 
+@pytest.mark.usefixtures("tiles_refined")
 def test_adaptive_sampling_interpolates_the_disk_within_the_tolerance():
     """With tolerance_px (tiles, interpolated blocks) an opaque disk's blocks interpolate
     its radius and g (core/sampling.py): every disk pixel has its g and the disk's light

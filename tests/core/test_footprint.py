@@ -90,6 +90,7 @@ CASES = {
 }
 
 
+@pytest.mark.usefixtures("tiles_refined")  # its adaptive cases interpolate
 @pytest.mark.parametrize("model", [None, "schwarzschild"])
 @pytest.mark.parametrize("case", list(CASES))
 def test_a_minified_sky_is_the_supersampled_one_not_its_moire(model, case):

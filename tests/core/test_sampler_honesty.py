@@ -9,6 +9,7 @@ import pathlib
 import sys
 
 import numpy as np
+import pytest
 
 import core
 from core import hamiltonians as hm
@@ -26,6 +27,7 @@ def _camera(position, look_at, width, height, fov_deg):
                                    fov_deg=fov_deg, width=width, height=height)  # fmt: skip
 
 
+@pytest.mark.usefixtures("tiles_refined")
 def test_small_objects_far_behind_a_hole_are_not_lost():
     """Six spheres of 4 rg, 400 rg behind a Schwarzschild hole seen from 30 rg: their lensed
     arcs span a few pixels. At Preview (1 px) every pixel the dense render sees them in is
@@ -197,6 +199,7 @@ def test_a_hit_near_its_objects_edge_reports_a_possible_flip():
         assert 10 <= np.count_nonzero(flagged) <= 0.02 * flagged.size  # the rims, not all
 
 
+@pytest.mark.usefixtures("tiles_refined")
 def test_runs_that_shared_their_steps_are_traced_again():
     """The high-spin disk at 0.25 px: rays that hit the disk's near side take a handful of
     steps, halved near it to the same sizes in the run at twice the step, so the two runs
@@ -235,6 +238,7 @@ def _disk_view(opacity: float = 1.0, inclination: float = 80.0):
     return core.Scene(model=model, background=(0.0, 0.0, 0.0, 1.0), disk=disk), camera
 
 
+@pytest.mark.usefixtures("tiles_refined")
 def test_an_opaque_disk_is_interpolated_within_the_tolerance():
     """Blocks on an opaque disk interpolate its radius and g (tested like directions, as
     the angle the block's gradient needs): colours as the dense render's, g within what
@@ -363,6 +367,7 @@ def test_a_ray_whose_companion_ran_past_the_rules_range_is_traced_again():
     assert big.sum() > 100 and within.sum() >= 0.9 * big.sum(), (within.sum(), big.sum())
 
 
+@pytest.mark.usefixtures("tiles_refined")
 def test_an_interpolated_pixels_estimate_adds_its_deviations_as_vectors():
     """benchmarks/honesty.py's stars (the procedural stars behind Schwarzschild seen from
     20 rg, 50 deg): a block's bilinear error is its edges' midpoint deviations weighted by
@@ -441,6 +446,7 @@ def test_an_interpolated_disk_pixels_hit_point_is_within_the_tolerance():
     assert np.count_nonzero(under) <= 0.001 * truth.size
 
 
+@pytest.mark.usefixtures("tiles_refined")
 def test_an_interpolated_centre_whose_colour_its_error_could_change_is_traced():
     """benchmarks/honesty.py's near_tangent (a 15 x 15 checker seen from 5 rg of a Kerr
     hole, looking along the orbit) and schwarzschild (a 24 x 16 checker), 160 x 90 at 1 px:

@@ -466,3 +466,30 @@ def test_a_frame_too_small_to_interpolate_with_profit_is_traced_at_every_pixel()
         patch.setattr(sampling.quadtree, "ROUND_RAYS", 0)
         refined = core.render(scene, cam, tolerance_px=1.0, passes=passes, workers=1)
     assert np.mean(refined.passes["steps"] == 0) > 0.1
+
+
+def test_a_tile_where_refining_cannot_pay_is_traced_as_interpolate_false_traces_it():
+    """The tile cost guard (core.sampling.quadtree.refining_pays): refining a tile adds
+    REFINE_ROUNDS - DENSE_ROUNDS rounds of ROUND_RAYS each and spares at best 1 -
+    REFINED_SHARE of its pixels' rays, so a tile under 12 000 pixels is traced at every
+    pixel from the start: the Kerr board at 160 x 90 on two workers (two tiles of 7200
+    pixels) is the every-pixel render's (interpolate=False) image, passes and ray counts to
+    the last bit. A tile of 28 800 pixels (320 x 180 in two) is still refined."""
+    from core.sampling import quadtree
+
+    added = (quadtree.REFINE_ROUNDS - quadtree.DENSE_ROUNDS) * quadtree.ROUND_RAYS
+    crossing = added / (1 - quadtree.REFINED_SHARE)
+    assert not quadtree.refining_pays(math.floor(crossing))
+    assert quadtree.refining_pays(math.floor(crossing) + 1)
+    scene, cam = _kerr_board(), _hole_camera(160, 90)
+    passes = ("steps", "ending", "error_px", "direction")
+    kw = {"tolerance_px": 1.0, "passes": passes, "workers": 2}
+    run, every = core.render(scene, cam, **kw), core.render(scene, cam, interpolate=False, **kw)
+    np.testing.assert_array_equal(run.rgba, every.rgba)
+    for name in passes:
+        np.testing.assert_array_equal(run.passes[name], every.passes[name])
+    for key in ("rays", "error_rays", "companion_rays", "steps"):
+        assert run.summary[key] == every.summary[key], key
+    assert np.all(run.passes["steps"] > 0)  # every pixel centre traced
+    large = core.render(scene, _hole_camera(320, 180), tolerance_px=1.0, passes=(), workers=1)
+    assert large.summary["rays"] < 0.8 * large.summary["pixels"]  # refined: interpolated
