@@ -49,12 +49,12 @@ reference (>= 0.9).
 
 The scenes are SCENES (each builder's docstring says what it shows): far_small,
 thin_front, stars, point_stars, mirage_grazing, near_tangent, disk_high_spin, schwarzschild
-and user_metric, and the graded-index lenses (issue 50) fisheye_matched, fisheye_jump,
-luneburg_matched and luneburg_jump (a scene core.render refuses is printed as refused,
-with its message, and has no row). 2 cores: --quick ~2.5 min with its references rendered
-(~1.6 min of it);
-the full 160x90 run ~6 min (references ~3 min, cached after the first run; each row also
-renders the scene twice with every pixel traced: ``x every`` and ``x dense``).
+and user_metric, the graded-index lenses (issue 50) fisheye_matched, fisheye_jump,
+luneburg_matched and luneburg_jump, orbit_disk, medium_text and sphere_cloud (a scene
+core.render refuses is printed as refused, with its message, and has no row). 2 cores:
+--quick ~2.5 min with its references rendered (~1.6 min of it); the full 160x90 run ~6 min
+(references ~3 min, cached after the first run; each row also renders the scene twice with
+every pixel traced: ``x every`` and ``x dense``).
 
 A table row per (scene, T), a line counting the rows that miss each target, and the CSV
 out/bench/honesty.csv; ``--save-images DIR``: per scene at the loosest T, reference | run
@@ -362,6 +362,21 @@ def medium_text(width: int, height: int) -> tuple[core.Scene, core.Camera]:
     return core.Scene(model=model, objects=[page], background=(0.2, 0.3, 0.5)), cam
 
 
+def sphere_cloud(width: int, height: int) -> tuple[core.Scene, core.Camera]:
+    """60 spheres (radius 0.4-1.2 rg) in a shell 4 < r < 12 rg around a Schwarzschild hole,
+    seen from 30 rg: more objects than core.tracing's NEAR_BOXES, so a step is near
+    geometry by the cells their boxes overlap (core.geometry.boxcells); lensed sky between."""
+    cam = _camera((0, -30, 2), (0, 0, 0), width, height, fov_deg=40.0)
+    rng = np.random.default_rng(60)
+    direction = rng.normal(size=(60, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    centre = (rng.uniform(4.0**3, 12.0**3, 60) ** (1 / 3))[:, None] * direction
+    radius, colour = rng.uniform(0.4, 1.2, 60), rng.uniform(0.2, 1.0, (60, 3))
+    spheres = [core.Sphere(c, r, color=(*k, 1.0))
+               for c, r, k in zip(centre, radius, colour, strict=True)]  # fmt: skip
+    return core.Scene(model=hm.schwarzschild(rg=1.0), objects=spheres), cam
+
+
 SCENES: dict[str, Callable[[int, int], tuple[core.Scene, core.Camera]]] = {
     "far_small": far_small,
     "thin_front": thin_front,
@@ -378,6 +393,7 @@ SCENES: dict[str, Callable[[int, int], tuple[core.Scene, core.Camera]]] = {
     "luneburg_jump": luneburg_jump,
     "orbit_disk": orbit_disk,
     "medium_text": medium_text,
+    "sphere_cloud": sphere_cloud,
 }
 """Scene builders by name: (width, height) -> (scene, camera)."""
 KINKED = ("fisheye_matched", "luneburg_matched")

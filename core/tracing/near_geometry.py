@@ -84,7 +84,8 @@ def near_paths(
     camera: np.ndarray, turn: np.ndarray, h0: np.ndarray,
 ) -> NearPaths:  # fmt: skip
     """The steps whose path X_prev -> X may pass the geometry's box, and one object's
-    own box where there are few (``TracerState._near_boxes``) (their chord's bounds widened by how
+    own box where there are not too many (``TracerState._near_boxes``, ``_near_many``)
+    (their chord's bounds widened by how
     far a path turning by ``turn`` from its heading can stray from it) and may leave
     the ball around the hole that holds no geometry (with an
     accretion disk: ``TracerState._clear``; a path from X_prev to X stays within the larger |X|
@@ -109,6 +110,9 @@ def near_paths(
         for lo, hi in tracer._near_boxes:
             any_box |= segment_overlaps(low[:, rows].T, high[:, rows].T, lo, hi)
         near[rows[~any_box]] = False
+    if tracer._near_many is not None and near.any():  # many objects' own boxes, at once
+        rows = np.flatnonzero(near)
+        near[rows[~tracer._near_many.meets(low[:, rows], high[:, rows])]] = False
     c = np.flatnonzero(near)
     X0, X1 = X_prev[:, c], X[:, c]
     V0, V1, h = step_ends.velocities(c)

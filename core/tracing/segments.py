@@ -239,6 +239,20 @@ class SceneGeometry:
             out.append((local.min(axis=0), local.max(axis=0)))
         return out
 
+    def local_box_arrays(self, to_local: Any) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) (K, 3) in local coordinates of each box ``boxes`` lists, all at once (the
+        box of its eight corners' images; -inf, inf where not finite)."""
+        bounds = self.boxes()
+        lo = np.array([b[0] for b in bounds], np.float64).reshape(-1, 3)
+        hi = np.array([b[1] for b in bounds], np.float64).reshape(-1, 3)
+        finite = np.isfinite(lo).all(axis=1) & np.isfinite(hi).all(axis=1)
+        upper = ((np.arange(8)[:, None] >> np.arange(3)) & 1).astype(bool)  # (8, 3)
+        corners = np.where(upper, hi[finite, None], lo[finite, None])  # (F, 8, 3)
+        local = to_local(corners.reshape(-1, 3)).reshape(-1, 8, 3)
+        out_lo, out_hi = np.full_like(lo, -np.inf), np.full_like(hi, np.inf)
+        out_lo[finite], out_hi[finite] = local.min(axis=1), local.max(axis=1)
+        return out_lo, out_hi
+
     def local_box(self, to_local: Any) -> tuple[np.ndarray, np.ndarray] | None:
         """(lo, hi) in local coordinates (``to_local``: world (N, 3) -> local) around every
         object and volume; None: nothing."""

@@ -1,0 +1,149 @@
+"""Which of a batch of boxes overlap any of many boxes, exactly, at once.
+
+``ManyBoxes(lo, hi)`` answers ``meets(low, high)``: for each query box [low, high], whether
+it overlaps one of the boxes, as testing every box in turn would (hits.segment_overlaps:
+touching counts). Two steps, both whole-batch array operations:
+
+- ``BoxCells``: the boxes' union cut into CELLS cells an axis, each cell marked where a box
+  overlaps it; a query meeting no marked cell (a 3-D prefix sum: eight lookups) meets no
+  box. Conservative (cells widened by EPS of a cell against rounding).
+- a sweep along the axis the boxes spread most along (in units of the widest's width):
+  boxes sorted by their low side there; a query's candidates are those whose low side lies
+  within [its low - the widest width, its high] (two searchsorted), each tested exactly.
+  Boxes wider than WIDE x the median width are tested apart (else the sweep's candidates
+  would be every box): one by one, or swept among themselves where there are many.
+
+Used where a step is near geometry by many objects' own boxes (core.tracing.near_geometry).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+CELLS = 64
+"""Cells along each axis of the boxes' union (64^3: 2 MB of prefix sums)."""
+EPS = 1e-6
+"""Cell indices are taken this share of a cell wider on both sides (rounding)."""
+WIDE = 4.0
+"""Boxes wider than this many median widths (on the sweep's axis) are tested one by one."""
+FEW = 16
+"""Up to this many wide boxes are tested one by one; more are swept apart (their own
+ManyBoxes: fewer than half the boxes each time)."""
+PAIRS = 1 << 18
+"""Candidate pairs tested at once at most (memory bounded)."""
+
+
+class BoxCells:
+    """Cells over finite boxes [lo[k], hi[k]] (K >= 1, 3) marked where a box overlaps them."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray, cells: int = CELLS) -> None:
+        """Mark the cells (``cells`` an axis over the union; one on an axis of no extent)."""
+        lo, hi = (np.asarray(x, np.float64).reshape(-1, 3) for x in (lo, hi))
+        self.origin, self.top = lo.min(axis=0), hi.max(axis=0)
+        extent = self.top - self.origin
+        self.shape = np.where(extent > 0, cells, 1).astype(np.int64)
+        self.size = np.where(extent > 0, extent / self.shape, 1.0)
+        i0, i1 = self._index(lo.T, -EPS), self._index(hi.T, EPS)
+        marks = np.zeros(tuple(self.shape + 1), np.int64)  # a difference array of the boxes
+        for corner in range(8):
+            pick = [(corner >> axis) & 1 for axis in range(3)]
+            at = tuple(i1[k] + 1 if pick[k] else i0[k] for k in range(3))
+            np.add.at(marks, at, -1 if sum(pick) % 2 else 1)
+        covered = marks.cumsum(axis=0).cumsum(axis=1).cumsum(axis=2)[:-1, :-1, :-1] > 0
+        self.prefix = np.zeros(tuple(self.shape + 1), np.int64)
+        """Marked cells below each corner: prefix[i, j, k] counts cells [0, i) x [0, j) x
+        [0, k)."""
+        self.prefix[1:, 1:, 1:] = covered.cumsum(axis=0).cumsum(axis=1).cumsum(axis=2)
+
+    def _index(self, x: np.ndarray, shift: float) -> np.ndarray:
+        """(3, M) the cells of points x (3, M), shifted by ``shift`` cells, within the grid."""
+        at = (x - self.origin[:, None]) / self.size[:, None] + shift
+        return np.clip(np.floor(at), 0, self.shape[:, None] - 1).astype(np.int64)
+
+    def meets(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+        """(M,) whether each box [low[:, m], high[:, m]] (3, M each) overlaps a marked cell."""
+        inside = np.all((high >= self.origin[:, None]) & (low <= self.top[:, None]), axis=0)
+        j0, j1 = self._index(low, -EPS), self._index(high, EPS) + 1
+        count = np.zeros(low.shape[1], np.int64)
+        flat = self.prefix.reshape(-1)
+        stride = (self.prefix.shape[1] * self.prefix.shape[2], self.prefix.shape[2], 1)
+        for corner in range(8):
+            pick = [(corner >> axis) & 1 for axis in range(3)]
+            at = sum((j1[k] if pick[k] else j0[k]) * stride[k] for k in range(3))
+            term = flat.take(at)
+            count += term if (3 - sum(pick)) % 2 == 0 else -term
+        return inside & (count > 0)
+
+
+class ManyBoxes:
+    """Finite boxes [lo[k], hi[k]] (K >= 1, 3): ``meets`` as testing each in turn, at once."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Index the boxes: their cells, the sweep's axis and order, the wide ones apart."""
+        lo, hi = (np.asarray(x, np.float64).reshape(-1, 3) for x in (lo, hi))
+        self.cells = BoxCells(lo, hi)
+        width = hi - lo
+        median = np.median(width, axis=0)
+        spread = (hi.max(axis=0) - lo.min(axis=0)) / np.maximum(median, 1e-300)
+        self.axis = axis = int(np.argmax(spread))
+        wide = width[:, axis] > WIDE * median[axis]  # under half of them
+        self.wide: list[tuple[np.ndarray, np.ndarray]] | ManyBoxes = (
+            list(zip(lo[wide], hi[wide], strict=True))
+            if np.count_nonzero(wide) <= FEW
+            else ManyBoxes(lo[wide], hi[wide])
+        )
+        """The wide boxes: up to FEW, (lo, hi) each, tested one by one; more, swept apart."""
+        narrow = np.flatnonzero(~wide)
+        order = narrow[np.argsort(lo[narrow, axis], kind="stable")]
+        self.lo, self.hi = lo[order].T.copy(), hi[order].T.copy()  # (3, K') by the sweep
+        most = float(width[narrow, axis].max()) if narrow.size else 0.0
+        scale = float(np.abs(np.concatenate([lo[:, axis], hi[:, axis]])).max())
+        self.reach = most * (1 + 1e-9) + 1e-12 * scale
+        """The widest swept box's width on the axis (and a hair for rounding): a query's
+        candidates start there."""
+
+    def meets(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+        """(M,) whether each box [low[:, m], high[:, m]] (3, M each) overlaps one of the
+        boxes (touching counts)."""
+        out = np.zeros(low.shape[1], bool)
+        rows = np.flatnonzero(self.cells.meets(low, high))
+        if rows.size == 0:
+            return out
+        low, high = low[:, rows], high[:, rows]
+        found = np.zeros(rows.size, bool)
+        if isinstance(self.wide, ManyBoxes):
+            found |= self.wide.meets(low, high)
+        else:
+            for lo, hi in self.wide:
+                found |= np.all((low <= hi[:, None]) & (high >= lo[:, None]), axis=0)
+        if self.lo.shape[1]:
+            key = self.lo[self.axis]
+            first = np.searchsorted(key, low[self.axis] - self.reach, side="left")
+            last = np.searchsorted(key, high[self.axis], side="right")
+            count = np.maximum(last - first, 0)
+            ends = np.cumsum(count)
+            start = 0
+            while start < rows.size:  # chunks of at most PAIRS candidates (or one query)
+                stop = max(
+                    start + 1, int(np.searchsorted(ends, ends[start] - count[start] + PAIRS))
+                )
+                part = slice(start, stop)
+                found[part] |= self._sweep(low[:, part], high[:, part], first[part], count[part])
+                start = stop
+        out[rows] = found
+        return out
+
+    def _sweep(self, low, high, first: np.ndarray, count: np.ndarray) -> np.ndarray:
+        """(M,) whether each query (low, high (3, M)) overlaps one of its ``count``
+        candidates among the swept boxes from ``first`` on, each tested exactly."""
+        query = np.arange(first.size).repeat(count)
+        box = np.arange(query.size) - (np.cumsum(count) - count).repeat(count)
+        box += first.repeat(count)
+        overlap = np.ones(query.size, bool)
+        for k in range(3):
+            overlap &= (low[k].take(query) <= self.hi[k].take(box)) & (
+                high[k].take(query) >= self.lo[k].take(box)
+            )
+        found = np.zeros(first.size, bool)
+        found[query[overlap]] = True
+        return found
