@@ -7,9 +7,9 @@ touching counts). Two steps, both whole-batch array operations:
 - ``BoxCells``: the boxes' union cut into CELLS cells an axis, each cell marked where a box
   overlaps it; a query meeting no marked cell (a 3-D prefix sum: eight lookups) meets no
   box. Conservative (cells widened by EPS of a cell against rounding).
-- a sweep along the axis the boxes spread most along (in units of the widest's width):
-  boxes sorted by their low side there; a query's candidates are those whose low side lies
-  within [its low - the widest width, its high] (two searchsorted), each tested exactly.
+- a sweep: the boxes sorted by their low side along each axis; a query's candidates along
+  an axis are those whose low side lies within [its low - the widest width, its high] (two
+  searchsorted); it is swept along the axis where it has the fewest, each tested exactly.
   Boxes wider than WIDE x the median width are tested apart (else the sweep's candidates
   would be every box): one by one, or swept among themselves where there are many.
 
@@ -79,14 +79,13 @@ class ManyBoxes:
     """Finite boxes [lo[k], hi[k]] (K >= 1, 3): ``meets`` as testing each in turn, at once."""
 
     def __init__(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        """Index the boxes: their cells, the sweep's axis and order, the wide ones apart."""
+        """Index the boxes: their cells, a sweep along each axis, the wide ones apart."""
         lo, hi = (np.asarray(x, np.float64).reshape(-1, 3) for x in (lo, hi))
         self.cells = BoxCells(lo, hi)
         width = hi - lo
-        median = np.median(width, axis=0)
-        spread = (hi.max(axis=0) - lo.min(axis=0)) / np.maximum(median, 1e-300)
-        self.axis = axis = int(np.argmax(spread))
-        wide = width[:, axis] > WIDE * median[axis]  # under half of them
+        wide = np.any(width > WIDE * np.median(width, axis=0), axis=1)
+        if 2 * np.count_nonzero(wide) > wide.size:  # no fewer apart: sweep them all
+            wide[:] = False
         self.wide: list[tuple[np.ndarray, np.ndarray]] | ManyBoxes = (
             list(zip(lo[wide], hi[wide], strict=True))
             if np.count_nonzero(wide) <= FEW
@@ -94,13 +93,10 @@ class ManyBoxes:
         )
         """The wide boxes: up to FEW, (lo, hi) each, tested one by one; more, swept apart."""
         narrow = np.flatnonzero(~wide)
-        order = narrow[np.argsort(lo[narrow, axis], kind="stable")]
-        self.lo, self.hi = lo[order].T.copy(), hi[order].T.copy()  # (3, K') by the sweep
-        most = float(width[narrow, axis].max()) if narrow.size else 0.0
-        scale = float(np.abs(np.concatenate([lo[:, axis], hi[:, axis]])).max())
-        self.reach = most * (1 + 1e-9) + 1e-12 * scale
-        """The widest swept box's width on the axis (and a hair for rounding): a query's
-        candidates start there."""
+        scale = float(np.abs(np.concatenate([lo, hi])).max())
+        self.sweeps = [_Sweep(lo[narrow], hi[narrow], k, scale) for k in range(3)]
+        """The other boxes, sorted along each axis: a query is swept along the axis where
+        it has the fewest candidates."""
 
     def meets(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
         """(M,) whether each box [low[:, m], high[:, m]] (3, M each) overlaps one of the
@@ -116,26 +112,54 @@ class ManyBoxes:
         else:
             for lo, hi in self.wide:
                 found |= np.all((low <= hi[:, None]) & (high >= lo[:, None]), axis=0)
-        if self.lo.shape[1]:
-            key = self.lo[self.axis]
-            first = np.searchsorted(key, low[self.axis] - self.reach, side="left")
-            last = np.searchsorted(key, high[self.axis], side="right")
-            count = np.maximum(last - first, 0)
-            ends = np.cumsum(count)
-            start = 0
-            while start < rows.size:  # chunks of at most PAIRS candidates (or one query)
-                stop = max(
-                    start + 1, int(np.searchsorted(ends, ends[start] - count[start] + PAIRS))
-                )
-                part = slice(start, stop)
-                found[part] |= self._sweep(low[:, part], high[:, part], first[part], count[part])
-                start = stop
+        if self.sweeps[0].lo.shape[1]:
+            spans = [sweep.candidates(low, high) for sweep in self.sweeps]
+            best = np.argmin(np.stack([count for _, count in spans]), axis=0)
+            for sweep, (first, count), k in zip(self.sweeps, spans, range(3), strict=True):
+                pick = np.flatnonzero(best == k)
+                if pick.size:
+                    found[pick] |= sweep.meets(low[:, pick], high[:, pick], first[pick],
+                                               count[pick])  # fmt: skip
         out[rows] = found
         return out
 
-    def _sweep(self, low, high, first: np.ndarray, count: np.ndarray) -> np.ndarray:
+
+class _Sweep:
+    """Boxes (lo, hi) (K, 3) sorted by their low side along ``axis``."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray, axis: int, scale: float) -> None:
+        """Sort them (``scale``: the largest coordinate's size, for rounding)."""
+        order = np.argsort(lo[:, axis], kind="stable")
+        self.axis = axis
+        self.lo, self.hi = lo[order].T.copy(), hi[order].T.copy()  # (3, K) sorted
+        most = float((hi[:, axis] - lo[:, axis]).max()) if lo.size else 0.0
+        self.reach = most * (1 + 1e-9) + 1e-12 * scale
+        """The widest box's width on the axis (and a hair for rounding): a query's
+        candidates start there."""
+
+    def candidates(self, low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(first, count) (M,): each query's candidates, the boxes from ``first`` on whose
+        low side lies within [its low - reach, its high] on the axis."""
+        key = self.lo[self.axis]
+        first = np.searchsorted(key, low[self.axis] - self.reach, side="left")
+        last = np.searchsorted(key, high[self.axis], side="right")
+        return first, np.maximum(last - first, 0)
+
+    def meets(self, low, high, first: np.ndarray, count: np.ndarray) -> np.ndarray:
         """(M,) whether each query (low, high (3, M)) overlaps one of its ``count``
-        candidates among the swept boxes from ``first`` on, each tested exactly."""
+        candidates from ``first`` on, each tested exactly, PAIRS at a time at most."""
+        found = np.zeros(first.size, bool)
+        ends, start = np.cumsum(count), 0
+        while start < first.size:  # chunks of at most PAIRS candidates (or one query)
+            top = ends[start] - count[start] + PAIRS
+            stop = max(start + 1, int(np.searchsorted(ends, top, side="right")))
+            part = slice(start, stop)
+            found[part] = self._pairs(low[:, part], high[:, part], first[part], count[part])
+            start = stop
+        return found
+
+    def _pairs(self, low, high, first: np.ndarray, count: np.ndarray) -> np.ndarray:
+        """``meets`` for one chunk of queries."""
         query = np.arange(first.size).repeat(count)
         box = np.arange(query.size) - (np.cumsum(count) - count).repeat(count)
         box += first.repeat(count)

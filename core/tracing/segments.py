@@ -242,9 +242,7 @@ class SceneGeometry:
     def local_box_arrays(self, to_local: Any) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi) (K, 3) in local coordinates of each box ``boxes`` lists, all at once (the
         box of its eight corners' images; -inf, inf where not finite)."""
-        bounds = self.boxes()
-        lo = np.array([b[0] for b in bounds], np.float64).reshape(-1, 3)
-        hi = np.array([b[1] for b in bounds], np.float64).reshape(-1, 3)
+        lo, hi = self._box_arrays()
         finite = np.isfinite(lo).all(axis=1) & np.isfinite(hi).all(axis=1)
         upper = ((np.arange(8)[:, None] >> np.arange(3)) & 1).astype(bool)  # (8, 3)
         corners = np.where(upper, hi[finite, None], lo[finite, None])  # (F, 8, 3)
@@ -252,6 +250,26 @@ class SceneGeometry:
         out_lo, out_hi = np.full_like(lo, -np.inf), np.full_like(hi, np.inf)
         out_lo[finite], out_hi[finite] = local.min(axis=1), local.max(axis=1)
         return out_lo, out_hi
+
+    def _box_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi) (K, 3) world: the boxes ``boxes`` lists, in any order; a Group's members
+        from its member bounds at once (10^5 spheres: ~2 s in boxes' loop)."""
+        group = self.objects if isinstance(self.objects, Group) else None
+        if group is None:
+            listed = [(lo, hi) for lo, hi, _, _ in self.boxes()]
+            plain_lo, plain_hi = np.empty((0, 3)), np.empty((0, 3))
+        else:
+            parts = [part_bounds(obj) if oid is None else None
+                     for obj, oid in zip(group.objects, group.ids, strict=True)]  # fmt: skip
+            plain = np.array([p is None for p in parts], bool).reshape(-1)
+            plain_lo, plain_hi = (x[plain] for x in group.member_bounds)
+            empty = np.any(plain_lo > plain_hi, axis=1)
+            plain_lo, plain_hi = plain_lo[~empty], plain_hi[~empty]
+            listed = [(v.lo, v.hi) for v in self.volumes]
+            listed += [(a, b) for p in parts if p is not None for a, b, _ in p]
+        lo = np.array([b[0] for b in listed], np.float64).reshape(-1, 3)
+        hi = np.array([b[1] for b in listed], np.float64).reshape(-1, 3)
+        return np.concatenate([lo, plain_lo]), np.concatenate([hi, plain_hi])
 
     def local_box(self, to_local: Any) -> tuple[np.ndarray, np.ndarray] | None:
         """(lo, hi) in local coordinates (``to_local``: world (N, 3) -> local) around every
