@@ -31,6 +31,12 @@ FEW = 16
 ManyBoxes: fewer than half the boxes each time)."""
 PAIRS = 1 << 18
 """Candidate pairs tested at once at most (memory bounded)."""
+QUERY_CELLS = 64
+"""A query over at most this many cells meets the boxes listed in them (_CellLists); a
+larger one is swept."""
+REFS = 8
+"""Cell lists hold each box in every cell it overlaps, up to REFS entries a box on average
+(more: no lists, every query swept)."""
 
 
 class BoxCells:
@@ -95,8 +101,10 @@ class ManyBoxes:
         narrow = np.flatnonzero(~wide)
         scale = float(np.abs(np.concatenate([lo, hi])).max())
         self.sweeps = [_Sweep(lo[narrow], hi[narrow], k, scale) for k in range(3)]
-        """The other boxes, sorted along each axis: a query is swept along the axis where
-        it has the fewest candidates."""
+        """The other boxes, sorted along each axis: a query over many cells is swept along
+        the axis where it has the fewest candidates ..."""
+        self.lists = _CellLists(self.cells, lo[narrow], hi[narrow])
+        """... one over few, tested against the boxes listed in its cells."""
 
     def meets(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
         """(M,) whether each box [low[:, m], high[:, m]] (3, M each) overlaps one of the
@@ -112,7 +120,24 @@ class ManyBoxes:
         else:
             for lo, hi in self.wide:
                 found |= np.all((low <= hi[:, None]) & (high >= lo[:, None]), axis=0)
-        if self.sweeps[0].lo.shape[1]:
+        if self.sweeps[0].lo.shape[1] == 0:
+            out[rows] = found
+            return out
+        few = self.lists.few_cells(low, high)
+        if few.any():
+            found[few] |= self.lists.meets(low[:, few], high[:, few])
+            rest = np.flatnonzero(~few)
+            found[rest] |= self._swept(low[:, rest], high[:, rest])
+        else:
+            found |= self._swept(low, high)
+        out[rows] = found
+        return out
+
+    def _swept(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+        """(M,) whether each query meets one of the swept boxes, each query swept along
+        the axis where it has the fewest candidates."""
+        found = np.zeros(low.shape[1], bool)
+        if low.shape[1]:
             spans = [sweep.candidates(low, high) for sweep in self.sweeps]
             best = np.argmin(np.stack([count for _, count in spans]), axis=0)
             for sweep, (first, count), k in zip(self.sweeps, spans, range(3), strict=True):
@@ -120,8 +145,7 @@ class ManyBoxes:
                 if pick.size:
                     found[pick] |= sweep.meets(low[:, pick], high[:, pick], first[pick],
                                                count[pick])  # fmt: skip
-        out[rows] = found
-        return out
+        return found
 
 
 class _Sweep:
@@ -169,5 +193,76 @@ class _Sweep:
                 high[k].take(query) >= self.lo[k].take(box)
             )
         found = np.zeros(first.size, bool)
+        found[query[overlap]] = True
+        return found
+
+
+class _CellLists:
+    """Boxes (lo, hi) (K, 3) listed in every cell of ``grid`` (a BoxCells) they overlap
+    (``ok``: at most REFS entries a box on average, else no lists)."""
+
+    def __init__(self, grid: BoxCells, lo: np.ndarray, hi: np.ndarray) -> None:
+        """List the boxes cell by cell (``start``, ``box``: compressed rows)."""
+        self.grid = grid
+        self.lo, self.hi = lo.T.copy(), hi.T.copy()  # (3, K)
+        self.stride = (int(grid.shape[1] * grid.shape[2]), int(grid.shape[2]), 1)
+        i0, i1 = grid._index(self.lo, -EPS), grid._index(self.hi, EPS)
+        count = np.prod(i1 - i0 + 1, axis=0)
+        self.ok = bool(count.sum() <= REFS * max(1, count.size))
+        if not self.ok:
+            return
+        owner, cell = self._cells(i0, i1)
+        order = np.argsort(cell, kind="stable")
+        self.box = owner[order]
+        """The boxes in each cell, cell by cell."""
+        self.start = np.zeros(int(np.prod(grid.shape)) + 1, np.int64)
+        np.cumsum(np.bincount(cell, minlength=self.start.size - 1), out=self.start[1:])
+        """Where each cell's boxes begin in ``box``."""
+
+    def _cells(self, i0: np.ndarray, i1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(owner, cell): each cell (flat index) of each range [i0, i1] (3, M), with the
+        range's position."""
+        n = i1 - i0 + 1
+        each = n[0] * n[1] * n[2]
+        owner = np.arange(each.size).repeat(each)
+        j = np.arange(owner.size) - (np.cumsum(each) - each).repeat(each)
+        nz, ny = n[2].take(owner), n[1].take(owner)
+        dz, j = j % nz, j // nz
+        dy, dx = j % ny, j // ny
+        cell = (i0[0].take(owner) + dx) * self.stride[0] + (i0[1].take(owner) + dy) * self.stride[1]
+        return owner, cell + i0[2].take(owner) + dz
+
+    def few_cells(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+        """(M,) whether each query box spans at most QUERY_CELLS cells (none without lists)."""
+        if not self.ok:
+            return np.zeros(low.shape[1], bool)
+        j0, j1 = self.grid._index(low, -EPS), self.grid._index(high, EPS)
+        return np.prod(j1 - j0 + 1, axis=0) <= QUERY_CELLS
+
+    def meets(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+        """(M,) whether each query box (over few cells) overlaps a box listed in its cells,
+        each tested exactly, PAIRS // QUERY_CELLS queries at a time."""
+        found = np.zeros(low.shape[1], bool)
+        step = max(1, PAIRS // QUERY_CELLS)
+        for start in range(0, low.shape[1], step):
+            part = slice(start, start + step)
+            found[part] = self._part(low[:, part], high[:, part])
+        return found
+
+    def _part(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+        """``meets`` for one chunk of queries."""
+        j0, j1 = self.grid._index(low, -EPS), self.grid._index(high, EPS)
+        query, cell = self._cells(j0, j1)
+        first = self.start.take(cell)
+        count = self.start.take(cell + 1) - first
+        query = query.repeat(count)
+        ref = np.arange(query.size) - (np.cumsum(count) - count).repeat(count)
+        box = self.box.take(ref + first.repeat(count))
+        overlap = np.ones(query.size, bool)
+        for k in range(3):
+            overlap &= (low[k].take(query) <= self.hi[k].take(box)) & (
+                high[k].take(query) >= self.lo[k].take(box)
+            )
+        found = np.zeros(low.shape[1], bool)
         found[query[overlap]] = True
         return found
