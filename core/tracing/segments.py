@@ -229,15 +229,9 @@ class SceneGeometry:
         return len(self.volumes) + int(np.count_nonzero(~np.any(bounds[0] > bounds[1], axis=1)))
 
     def local_boxes(self, to_local: Any) -> list[tuple[np.ndarray, np.ndarray]]:
-        """(lo, hi) in local coordinates of each object's and volume's box (boxes)."""
-        out = []
-        for lo, hi, _, _ in self.boxes():
-            if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-                out.append((np.full(3, -np.inf), np.full(3, np.inf)))
-                continue
-            local = to_local(box_corners(lo, hi))
-            out.append((local.min(axis=0), local.max(axis=0)))
-        return out
+        """(lo, hi) in local coordinates of each object's and volume's box (boxes), one
+        pair a box (``local_box_arrays``)."""
+        return list(zip(*self.local_box_arrays(to_local), strict=True))
 
     def local_box_arrays(self, to_local: Any) -> tuple[np.ndarray, np.ndarray]:
         """(lo, hi) (K, 3) in local coordinates of each box ``boxes`` lists, all at once (the

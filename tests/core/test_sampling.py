@@ -477,10 +477,8 @@ def test_a_tile_where_refining_cannot_pay_is_traced_as_interpolate_false_traces_
     the last bit. A tile of 28 800 pixels (320 x 180 in two) is still refined."""
     from core.sampling import quadtree
 
-    added = (quadtree.REFINE_ROUNDS - quadtree.DENSE_ROUNDS) * quadtree.ROUND_RAYS
-    crossing = added / (1 - quadtree.REFINED_SHARE)
-    assert not quadtree.refining_pays(math.floor(crossing))
-    assert quadtree.refining_pays(math.floor(crossing) + 1)
+    assert not quadtree.refining_pays(12_000)  # the figure docs/architecture.md gives
+    assert quadtree.refining_pays(12_001)
     scene, cam = _kerr_board(), _hole_camera(160, 90)
     passes = ("steps", "ending", "error_px", "direction")
     kw = {"tolerance_px": 1.0, "passes": passes, "workers": 2}
