@@ -3,6 +3,7 @@
     PYTHONPATH=. python benchmarks/scale.py [--counts 100,1000,10000,100000]
         [--size 160x120] [--models flat,schwarzschild] [--baseline DIR] [--timeout 300]
         [--runs 3] [--env 16384x8192] [--only spheres,env] [--csv PATH]
+        [--tolerance-px 1]
 
 - ``spheres``: N small spheres (N = 10^2 .. 10^5) in a shell 4 < r < 12 around the origin,
   their radius 11.8 / sqrt(N) (about one sphere's cross-section along a ray through the
@@ -12,6 +13,9 @@
   this checkout beside ``--baseline DIR`` (a checkout of the original commit, e.g.
   ``git worktree add /tmp/base f4e4687``; its runs capped at ``--timeout`` seconds, shown
   as "> N s"). Target: 10^5 objects within 3x of 10^2 objects per traced ray.
+  ``--tolerance-px P``: adaptive renders at P pixels (*Preview* is 1), which measure each
+  ray's clearance from every object near its path (core/tracing/clearance.py), instead of
+  the default fixed tolerance.
 - ``env`` (``--env WxH``, default 16384x8192; ``--env 0`` skips it): peak resident memory
   (ru_maxrss) of a process that makes a float32 RGBA equirect sky of that size and renders
   a 64x48 frame of it with sky footprints (core/mipmap.py), beside the image's own bytes.
@@ -55,15 +59,19 @@ def sphere_scene(count: int, curved: bool):
     return core.Scene(model=model, objects=objects, background="procedural")
 
 
-def child_spheres(count: int, curved: bool, width: int, height: int) -> dict:
-    """Render the sphere scene once (one worker): seconds and rays."""
+def child_spheres(
+    count: int, curved: bool, width: int, height: int, tolerance_px: float | None = None
+) -> dict:
+    """Render the sphere scene once (one worker; adaptive at ``tolerance_px`` where
+    given): seconds and rays."""
     import core
 
     scene = sphere_scene(count, curved)
     camera = core.Camera.perspective(position=(0, -30, 2), look_at=(0, 0, 0), up=(0, 0, 1),
                                      fov_deg=40, width=width, height=height)  # fmt: skip
     start = time.perf_counter()
-    out = core.render(scene, camera, workers=1)
+    accuracy = {} if tolerance_px is None else {"tolerance_px": tolerance_px}
+    out = core.render(scene, camera, workers=1, **accuracy)
     seconds = time.perf_counter() - start
     return {"seconds": seconds, "rays": int(out.summary["rays"])}
 
@@ -134,11 +142,14 @@ def spheres(args) -> list[dict]:
     width, height = (int(v) for v in args.size.split("x"))
     counts = [int(c) for c in args.counts.split(",")]
     rows = []
-    print(f"spheres at {width}x{height}, one worker; seconds and microseconds per traced ray")
+    adaptive = "" if args.tolerance_px is None else f", adaptive at {args.tolerance_px:g} px"
+    print(f"spheres at {width}x{height}, one worker{adaptive}; seconds and microseconds per "
+          "traced ray")  # fmt: skip
     print(f"{'model':14s} {'objects':>8s} {'this':>20s} {'baseline':>20s}")
     for model in args.models.split(","):
         for count in counts:
             flags = ["spheres", str(count), model, str(width), str(height)]
+            flags += [] if args.tolerance_px is None else [str(args.tolerance_px)]
             new = best_of(ROOT, flags, args)
             old = best_of(args.baseline, flags, args) if args.baseline else None
             before = _cell(old, args.timeout) if args.baseline else ""
@@ -184,8 +195,9 @@ def main() -> None:
     if len(sys.argv) > 2 and sys.argv[1] == "--child":
         kind, *rest = sys.argv[2:]
         if kind == "spheres":
+            tolerance_px = float(rest[4]) if len(rest) > 4 else None
             row = child_spheres(
-                int(rest[0]), rest[1] == "schwarzschild", int(rest[2]), int(rest[3])
+                int(rest[0]), rest[1] == "schwarzschild", int(rest[2]), int(rest[3]), tolerance_px
             )
         else:
             row = child_env(int(rest[0]), int(rest[1]))
@@ -198,6 +210,12 @@ def main() -> None:
     parser.add_argument("--baseline", default=None, help="a checkout of the original commit")
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds per run at most")
     parser.add_argument("--runs", type=int, default=3, help="fresh runs of a short figure (best)")
+    parser.add_argument(
+        "--tolerance-px",
+        type=float,
+        default=None,
+        help="adaptive renders at this many pixels (default: fixed tolerance)",
+    )
     parser.add_argument("--env", default="16384x8192", help="sky size WxH; 0: skip")
     parser.add_argument("--only", default="spheres,env")
     parser.add_argument("--csv", default=None, help="write the figures to this CSV")

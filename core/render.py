@@ -30,7 +30,6 @@ from .backend import CPU, Device, device_of
 from .blackbody import XYZ_FROM_RGB
 from .geometry import Group, Intersector
 from .geometry.group import member_bounds
-from .geometry.hits import box_corners
 from .imageio import FAILED_COLOR
 from .mipmap import span_footprint
 from .motion import check_observer, observer_motion
@@ -528,11 +527,9 @@ def _watch_margin(tracer: Tracer, camera, pixel_angle: float) -> float:
     if not boxes:
         return 0.0
     eye = camera.frame.position
-    far = 0.0
-    for lo, hi, *_ in boxes:
-        ends = [np.where(np.isfinite(x), x, eye) for x in (lo, hi)]
-        corners = box_corners(*ends)
-        far = max(far, float(np.max(np.linalg.norm(corners - eye, axis=1))))
+    sides = (np.array([box[i] for box in boxes], float) for i in (0, 1))  # lo, hi (K, 3)
+    reach = [np.abs(np.where(np.isfinite(x), x, eye) - eye) for x in sides]
+    far = float(np.max(np.linalg.norm(np.maximum(*reach), axis=1)))  # each box's farthest corner
     return CLEARANCE * STRIDE * pixel_angle * far
 
 

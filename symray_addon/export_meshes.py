@@ -18,6 +18,7 @@ import bpy
 import numpy as np
 from mathutils.bvhtree import BVHTree
 
+from ..core.geometry.boxcells import ManyBoxes
 from ..core.geometry.boxtree import morton
 from ..core.intersect import Hits, TriangleMesh, barycentric_gradients
 from .materials import MaterialSampler, material_sampler, unsupported_nodes
@@ -55,9 +56,12 @@ all of a batch's segments at once (core.TriangleMesh: float64 Möller–Trumbore
 through Blender's BVHTree, one ray_cast per segment in a Python loop, ~1.9 us a segment
 against 0.15 us in numpy for a few triangles (2000 segments; 64 triangles: on a par). A
 floor under the hole and disk made 3.5 million such calls in a 480x270 frame (issue 51)."""
-PART_BOXES = 16
-"""Boxes the clearances see at most (each box costs every traced step a slab test):
-beyond, objects share boxes (in the order of their centres along a Morton curve)."""
+PART_BOXES = 4096
+"""Boxes the clearances and the near tests see at most (beyond FEW_PARTS tested all at once:
+core.geometry.boxcells.ManyBoxes; the clearance's broad phase likewise): beyond, objects
+share boxes (in the order of their centres along a Morton curve)."""
+FEW_PARTS = 16
+"""Up to this many part boxes, a segment is tested against each in turn."""
 
 
 def part_bounds(corners: np.ndarray, tri_object: np.ndarray) -> list[tuple]:
@@ -111,6 +115,10 @@ class BVHIntersector:
         self.names = list(names)
         self.bounds = (self.vertices.min(axis=0), self.vertices.max(axis=0))
         self.part_bounds = part_bounds(self.vertices[self.triangles], self.tri_object)
+        self._parts = None
+        if len(self.part_bounds) > FEW_PARTS:
+            lo, hi = (np.array([box[k] for box in self.part_bounds]) for k in (0, 1))
+            self._parts = ManyBoxes(lo, hi)
         """(lo, hi, object id) of the objects (core.tracing.segments: clearances)."""
         tri = self.vertices[self.triangles]
         e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
@@ -167,6 +175,8 @@ class BVHIntersector:
         small object made their union's box a slab around everything (issue 51: 3.4 M
         segments cast where 0.2 M were without the floor)."""
         top, bottom = np.maximum(a, b), np.minimum(a, b)
+        if self._parts is not None:
+            return self._parts.meets((bottom - slack[:, None]).T, (top + slack[:, None]).T)
         near = np.zeros(a.shape[0], dtype=bool)
         for lo, hi, _ in self.part_bounds:
             near |= np.all(top >= lo - slack[:, None], axis=1) & np.all(

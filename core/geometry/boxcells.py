@@ -7,9 +7,11 @@ touching counts). Two steps, both whole-batch array operations:
 - ``BoxCells``: the boxes' union cut into CELLS cells an axis, each cell marked where a box
   overlaps it; a query meeting no marked cell (a 3-D prefix sum: eight lookups) meets no
   box. Conservative (cells widened by EPS of a cell against rounding).
-- a sweep: the boxes sorted by their low side along each axis; a query's candidates along
-  an axis are those whose low side lies within [its low - the widest width, its high] (two
-  searchsorted); it is swept along the axis where it has the fewest, each tested exactly.
+- each query is then tested exactly against the candidates of the cheaper of two lists:
+  the boxes listed in each cell it spans (a prefix sum of the lists' lengths counts them
+  with the cells), or a sweep: the boxes sorted by their low side along each axis, a
+  query's candidates along an axis those whose low side lies within [its low - the widest
+  width, its high] (two searchsorted), along the axis where it has the fewest.
   Boxes wider than WIDE x the median width are tested apart (else the sweep's candidates
   would be every box): one by one, or swept among themselves where there are many.
 
@@ -31,9 +33,6 @@ FEW = 16
 ManyBoxes: fewer than half the boxes each time)."""
 PAIRS = 1 << 18
 """Candidate pairs tested at once at most (memory bounded)."""
-QUERY_CELLS = 64
-"""A query over at most this many cells meets the boxes listed in them (_CellLists); a
-larger one is swept."""
 REFS = 8
 """Cell lists hold each box in every cell it overlaps, up to REFS entries a box on average
 (more: no lists, every query swept)."""
@@ -70,15 +69,22 @@ class BoxCells:
         """(M,) whether each box [low[:, m], high[:, m]] (3, M each) overlaps a marked cell."""
         inside = np.all((high >= self.origin[:, None]) & (low <= self.top[:, None]), axis=0)
         j0, j1 = self._index(low, -EPS), self._index(high, EPS) + 1
-        count = np.zeros(low.shape[1], np.int64)
-        flat = self.prefix.reshape(-1)
-        stride = (self.prefix.shape[1] * self.prefix.shape[2], self.prefix.shape[2], 1)
-        for corner in range(8):
-            pick = [(corner >> axis) & 1 for axis in range(3)]
-            at = sum((j1[k] if pick[k] else j0[k]) * stride[k] for k in range(3))
-            term = flat.take(at)
-            count += term if (3 - sum(pick)) % 2 == 0 else -term
+        count = _range_sums(self.prefix, j0, j1)
         return inside & (count > 0)
+
+
+def _range_sums(prefix: np.ndarray, j0: np.ndarray, j1: np.ndarray) -> np.ndarray:
+    """(M,) the sums over cell ranges [j0, j1) (3, M each) of a 3-D prefix sum (``prefix``
+    [i, j, k]: the sum over cells [0, i) x [0, j) x [0, k)): eight lookups."""
+    count = np.zeros(j0.shape[1], np.int64)
+    flat = prefix.reshape(-1)
+    stride = (prefix.shape[1] * prefix.shape[2], prefix.shape[2], 1)
+    for corner in range(8):
+        pick = [(corner >> axis) & 1 for axis in range(3)]
+        at = sum((j1[k] if pick[k] else j0[k]) * stride[k] for k in range(3))
+        term = flat.take(at)
+        count += term if (3 - sum(pick)) % 2 == 0 else -term
+    return count
 
 
 class ManyBoxes:
@@ -88,6 +94,8 @@ class ManyBoxes:
         """Index the boxes: their cells, a sweep along each axis, the wide ones apart."""
         lo, hi = (np.asarray(x, np.float64).reshape(-1, 3) for x in (lo, hi))
         self.cells = BoxCells(lo, hi)
+        self.count = lo.shape[0]
+        """How many boxes there are."""
         width = hi - lo
         wide = np.any(width > WIDE * np.median(width, axis=0), axis=1)
         if 2 * np.count_nonzero(wide) > wide.size:  # no fewer apart: sweep them all
@@ -98,54 +106,72 @@ class ManyBoxes:
             else ManyBoxes(lo[wide], hi[wide])
         )
         """The wide boxes: up to FEW, (lo, hi) each, tested one by one; more, swept apart."""
+        self.wide_index = np.flatnonzero(wide)
+        """Their indices among all the boxes."""
         narrow = np.flatnonzero(~wide)
+        self.narrow_index = narrow
+        """The other boxes' indices (the sweeps' and the cell lists' boxes are these)."""
         scale = float(np.abs(np.concatenate([lo, hi])).max())
         self.sweeps = [_Sweep(lo[narrow], hi[narrow], k, scale) for k in range(3)]
-        """The other boxes, sorted along each axis: a query over many cells is swept along
-        the axis where it has the fewest candidates ..."""
+        """The other boxes, sorted along each axis: a query is swept along the axis where
+        it has the fewest candidates ..."""
         self.lists = _CellLists(self.cells, lo[narrow], hi[narrow])
-        """... one over few, tested against the boxes listed in its cells."""
+        """... or tested against the boxes listed in its cells, where they are fewer."""
 
     def meets(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
         """(M,) whether each box [low[:, m], high[:, m]] (3, M each) overlaps one of the
         boxes (touching counts)."""
         out = np.zeros(low.shape[1], bool)
-        rows = np.flatnonzero(self.cells.meets(low, high))
-        if rows.size == 0:
-            return out
-        low, high = low[:, rows], high[:, rows]
-        found = np.zeros(rows.size, bool)
-        if isinstance(self.wide, ManyBoxes):
-            found |= self.wide.meets(low, high)
-        else:
-            for lo, hi in self.wide:
-                found |= np.all((low <= hi[:, None]) & (high >= lo[:, None]), axis=0)
-        if self.sweeps[0].lo.shape[1] == 0:
-            out[rows] = found
-            return out
-        few = self.lists.few_cells(low, high)
-        if few.any():
-            found[few] |= self.lists.meets(low[:, few], high[:, few])
-            rest = np.flatnonzero(~few)
-            found[rest] |= self._swept(low[:, rest], high[:, rest])
-        else:
-            found |= self._swept(low, high)
-        out[rows] = found
+        for query, _ in self._overlaps(low, high):
+            out[query] = True
         return out
 
-    def _swept(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-        """(M,) whether each query meets one of the swept boxes, each query swept along
-        the axis where it has the fewest candidates."""
-        found = np.zeros(low.shape[1], bool)
-        if low.shape[1]:
-            spans = [sweep.candidates(low, high) for sweep in self.sweeps]
-            best = np.argmin(np.stack([count for _, count in spans]), axis=0)
-            for sweep, (first, count), k in zip(self.sweeps, spans, range(3), strict=True):
-                pick = np.flatnonzero(best == k)
-                if pick.size:
-                    found[pick] |= sweep.meets(low[:, pick], high[:, pick], first[pick],
-                                               count[pick])  # fmt: skip
-        return found
+    def pairs(
+        self, low: np.ndarray, high: np.ndarray, owner: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(query, box): every query box [low[:, m], high[:, m]] (3, M each) and box
+        [lo[k], hi[k]] that overlap (touching counts), each pair once, by query; with
+        ``owner`` (M,) (ints, queries that are parts of one), (owner, box) pairs instead."""
+        found = list(self._overlaps(low, high))
+        if not found:
+            return np.zeros(0, np.int64), np.zeros(0, np.int64)
+        query, box = (np.concatenate(x) for x in zip(*found, strict=True))
+        if owner is not None:
+            query = owner[query]
+        key = np.unique(query * np.int64(self.count) + box)  # lists repeat a box per cell
+        return key // self.count, key % self.count
+
+    def _overlaps(self, low: np.ndarray, high: np.ndarray):
+        """Yield (query, box) arrays of overlapping pairs (boxes by their index; a pair may
+        come more than once)."""
+        rows = np.flatnonzero(self.cells.meets(low, high))
+        if rows.size == 0:
+            return
+        low, high = low[:, rows], high[:, rows]
+        if isinstance(self.wide, ManyBoxes):
+            for query, box in self.wide._overlaps(low, high):
+                yield rows[query], self.wide_index[box]
+        else:
+            for box, (lo, hi) in zip(self.wide_index, self.wide, strict=True):
+                query = np.flatnonzero(np.all((low <= hi[:, None]) & (high >= lo[:, None]), axis=0))
+                yield rows[query], np.full(query.size, box)
+        if self.narrow_index.size == 0:
+            return
+        spans = [sweep.candidates(low, high) for sweep in self.sweeps]
+        counts = np.stack([count for _, count in spans])
+        cost = self.lists.cost(low, high)
+        listed = cost <= counts.min(axis=0)
+        best = np.where(listed, 3, np.argmin(counts, axis=0))
+        pick = np.flatnonzero(listed)
+        if pick.size:
+            for query, box in self.lists.overlaps(low[:, pick], high[:, pick], cost[pick]):
+                yield rows[pick[query]], self.narrow_index[box]
+        for sweep, (first, count), k in zip(self.sweeps, spans, range(3), strict=True):
+            pick = np.flatnonzero(best == k)
+            if pick.size:
+                for query, box in sweep.overlaps(low[:, pick], high[:, pick], first[pick],
+                                                 count[pick]):  # fmt: skip
+                    yield rows[pick[query]], self.narrow_index[box]
 
 
 class _Sweep:
@@ -154,6 +180,8 @@ class _Sweep:
     def __init__(self, lo: np.ndarray, hi: np.ndarray, axis: int, scale: float) -> None:
         """Sort them (``scale``: the largest coordinate's size, for rounding)."""
         order = np.argsort(lo[:, axis], kind="stable")
+        self.order = order
+        """The boxes' indices, sorted."""
         self.axis = axis
         self.lo, self.hi = lo[order].T.copy(), hi[order].T.copy()  # (3, K) sorted
         most = float((hi[:, axis] - lo[:, axis]).max()) if lo.size else 0.0
@@ -169,32 +197,42 @@ class _Sweep:
         last = np.searchsorted(key, high[self.axis], side="right")
         return first, np.maximum(last - first, 0)
 
-    def meets(self, low, high, first: np.ndarray, count: np.ndarray) -> np.ndarray:
-        """(M,) whether each query (low, high (3, M)) overlaps one of its ``count``
-        candidates from ``first`` on, each tested exactly, PAIRS at a time at most."""
-        found = np.zeros(first.size, bool)
-        ends, start = np.cumsum(count), 0
-        while start < first.size:  # chunks of at most PAIRS candidates (or one query)
-            top = ends[start] - count[start] + PAIRS
-            stop = max(start + 1, int(np.searchsorted(ends, top, side="right")))
-            part = slice(start, stop)
-            found[part] = self._pairs(low[:, part], high[:, part], first[part], count[part])
-            start = stop
-        return found
+    def overlaps(self, low, high, first: np.ndarray, count: np.ndarray):
+        """Yield (query, box) of each query (low, high (3, M)) and those of its ``count``
+        candidates from ``first`` on it overlaps, each tested exactly, PAIRS at a time at
+        most (boxes by their index before sorting)."""
+        for part in _parts(count):
+            query, box = self._pairs(low[:, part], high[:, part], first[part], count[part])
+            yield query + part.start, self.order[box]
 
-    def _pairs(self, low, high, first: np.ndarray, count: np.ndarray) -> np.ndarray:
-        """``meets`` for one chunk of queries."""
+    def _pairs(self, low, high, first: np.ndarray, count: np.ndarray):
+        """``overlaps`` for one chunk of queries (boxes by their sorted position)."""
         query = np.arange(first.size).repeat(count)
         box = np.arange(query.size) - (np.cumsum(count) - count).repeat(count)
         box += first.repeat(count)
-        overlap = np.ones(query.size, bool)
-        for k in range(3):
-            overlap &= (low[k].take(query) <= self.hi[k].take(box)) & (
-                high[k].take(query) >= self.lo[k].take(box)
-            )
-        found = np.zeros(first.size, bool)
-        found[query[overlap]] = True
-        return found
+        overlap = _overlap(low, high, query, self.lo, self.hi, box)
+        return query[overlap], box[overlap]
+
+
+def _parts(cost: np.ndarray):
+    """Slices of queries whose ``cost`` (M,) (candidates each) sums to PAIRS at most (or
+    one query)."""
+    ends, start = np.cumsum(cost), 0
+    while start < cost.size:
+        top = ends[start] - cost[start] + PAIRS
+        stop = max(start + 1, int(np.searchsorted(ends, top, side="right")))
+        yield slice(start, stop)
+        start = stop
+
+
+def _overlap(low, high, query: np.ndarray, lo, hi, box: np.ndarray) -> np.ndarray:
+    """(P,) whether query boxes [low, high] (3, M) ``query`` and boxes [lo, hi] (3, K)
+    ``box`` overlap, pair by pair (touching counts)."""
+    overlap = np.ones(query.size, bool)
+    for k in range(3):
+        overlap &= low[k].take(query) <= hi[k].take(box)
+        overlap &= high[k].take(query) >= lo[k].take(box)
+    return overlap
 
 
 class _CellLists:
@@ -215,9 +253,14 @@ class _CellLists:
         order = np.argsort(cell, kind="stable")
         self.box = owner[order]
         """The boxes in each cell, cell by cell."""
-        self.start = np.zeros(int(np.prod(grid.shape)) + 1, np.int64)
-        np.cumsum(np.bincount(cell, minlength=self.start.size - 1), out=self.start[1:])
+        per_cell = np.bincount(cell, minlength=int(np.prod(grid.shape)))
+        self.start = np.zeros(per_cell.size + 1, np.int64)
+        np.cumsum(per_cell, out=self.start[1:])
         """Where each cell's boxes begin in ``box``."""
+        self.prefix = np.zeros(tuple(grid.shape + 1), np.int64)
+        """Boxes listed in the cells below each corner (as BoxCells.prefix)."""
+        listed = per_cell.reshape(tuple(grid.shape))
+        self.prefix[1:, 1:, 1:] = listed.cumsum(axis=0).cumsum(axis=1).cumsum(axis=2)
 
     def _cells(self, i0: np.ndarray, i1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(owner, cell): each cell (flat index) of each range [i0, i1] (3, M), with the
@@ -232,25 +275,30 @@ class _CellLists:
         cell = (i0[0].take(owner) + dx) * self.stride[0] + (i0[1].take(owner) + dy) * self.stride[1]
         return owner, cell + i0[2].take(owner) + dz
 
-    def few_cells(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-        """(M,) whether each query box spans at most QUERY_CELLS cells (none without lists)."""
+    def cost(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+        """(M,) the cells each query box spans and the boxes listed in them (the largest
+        int64 without lists)."""
+        return self.listed(low, high, cells=True)
+
+    def listed(self, low: np.ndarray, high: np.ndarray, cells: bool = False) -> np.ndarray:
+        """(M,) the boxes listed in the cells each query box spans (a box once a cell; with
+        ``cells``, and the cells; the largest int64 without lists)."""
         if not self.ok:
-            return np.zeros(low.shape[1], bool)
-        j0, j1 = self.grid._index(low, -EPS), self.grid._index(high, EPS)
-        return np.prod(j1 - j0 + 1, axis=0) <= QUERY_CELLS
+            return np.full(low.shape[1], np.iinfo(np.int64).max)
+        j0, j1 = self.grid._index(low, -EPS), self.grid._index(high, EPS) + 1
+        count = _range_sums(self.prefix, j0, j1)
+        return count + np.prod(j1 - j0, axis=0) if cells else count
 
-    def meets(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-        """(M,) whether each query box (over few cells) overlaps a box listed in its cells,
-        each tested exactly, PAIRS // QUERY_CELLS queries at a time."""
-        found = np.zeros(low.shape[1], bool)
-        step = max(1, PAIRS // QUERY_CELLS)
-        for start in range(0, low.shape[1], step):
-            part = slice(start, start + step)
-            found[part] = self._part(low[:, part], high[:, part])
-        return found
+    def overlaps(self, low: np.ndarray, high: np.ndarray, cost: np.ndarray):
+        """Yield (query, box) of each query box and the boxes listed in its cells it
+        overlaps, each tested exactly, queries of ``cost`` (M,) PAIRS at a time at most (a
+        box listed in several of a query's cells comes once each)."""
+        for part in _parts(cost):
+            query, box = self._part(low[:, part], high[:, part])
+            yield query + part.start, box
 
-    def _part(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-        """``meets`` for one chunk of queries."""
+    def _part(self, low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``overlaps`` for one chunk of queries."""
         j0, j1 = self.grid._index(low, -EPS), self.grid._index(high, EPS)
         query, cell = self._cells(j0, j1)
         first = self.start.take(cell)
@@ -258,11 +306,5 @@ class _CellLists:
         query = query.repeat(count)
         ref = np.arange(query.size) - (np.cumsum(count) - count).repeat(count)
         box = self.box.take(ref + first.repeat(count))
-        overlap = np.ones(query.size, bool)
-        for k in range(3):
-            overlap &= (low[k].take(query) <= self.hi[k].take(box)) & (
-                high[k].take(query) >= self.lo[k].take(box)
-            )
-        found = np.zeros(low.shape[1], bool)
-        found[query[overlap]] = True
-        return found
+        overlap = _overlap(low, high, query, self.lo, self.hi, box)
+        return query[overlap], box[overlap]

@@ -12,12 +12,14 @@ far from a hole pass small objects between their ends.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
+from dataclasses import dataclass, fields
 from typing import Any
 
 import numpy as np
 
 from ..geometry import Disk, Plane, Sphere
+from ..geometry.boxcells import ManyBoxes
 from ..geometry.hits import slab_span
 
 SUBPOINTS = 8
@@ -25,51 +27,146 @@ SUBPOINTS = 8
 nearest of them (_zoom)."""
 
 
-Distance = Callable[[np.ndarray], np.ndarray]
-"""World points (..., 3) -> their distance (...) from an object (0 inside): exact for the
-shapes whose box is loose (a sphere's corners reach 0.7 of its radius beyond it; an
-annulus's box holds its hole, where rays pass the accretion disk's shadow)."""
-Bound = tuple[np.ndarray, np.ndarray, "Distance | None", int]
-"""(lo, hi, distance, object id): an object's world box, where known its exact distance,
-and the id its hits report (Hits.object_id; VOLUME_ID for a volume)."""
+class Gap:
+    """The exact distance from one kind of shape (0 inside), its parameters as fields:
+    those of one object, or stacked (``stack``: shaped (K, 1, ...) against points (K, S,
+    3)) and taken per (chord, object) pair (``take``). Exact
+    where the shape's box is loose (a sphere's corners reach 0.7 of its radius beyond it; an
+    annulus's box holds its hole, where rays pass the accretion disk's shadow; a tilted
+    strip's box holds much sky)."""
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        """(...) the distance from points (..., 3) (one object; taken: (P, K, 3))."""
+        raise NotImplementedError
+
+    def take(self, rows: np.ndarray) -> Gap:
+        """The stacked parameters ``rows`` (one a pair)."""
+        return type(self)(**{f.name: getattr(self, f.name)[rows] for f in fields(self)})  # type: ignore[arg-type]
+
+    @classmethod
+    def stack(cls, gaps: Sequence[Gap]) -> Gap:
+        """Objects' parameters stacked on a leading axis, each shaped (K, 1, ...) against
+        points (K, ..., 3)."""
+        names = [f.name for f in fields(cls)]  # type: ignore[arg-type]
+        return cls(**{n: np.stack([np.asarray(getattr(g, n), float) for g in gaps])[:, None]
+                      for n in names})  # fmt: skip
+
+
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The dot products of a and b along their last axis (broadcast; einsum: 5x a sum of
+    their product over an axis of 3)."""
+    return np.einsum("...i,...i->...", a, b)
+
+
+def _length(a: np.ndarray) -> np.ndarray:
+    """The lengths of vectors a (..., 3)."""
+    return np.sqrt(_dot(a, a))
+
+
+@dataclass(frozen=True)
+class BoxGap(Gap):
+    """The distance from a box [lo, hi] (infinite sides: none along them)."""
+
+    lo: np.ndarray
+    hi: np.ndarray
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        with np.errstate(invalid="ignore"):
+            outside = np.maximum(np.maximum(self.lo - points, points - self.hi), 0.0)
+            outside = np.nan_to_num(outside)
+        return _length(outside)
+
+
+@dataclass(frozen=True)
+class SphereGap(Gap):
+    """The distance from a ball (a core.Sphere)."""
+
+    centre: np.ndarray
+    radius: np.ndarray
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        return np.maximum(_length(points - self.centre) - self.radius, 0.0)
+
+
+@dataclass(frozen=True)
+class AnnulusGap(Gap):
+    """The distance from an annulus (a core.Disk)."""
+
+    centre: np.ndarray
+    normal: np.ndarray
+    r_in: np.ndarray
+    r_out: np.ndarray
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        offset = points - self.centre
+        height = _dot(offset, self.normal)
+        radial = _length(offset - height[..., None] * self.normal)
+        beyond = np.maximum(np.maximum(self.r_in - radial, radial - self.r_out), 0.0)
+        return np.hypot(height, beyond)
+
+
+@dataclass(frozen=True)
+class RectangleGap(Gap):
+    """The distance from a finite plane (a rectangle centred at its point)."""
+
+    point: np.ndarray
+    normal: np.ndarray
+    u_axis: np.ndarray
+    v_axis: np.ndarray
+    half_u: np.ndarray  # half its extent along u
+    half_v: np.ndarray
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        offset = points - self.point
+        height = _dot(offset, self.normal)
+        u = np.maximum(np.abs(_dot(offset, self.u_axis)) - self.half_u, 0.0)
+        v = np.maximum(np.abs(_dot(offset, self.v_axis)) - self.half_v, 0.0)
+        return np.sqrt(height * height + u * u + v * v)
+
+
+Bound = tuple[np.ndarray, np.ndarray, "Gap | None", int]
+"""(lo, hi, gap, object id): an object's world box, where known its exact distance, and
+the id its hits report (Hits.object_id; VOLUME_ID for a volume)."""
 
 VOLUME_ID = -3
 """The id of a volume's bound: no hit reports it (-1 is no hit, -2 the accretion disk's
 DISK_ID), so a volume is never taken for the object a ray hit."""
 
+FEW_BOXES = 16
+"""Up to this many bounds, every chord is tested against each; more, only against those a
+broad phase (core.geometry.boxcells.ManyBoxes) finds overlapping the chord's box widened
+by its margin."""
+PAIRS = 1 << 16
+"""(chord, bound) pairs measured at once at most (memory bounded)."""
+FEW_NEAR = 32
+"""A chord with at most this many bounds listed in the cells around it (a bound once a
+cell) looks for its bounds at its whole margin at once (LEVELS)."""
+PIECES = 16
+"""The broad phase takes a chord in up to PIECES pieces, each about a cell of its grid or
+twice the chord's reach long (a long slanting chord's own box holds many bounds far from
+it)."""
+LEVELS = (1 / 64, 1 / 16, 1 / 4, 1.0)
+"""With the broad phase, chords look for the bounds within these shares of their margin in
+turn: a chord with two bounds nearer (as seen) than any beyond the share can be is done
+(its nearest and the nearest of the others are among them); the others look farther. In
+a crowd (10^5 spheres) a chord is near hundreds of bounds within its margin, and only its
+nearest two count."""
 
-def shape_distance(obj: Any) -> Distance | None:
+
+def shape_distance(obj: Any) -> Gap | None:
     """The exact distance from a Sphere, a Disk (annulus) or a finite Plane (a rectangle:
     a tilted strip's box holds much sky, and a ray through it kept a clearance of 0, traced
     again at every retrace: benchmarks/honesty.py thin_front, 0.3 retraces a ray); None
     for other shapes (their box stands for them)."""
     if isinstance(obj, Sphere):
-        centre, radius = obj.center, obj.radius
-        return lambda p: np.maximum(np.linalg.norm(p - centre, axis=-1) - radius, 0.0)
+        return SphereGap(np.asarray(obj.center, float), np.asarray(obj.radius, float))
     if isinstance(obj, Disk):
-        return lambda p: _annulus_distance(p, obj)
+        return AnnulusGap(*(np.asarray(x, float) for x in (obj.center, obj.normal, obj.r_in,
+                                                          obj.r_out)))  # fmt: skip
     if isinstance(obj, Plane) and obj.extent is not None:
-        return lambda p: _rectangle_distance(p, obj)
+        axes = (obj.point, obj.normal, obj.u_axis, obj.v_axis, *(0.5 * np.asarray(obj.extent)))
+        return RectangleGap(*(np.asarray(x, float) for x in axes))
     return None
-
-
-def _rectangle_distance(points: np.ndarray, plane: Any) -> np.ndarray:
-    """Distance from the points (..., 3) to the finite plane ``plane`` (a core.Plane with
-    an extent: a rectangle centred at its point)."""
-    offset = points - plane.point
-    height = offset @ plane.normal
-    u = np.maximum(np.abs(offset @ plane.u_axis) - 0.5 * plane.extent[0], 0.0)
-    v = np.maximum(np.abs(offset @ plane.v_axis) - 0.5 * plane.extent[1], 0.0)
-    return np.sqrt(height * height + u * u + v * v)
-
-
-def _annulus_distance(points: np.ndarray, disk: Any) -> np.ndarray:
-    """Distance from the points (..., 3) to the annulus ``disk`` (a core.Disk)."""
-    offset = points - disk.center
-    height = offset @ disk.normal
-    radial = np.linalg.norm(offset - height[..., None] * disk.normal, axis=-1)
-    beyond = np.maximum(np.maximum(disk.r_in - radial, radial - disk.r_out), 0.0)
-    return np.hypot(height, beyond)
 
 
 class ClearanceBoxes:
@@ -77,11 +174,32 @@ class ClearanceBoxes:
     which a chord counts as clear (the coarsest block's spread at the farthest box)."""
 
     def __init__(self, boxes: Sequence[Bound], margin: float) -> None:
-        """Bounds (lo, hi, distance, id) in world coordinates (infinite sides allowed:
-        planes)."""
-        self.boxes = [(np.asarray(lo, float), np.asarray(hi, float), d) for lo, hi, d, _ in boxes]
+        """Bounds (lo, hi, gap, id) in world coordinates (infinite sides allowed:
+        planes); their gaps stacked by kind (a box's own where none is known)."""
+        self.lo = np.array([lo for lo, *_ in boxes], float).reshape(-1, 3)
+        self.hi = np.array([hi for _, hi, *_ in boxes], float).reshape(-1, 3)
         self.ids = np.array([oid for *_, oid in boxes], dtype=np.int64)
         self.margin = float(margin)
+        gaps = [BoxGap(lo, hi) if g is None else g for lo, hi, g, _ in boxes]
+        kinds = list(dict.fromkeys(type(g) for g in gaps))
+        self.kind = np.array([kinds.index(type(g)) for g in gaps], np.int64)
+        """Each bound's kind of gap: an index into ``gaps``."""
+        self.slot = np.zeros(len(gaps), np.int64)
+        """Each bound's row in its kind's stacked gaps."""
+        self.gaps = []
+        for index, kind in enumerate(kinds):
+            members = np.flatnonzero(self.kind == index)
+            self.slot[members] = np.arange(members.size)
+            self.gaps.append(kind.stack([gaps[m] for m in members]))
+        finite = np.isfinite(self.lo).all(axis=1) & np.isfinite(self.hi).all(axis=1)
+        self.apart = np.flatnonzero(~finite)
+        """The bounds every chord is tested against (unbounded; all, up to FEW_BOXES)."""
+        self.broad = None
+        if len(gaps) > FEW_BOXES and finite.any():
+            self.boxed = np.flatnonzero(finite)
+            self.broad = ManyBoxes(self.lo[finite], self.hi[finite])
+        else:
+            self.apart = np.arange(len(gaps))
 
     def record(
         self,
@@ -94,43 +212,99 @@ class ClearanceBoxes:
         share: np.ndarray | None = None,
         until: np.ndarray | None = None,
     ) -> None:
-        """Lower the clearances of the rays ``rows`` (``out``: RayResults) by the world
-        chords a -> b (M, 3) seen from ``eye`` (M, 3), each chord measured on its part
+        """Lower the clearances of the rays ``rows`` (distinct; ``out``: RayResults) by the
+        world chords a -> b (M, 3) seen from ``eye`` (M, 3), each chord measured on its part
         within the margin of a box; with ``bend`` (P, R, slack) ((M, 3), (M, 3), (M,)),
         on the cubic path a + U (b - a) + U (1 - U) ((1 - U) P - U R) instead (the Hermite
         cubic of a step a -> b with end velocities v0, v1: P = a - b + h v0, R = a - b
         + h v1), its gaps less ``slack``:
         ``clearance`` the smallest angle to any box, the box it was to (``clearance_box``)
-        and the smallest to any other (``clearance_other``; a bound from below: a box
-        overtaken keeps what it had). With ``share`` (M,), chord k is measured within
-        share[k] x the margin. With ``until`` (M,), chord k only up to that fraction of it
-        (where its ray hit a surface: what lies beyond is not on its path)."""
-        with np.errstate(divide="ignore"):
-            inv_d = 1.0 / (b - a)
-        margin = self.margin if share is None else self.margin * share[:, None]
-        for k, (lo, hi, distance) in enumerate(self.boxes):
-            enter, leave = slab_span(a, inv_d, lo - margin, hi + margin)
-            if until is not None:
-                leave = np.minimum(leave, until)
-            near = np.flatnonzero(enter <= leave)
-            done = (out.clearance[rows[near]] <= 0.0) & (out.clearance_box[rows[near]] == k)
-            near = near[~done]  # touching box k already: its chords can lower nothing
-            if near.size == 0:
+        and the smallest to any other (``clearance_other``; a bound from below: as the
+        boxes taken in turn would leave it, _lower). With ``share`` (M,), chord k is
+        measured within share[k] x the margin. With ``until`` (M,), chord k only up to that
+        fraction of it (where its ray hit a surface: what lies beyond is not on its path)."""
+        share = np.ones(len(rows)) if share is None else share
+        until = np.ones(len(rows)) if until is None else until
+        margin = self.margin * share
+        levels = LEVELS if self.broad is not None else (1.0,)
+        beyond = _Beyond(a, b, eye, bend) if len(levels) > 1 else None
+        first = self._first_level(a, b, margin, len(levels) - 1)
+        pending = np.zeros(0, np.int64)
+        for level, scale in enumerate(levels):
+            last = level == len(levels) - 1
+            starting = np.flatnonzero(first == level)  # none of them pending
+            pending = np.sort(np.concatenate([pending, starting])) if pending.size else starting
+            chord, box = self._candidates(a, b, scale * margin, pending)
+            resolved = np.zeros(len(rows), bool)
+            for part in _chunks(chord, PAIRS):
+                q, k = chord[part], box[part]
+                with np.errstate(divide="ignore"):
+                    inv_d = 1.0 / (b[q] - a[q])
+                wide = margin[q, None]
+                enter, leave = slab_span(a[q], inv_d, self.lo[k] - wide, self.hi[k] + wide)
+                leave = np.minimum(leave, until[q])
+                r = rows[q]
+                done = (out.clearance[r] <= 0.0) & (out.clearance_box[r] == k)
+                near = np.flatnonzero((enter <= leave) & ~done)  # touching box k: lowers nothing
+                q, k, span = q[near], k[near], (enter[near], leave[near])
+                angle = self._angles(q, k, span, a, b, eye, bend)
+                if beyond is not None and not last:  # chords whose nearest two lie within reach
+                    ok = _two_below(q, angle, beyond.least(scale * margin))
+                    resolved[q[ok]] = True
+                    q, k, angle = q[ok], k[ok], angle[ok]
+                if q.size:
+                    _lower(out, rows, q, k, angle)
+            pending = pending[~resolved[pending]]
+
+    def _first_level(self, a: np.ndarray, b: np.ndarray, margin: np.ndarray, last: int):
+        """(M,) the level of LEVELS each chord starts at: the last where few bounds are
+        listed in the cells around its box widened by its margin (FEW_NEAR: looking
+        nearer first would cost more than it saves), else the first."""
+        if self.broad is None:
+            return np.full(len(a), last)
+        wide = margin[:, None]
+        low, high = (np.minimum(a, b) - wide).T, (np.maximum(a, b) + wide).T
+        return np.where(self.broad.lists.listed(low, high) <= FEW_NEAR, last, 0)
+
+    def _candidates(self, a: np.ndarray, b: np.ndarray, reach: np.ndarray, pending: np.ndarray):
+        """(chord, bound) pairs, by chord, of the chords ``pending`` that may come within
+        ``reach`` (M,) of a bound: each with every bound ``apart``, and with those the
+        broad phase finds overlapping its box widened by its reach."""
+        chord = pending.repeat(self.apart.size)
+        box = np.tile(self.apart, pending.size)
+        if self.broad is not None and pending.size:
+            a, b, wide = a[pending], b[pending], reach[pending]
+            length = np.linalg.norm(b - a, axis=1)
+            size = np.maximum(2.0 * wide, float(self.broad.cells.size.min()))
+            pieces = np.clip(np.ceil(length / size), 1, PIECES).astype(np.int64)
+            owner = np.arange(pending.size).repeat(pieces)
+            t = np.arange(owner.size) - (np.cumsum(pieces) - pieces).repeat(pieces)
+            t0, t1 = (x / pieces[owner] for x in (t, t + 1))
+            d = b - a
+            ends = [a[owner] + u[:, None] * d[owner] for u in (t0, t1)]
+            low = np.minimum(*ends) - wide[owner, None]
+            high = np.maximum(*ends) + wide[owner, None]
+            near, boxed = self.broad.pairs(low.T, high.T, owner)
+            chord = np.concatenate([chord, pending[near]])
+            box = np.concatenate([box, self.boxed[boxed]])
+            order = np.argsort(chord, kind="stable")
+            chord, box = chord[order], box[order]
+        return chord, box
+
+    def _angles(self, q, k, span, a, b, eye, bend) -> np.ndarray:
+        """(P,) the angle of each pair's chord part [enter, leave] (``span``) to its bound,
+        each kind of bound's pairs measured at once."""
+        angle = np.empty(q.size)
+        for index, gaps in enumerate(self.gaps):
+            pick = np.flatnonzero(self.kind[k] == index)
+            if pick.size == 0:
                 continue
-            d = b[near] - a[near]
-            start, end = (a[near] + t[near, None] * d for t in (enter, leave))
-            bent = None if bend is None else (enter[near], leave[near], *(x[near] for x in bend))
-            angle = _chord_angle(start, end, eye[near], lo, hi, distance, bent)
-            r = rows[near]
-            best, box = out.clearance[r], out.clearance_box[r]
-            same = box == k
-            overtakes = ~same & (angle < best)
-            out.clearance_other[r] = np.where(
-                overtakes, np.minimum(best, out.clearance_other[r]),
-                np.where(same, out.clearance_other[r], np.minimum(out.clearance_other[r], angle)),
-            )  # fmt: skip
-            out.clearance[r] = np.minimum(best, angle)
-            out.clearance_box[r] = np.where(overtakes, k, box)
+            c, enter, leave = q[pick], span[0][pick], span[1][pick]
+            d = b[c] - a[c]
+            start, end = a[c] + enter[:, None] * d, a[c] + leave[:, None] * d
+            bent = None if bend is None else (enter, leave, *(x[c] for x in bend))
+            angle[pick] = _chord_angle(start, end, eye[c], gaps.take(self.slot[k[pick]]), bent)
+        return angle
 
     def besides_hit(self, out: Any) -> np.ndarray:
         """(N,) each ray's clearance from everything but the object it hit (all of it for
@@ -141,32 +315,98 @@ class ClearanceBoxes:
         return np.where(own, out.clearance_other, out.clearance)
 
 
-def _chord_angle(a, b, eye, lo, hi, distance=None, bent=None) -> np.ndarray:
-    """(M,) the angle, seen from ``eye``, between chords a -> b and the box [lo, hi] (or
-    the object, by its ``distance``): the least over SUBPOINTS + 1 points of each chord
+def _chunks(chord: np.ndarray, most: int):
+    """Slices of pairs sorted by chord, at most ``most`` each (or one chord's), none
+    splitting a chord's pairs."""
+    start = 0
+    while start < chord.size:
+        stop = min(start + most, chord.size)
+        if stop < chord.size:
+            cut = int(np.searchsorted(chord, chord[stop], side="left"))
+            stop = cut if cut > start else int(np.searchsorted(chord, chord[stop], side="right"))
+        yield slice(start, stop)
+        start = stop
+
+
+class _Beyond:
+    """How near, as seen from the eye, the paths of chords a -> b (M, 3) (bent: ``bend``,
+    ClearanceBoxes.record) can come to a bound that lies beyond a reach of their chord."""
+
+    def __init__(self, a: np.ndarray, b: np.ndarray, eye: np.ndarray, bend) -> None:
+        """The paths' farthest point from the eye and their stray from the chord: a cubic's
+        bow U (1 - U) ((1 - U) P - U R) is at most 4/27 (|P| + |R|), and its slack."""
+        self.stray = np.zeros(len(a))
+        if bend is not None:
+            P, R, slack = bend
+            self.stray = 4.0 / 27.0 * (np.linalg.norm(P, axis=1) + np.linalg.norm(R, axis=1))
+            self.stray += slack
+        far = np.maximum(np.linalg.norm(a - eye, axis=1), np.linalg.norm(b - eye, axis=1))
+        self.far = far + self.stray
+
+    def least(self, reach: np.ndarray) -> np.ndarray:
+        """(M,) the least angle a bound beyond ``reach`` (M,) of each chord can be seen at
+        from its path (0 where the path strays that far)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            angle = np.maximum(reach - self.stray, 0.0) / self.far
+        return np.nan_to_num(angle, nan=0.0, posinf=0.0)
+
+
+def _two_below(q: np.ndarray, angle: np.ndarray, bound: np.ndarray) -> np.ndarray:
+    """(P,) whether pair p's chord q[p] (pairs by chord, a bound once each) has two pairs
+    with angles below its ``bound`` (M,): no bound beyond can then be its nearest or the
+    nearest of the others (_lower)."""
+    count = np.bincount(q[angle < bound[q]], minlength=bound.size)
+    return count[q] >= 2
+
+
+def _lower(out: Any, rows: np.ndarray, q: np.ndarray, k: np.ndarray, angle: np.ndarray) -> None:
+    """Lower the clearances of rays rows[q] by the angles of their chords q (sorted) to
+    bounds k (each bound once a chord), all of a chord's pairs at once: ``clearance`` the
+    least of all; ``clearance_box`` the first bound at the least where that is below what
+    the ray had, else the one it had; ``clearance_other`` the least of the other bounds'
+    angles and, where the nearest bound changed, what the ray had."""
+    starts = np.flatnonzero(np.r_[True, q[1:] != q[:-1]])  # each chord's first pair
+    chord = np.cumsum(np.r_[False, q[1:] != q[:-1]])  # each pair's chord among them
+    r = rows[q[starts]]
+    best, box, other = out.clearance[r], out.clearance_box[r], out.clearance_other[r]
+    least = np.minimum.reduceat(angle, starts)
+    top = np.iinfo(np.int64).max
+    first = np.minimum.reduceat(np.where(angle == least[chord], k, top), starts)
+    lower = least < best
+    moved = lower & (first != box)
+    box = np.where(lower, first, box)
+    nearest = np.minimum.reduceat(np.where(k != box[chord], angle, np.inf), starts)
+    other = np.minimum(other, nearest)
+    out.clearance_other[r] = np.where(moved, np.minimum(other, best), other)
+    out.clearance[r] = np.minimum(best, least)
+    out.clearance_box[r] = box
+
+
+def _chord_angle(a, b, eye, gap_of: Gap, bent=None) -> np.ndarray:
+    """(M,) the angle, seen from ``eye``, between chords a -> b and their objects (their
+    ``gap_of``, stacked: one a chord): the least over SUBPOINTS + 1 points of each chord
     and the point nearest the object, found by a zooming grid search (_zoom) between the
     two points beside the nearest of them. With ``bent`` (enter, leave, P,
     R, slack), a -> b is the part [enter, leave] of a step's chord, the points are moved
     onto the step's cubic and the gaps are less slack (ClearanceBoxes.record)."""
-    gap_of = distance if distance is not None else _box_distance(lo, hi)
     path = _Path(a, b, bent)
     t = np.linspace(0.0, 1.0, SUBPOINTS + 1)
     points = path.at(t[None, :])  # (M, K, 3)
     gap = path.less_slack(gap_of(points))
     with np.errstate(divide="ignore", invalid="ignore"):
-        angle = gap / np.linalg.norm(points - eye[:, None, :], axis=2)
+        angle = gap / _length(points - eye[:, None, :])
     least = np.nan_to_num(np.min(angle, axis=1), nan=0.0)
-    spacing = 0.5 * np.linalg.norm(b - a, axis=1) / SUBPOINTS  # a point's farthest from a sample
+    spacing = 0.5 * _length(b - a) / SUBPOINTS  # a point's farthest from a sample
     closest = np.min(gap, axis=1)
     rough = np.flatnonzero((closest < 2.0 * spacing) & (closest > 0.0))  # samples may miss it
     if rough.size:
         k = np.argmin(gap[rough], axis=1)
         lo_t, hi_t = t[np.maximum(k - 1, 0)], t[np.minimum(k + 1, SUBPOINTS)]
-        near = path.take(rough)
-        best = _zoom(lambda u: near.less_slack(gap_of(near.at(u))), lo_t, hi_t)
-        at = near.at(best[:, None])[:, 0]
+        near, near_gap = path.take(rough), gap_of.take(rough)
+        best = _zoom(lambda u: near.less_slack(near_gap(near.at(u))), lo_t, hi_t)
+        at = near.at(best[:, None])  # (R, 1, 3)
         with np.errstate(divide="ignore", invalid="ignore"):
-            nearest = near.less_slack(gap_of(at)) / np.linalg.norm(at - eye[rough], axis=1)
+            nearest = near.less_slack(near_gap(at)[:, 0]) / _length(at[:, 0] - eye[rough])
         least[rough] = np.minimum(least[rough], np.nan_to_num(nearest, nan=0.0))
     return least
 
@@ -228,17 +468,5 @@ def _zoom(f, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
 def clear_radius(bounds: Sequence[Bound], point: np.ndarray) -> float:
     """How far ``point`` (3,) is from the nearest of ``bounds`` (each object's exact shape
     where known, else its box); inf: no bounds."""
-    gaps = [(d if d is not None else _box_distance(lo, hi))(point[None, :])[0]
-            for lo, hi, d, _ in bounds]  # fmt: skip
+    gaps = [(BoxGap(lo, hi) if g is None else g)(point) for lo, hi, g, _ in bounds]
     return float(min(gaps, default=np.inf))
-
-
-def _box_distance(lo: np.ndarray, hi: np.ndarray) -> Distance:
-    """The distance from the box [lo, hi] (infinite sides: none along them)."""
-
-    def gap(points: np.ndarray) -> np.ndarray:
-        with np.errstate(invalid="ignore"):
-            outside = np.nan_to_num(np.maximum(np.maximum(lo - points, points - hi), 0.0))
-        return np.sqrt(np.sum(outside * outside, axis=-1))
-
-    return gap

@@ -296,11 +296,12 @@ def test_a_medium_of_index_one_renders_the_cube_as_flat_space_does(addon, factor
     assert np.count_nonzero(medium != flat) <= 2, np.argwhere(medium != flat)  # grazing edges
 
 
-def test_part_bounds_one_box_per_object_then_shared(addon):
+def test_part_bounds_one_box_per_object_then_shared(addon, monkeypatch):
     """The clearances see each object's own box (its hits then measure only the others);
-    past PART_BOXES objects, neighbours share a box (id -3: none's own), every triangle
-    inside its box."""
+    past PART_BOXES objects (16 here, 4096 in use), neighbours share a box (id -3: none's
+    own), every triangle inside its box."""
     meshes = addon.module("symray_addon.export_meshes")
+    monkeypatch.setattr(meshes, "PART_BOXES", 16)
     rng = np.random.default_rng(5)
     for count in (3, meshes.PART_BOXES + 5):
         centres = rng.uniform(-10, 10, (count, 3))
@@ -320,3 +321,43 @@ def test_part_bounds_one_box_per_object_then_shared(addon):
             if count <= meshes.PART_BOXES:
                 np.testing.assert_array_equal(own[0][0], corners[tri_object == k].min(axis=(0, 1)))
                 np.testing.assert_array_equal(own[0][1], corners[tri_object == k].max(axis=(0, 1)))
+
+
+def _cubes(meshes, centres: np.ndarray, half: float):
+    """A BVHIntersector of cubes of half-width ``half`` around ``centres`` (C, 3), one
+    object each (12 triangles, one white material)."""
+    unit = _unit_cube(meshes)
+    count = centres.shape[0]
+    vertices = (centres[:, None, :] + half * unit.vertices[None]).reshape(-1, 3)
+    triangles = (unit.triangles[None] + 8 * np.arange(count)[:, None, None]).reshape(-1, 3)
+    sampler = meshes.MaterialSampler(np.array([1.0, 1.0, 1.0, 1.0]))
+    return meshes.BVHIntersector(
+        vertices, triangles, np.repeat(np.arange(count), 12), np.zeros(12 * count),
+        np.zeros((12 * count, 3, 2)), [sampler],
+    )  # fmt: skip
+
+
+def test_many_objects_keep_their_own_boxes_and_are_found_at_once(addon, monkeypatch):
+    """300 small cubes (a scattered crowd: 4 % of the space their boxes' union spans) keep
+    a box each (PART_BOXES), so steps between them are not near geometry; their boxes are
+    tested all at once (ManyBoxes): the same segments near a part and the same hits as
+    testing each box in turn, on segments of every length among and past them."""
+    meshes = addon.module("symray_addon.export_meshes")
+    rng = np.random.default_rng(45)
+    centres = rng.uniform(-10, 10, (300, 3))
+    crowd = _cubes(meshes, centres, 0.2)
+    assert len(crowd.part_bounds) == 300 and crowd._parts is not None
+    monkeypatch.setattr(meshes, "FEW_PARTS", 10**6)
+    in_turn = _cubes(meshes, centres, 0.2)
+    assert in_turn._parts is None
+    a = rng.uniform(-12, 12, (4000, 3))
+    b = a + rng.normal(size=(4000, 3)) * rng.choice([0.1, 1.0, 10.0], (4000, 1))
+    b[:300] = centres + rng.normal(scale=0.1, size=(300, 3))  # ending in or beside a cube
+    slack = rng.uniform(0.0, 0.05, 4000)
+    near = crowd._near_parts(a, b, slack)
+    np.testing.assert_array_equal(near, in_turn._near_parts(a, b, slack))
+    assert 300 <= np.count_nonzero(near) < 0.7 * near.size  # most segments pass clear
+    mine, theirs = crowd.intersect(a, b), in_turn.intersect(a, b)
+    np.testing.assert_array_equal(mine.hit, theirs.hit)
+    np.testing.assert_array_equal(mine.t[mine.hit], theirs.t[theirs.hit])
+    assert mine.hit.sum() > 100

@@ -94,3 +94,108 @@ def test_a_floor_under_an_opaque_disk_costs_no_extra_rays():
     truth = np.arccos(np.clip(cos, -1.0, 1.0)) / angle
     estimate = np.maximum(floor.passes["error_px"], 0.1)
     assert not np.any((truth > 1.0) & (truth > 3.0 * estimate))
+
+
+def _bounds(count: int, rng) -> list:
+    """``count`` random bounds of every kind (spheres, boxes, annuli, rectangles, an
+    unbounded plane's box), spread over [-10, 10]^3."""
+    from core.tracing.clearance import BoxGap
+
+    bounds = []
+    for k in range(count):
+        centre, size = rng.uniform(-10, 10, 3), rng.uniform(0.1, 2.0)
+        kind = k % 5
+        if kind == 0:
+            obj = core.Sphere(centre, size)
+        elif kind == 1:
+            obj = core.Disk(centre, rng.normal(size=3), 0.3 * size, size)
+        elif kind == 2:
+            obj = core.Plane(centre, normal=rng.normal(size=3), u_axis=rng.normal(size=3),
+                             extent=(size, 0.2 * size))  # fmt: skip
+        else:
+            obj = None
+        if obj is None:
+            lo, hi = centre - size, centre + size * rng.uniform(0.5, 1.5, 3)
+            gap = None if kind == 3 else BoxGap(lo, hi)
+        else:
+            (lo, hi), gap = obj.bounds, shape_distance(obj)
+        bounds.append((np.asarray(lo, float), np.asarray(hi, float), gap, k))
+    lo = np.array([-np.inf, -np.inf, -0.5])
+    bounds.append((lo, np.array([np.inf, np.inf, 0.5]), None, count))  # a slab: unbounded
+    return bounds
+
+
+def _record_by_ray(watch, rows, a, b, eye, out, bend, share, until) -> None:
+    """The clearance rule, ray by ray, from every chord's angle to every bound within its
+    margin: the least angle; the bound it is to, the first at it where it is below what
+    the ray had (else the ray's bound stays); the least to the other bounds, and what the
+    ray had where its nearest bound changed."""
+    from core.geometry.hits import slab_span
+
+    with np.errstate(divide="ignore"):
+        inv_d = 1.0 / (b - a)
+    margin = watch.margin * share[:, None]
+    angles = np.full((len(rows), watch.lo.shape[0]), np.inf)
+    for k in range(watch.lo.shape[0]):
+        enter, leave = slab_span(a, inv_d, watch.lo[k] - margin, watch.hi[k] + margin)
+        leave = np.minimum(leave, until)
+        near = np.flatnonzero(enter <= leave)
+        box_k = np.full(near.size, k)
+        span = (enter[near], leave[near])
+        angles[near, k] = watch._angles(near, box_k, span, a, b, eye, bend)
+    for chord, ray in enumerate(rows):
+        best, box = out.clearance[ray], out.clearance_box[ray]
+        seen = np.flatnonzero(np.isfinite(angles[chord]))
+        seen = seen[~((best <= 0) & (seen == box))]  # touching its bound: lowers nothing
+        if seen.size == 0:
+            continue
+        least = angles[chord, seen].min()
+        new_box = seen[angles[chord, seen] == least][0] if least < best else box
+        others = [angles[chord, k] for k in seen if k != new_box]
+        other = min([out.clearance_other[ray], *others])
+        if new_box != box:
+            other = min(other, best)
+        out.clearance[ray] = min(best, least)
+        out.clearance_box[ray], out.clearance_other[ray] = new_box, other
+
+
+@pytest.mark.parametrize("count", [3, 40, 300])
+def test_clearance_from_pairs_at_once_equals_the_rule_ray_by_ray(count, monkeypatch):
+    """ClearanceBoxes.record (the chords' (chord, bound) pairs found at once: all of them up
+    to FEW_BOXES bounds, else by a broad phase, nearest first: LEVELS) leaves every ray's
+    clearance, nearest bound and clearance from the others exactly as the rule applied ray
+    by ray to every bound, over three calls (states carried over, rays whose nearest bound
+    is touched, shares of the margin, chords cut short), with pairs measured a few at a
+    time (PAIRS 50) or all at once, with or without the broad phase."""
+    from core.tracing import clearance
+    from core.tracing.clearance import ClearanceBoxes
+    from core.tracing.segments import RayResults
+
+    rng = np.random.default_rng(count)
+    bounds = _bounds(count, rng)
+    n = 400
+    outs = [RayResults.empty(n, np.zeros((n, 3)), np.ones((n, 3))) for _ in range(3)]
+    for _ in range(3):  # three calls, states carried over
+        rows = rng.permutation(n)[: n // 2]
+        a = rng.uniform(-12, 12, (rows.size, 3))
+        b = a + rng.normal(scale=3.0, size=(rows.size, 3))
+        eye = a - rng.uniform(1, 5, (rows.size, 3))
+        share = rng.choice([1.0, 0.3, 0.0], rows.size)
+        bent = rng.uniform(size=rows.size) < 0.5  # half the chords bent into cubics
+        bend = (*(bent[:, None] * rng.normal(scale=0.5, size=(rows.size, 3)) for _ in "PR"),
+                bent * rng.uniform(0, 0.1, rows.size))  # fmt: skip
+        until = np.where(rng.uniform(size=rows.size) < 0.2, rng.uniform(size=rows.size), 1.0)
+        args = (rows, a, b, eye)
+        watch = ClearanceBoxes(bounds, margin=4.0)
+        _record_by_ray(watch, *args, outs[0], bend, share, until)
+        monkeypatch.setattr(clearance, "PAIRS", 50)
+        watch.record(*args, outs[1], bend, share, until)
+        monkeypatch.setattr(clearance, "PAIRS", 1 << 16)
+        monkeypatch.setattr(clearance, "FEW_BOXES", 10**6)
+        ClearanceBoxes(bounds, margin=4.0).record(*args, outs[2], bend, share, until)
+        monkeypatch.setattr(clearance, "FEW_BOXES", 16)
+    assert np.count_nonzero(np.isfinite(outs[0].clearance)) > n // 10
+    assert np.count_nonzero(outs[0].clearance == 0.0) > 0  # some touched
+    for got in outs[1:]:
+        for name in ("clearance", "clearance_box", "clearance_other"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(outs[0], name), name)

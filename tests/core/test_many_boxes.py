@@ -67,6 +67,17 @@ def test_many_boxes_answer_as_testing_each_box_in_turn(case, monkeypatch):
     np.testing.assert_array_equal(ManyBoxes(lo, hi).meets(low, high), truth)
 
 
+@pytest.mark.parametrize("case", range(0, 12, 2))
+def test_many_boxes_pairs_are_every_overlapping_query_and_box_once(case):
+    """ManyBoxes.pairs lists exactly the (query, box) pairs that overlap, each once, as
+    testing every pair does (the clearance's broad phase: core.tracing.clearance)."""
+    lo, hi, low, high = _boxes_and_queries(case)
+    overlap = (low.T[:, None, :] <= hi[None]) & (high.T[:, None, :] >= lo[None])
+    query, box = np.nonzero(np.all(overlap, axis=2))
+    got = ManyBoxes(lo, hi).pairs(low, high)
+    np.testing.assert_array_equal(np.stack(got), np.stack([query, box]))
+
+
 def _cloud(count: int) -> tuple[core.Scene, core.Camera]:
     """``count`` spheres (radius 0.4-1.2 rg) in a shell 4 < r < 12 rg around a
     Schwarzschild hole, seen from 30 rg."""
