@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ..backend import array_module, to_host
 from ..geometry import segment_overlaps
 from . import dense
 from .step_ends import StepEnds
@@ -111,8 +112,9 @@ def near_paths(
             any_box |= segment_overlaps(low[:, rows].T, high[:, rows].T, lo, hi)
         near[rows[~any_box]] = False
     if tracer._near_many is not None and near.any():  # many objects' own boxes, at once
-        rows = np.flatnonzero(near)
-        near[rows[~tracer._near_many.meets(low[:, rows], high[:, rows])]] = False
+        rows = np.flatnonzero(near)  # (on the host, as the objects' hit tests: Segments.cast)
+        meets = tracer._near_many.meets(to_host(low[:, rows]), to_host(high[:, rows]))
+        near[rows[~array_module(near).asarray(meets)]] = False
     c = np.flatnonzero(near)
     X0, X1 = X_prev[:, c], X[:, c]
     V0, V1, h = step_ends.velocities(c)

@@ -226,3 +226,16 @@ def test_cuda_without_cupy_names_the_package_to_install(monkeypatch):
     monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None)
     with pytest.raises(RuntimeError, match="needs CuPy.*pip install cupy"):
         backend.device_of("cuda")
+
+
+def test_many_objects_render_on_the_device_as_on_the_cpu():
+    """40 spheres around a hole (more than NEAR_BOXES: steps near geometry by the objects'
+    own boxes at once, core.geometry.boxcells.ManyBoxes; a Group's broad phase): image and
+    passes equal to the numpy path's."""
+    rng = np.random.default_rng(40)
+    direction = rng.normal(size=(40, 3))
+    direction /= np.linalg.norm(direction, axis=1, keepdims=True)
+    centres = rng.uniform(4.0, 12.0, (40, 1)) * direction
+    spheres = [core.Sphere(c, 0.8, (0.3, 0.5, 1.0, 1.0)) for c in centres]
+    scene = core.Scene(model=hm.schwarzschild(rg=1.0), objects=spheres, background="procedural")
+    _same(*_both(scene, _camera()))
