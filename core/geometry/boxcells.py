@@ -11,7 +11,8 @@ touching counts). Two steps, both whole-batch array operations:
   the boxes listed in each cell it spans (a prefix sum of the lists' lengths counts them
   with the cells), or a sweep: the boxes sorted by their low side along each axis, a
   query's candidates along an axis those whose low side lies within [its low - the widest
-  width, its high] (two searchsorted), along the axis where it has the fewest.
+  width, its high] (two searchsorted), along the axis where it has the fewest (a query
+  over at most FEW_CELLS cells takes its cells' lists unweighed).
   Boxes wider than WIDE x the median width are tested apart (else the sweep's candidates
   would be every box): one by one, or swept among themselves where there are many.
 
@@ -33,6 +34,9 @@ FEW = 16
 ManyBoxes: fewer than half the boxes each time)."""
 PAIRS = 1 << 18
 """Candidate pairs tested at once at most (memory bounded)."""
+FEW_CELLS = 64
+"""A query over at most this many cells is tested against the boxes listed in them without
+weighing a sweep (a small step's common case: no searchsorted)."""
 REFS = 8
 """Cell lists hold each box in every cell it overlaps, up to REFS entries a box on average
 (more: no lists, every query swept)."""
@@ -157,21 +161,34 @@ class ManyBoxes:
                 yield rows[query], np.full(query.size, box)
         if self.narrow_index.size == 0:
             return
+        cost, cells = self.lists.cost(low, high)
+        few = np.flatnonzero(cells <= FEW_CELLS)  # listed whatever the sweep holds
+        if few.size:
+            for query, box in self.lists.overlaps(low[:, few], high[:, few], cost[few]):
+                yield rows[few[query]], self.narrow_index[box]
+        rest = np.flatnonzero(cells > FEW_CELLS)
+        if rest.size:
+            for query, box in self._listed_or_swept(low[:, rest], high[:, rest], cost[rest]):
+                yield rows[rest[query]], self.narrow_index[box]
+
+    def _listed_or_swept(self, low: np.ndarray, high: np.ndarray, cost: np.ndarray):
+        """Yield (query, box) of the narrow boxes: each query tested against the boxes
+        listed in its cells (``cost`` (M,): cells and boxes listed) or swept along the axis
+        where it has the fewest candidates, whichever are fewer."""
         spans = [sweep.candidates(low, high) for sweep in self.sweeps]
         counts = np.stack([count for _, count in spans])
-        cost = self.lists.cost(low, high)
         listed = cost <= counts.min(axis=0)
         best = np.where(listed, 3, np.argmin(counts, axis=0))
         pick = np.flatnonzero(listed)
         if pick.size:
             for query, box in self.lists.overlaps(low[:, pick], high[:, pick], cost[pick]):
-                yield rows[pick[query]], self.narrow_index[box]
+                yield pick[query], box
         for sweep, (first, count), k in zip(self.sweeps, spans, range(3), strict=True):
             pick = np.flatnonzero(best == k)
             if pick.size:
                 for query, box in sweep.overlaps(low[:, pick], high[:, pick], first[pick],
                                                  count[pick]):  # fmt: skip
-                    yield rows[pick[query]], self.narrow_index[box]
+                    yield pick[query], box
 
 
 class _Sweep:
@@ -275,19 +292,23 @@ class _CellLists:
         cell = (i0[0].take(owner) + dx) * self.stride[0] + (i0[1].take(owner) + dy) * self.stride[1]
         return owner, cell + i0[2].take(owner) + dz
 
-    def cost(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
-        """(M,) the cells each query box spans and the boxes listed in them (the largest
-        int64 without lists)."""
-        return self.listed(low, high, cells=True)
+    def cost(self, low: np.ndarray, high: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(M,) (cost, cells): the cells each query box spans and the boxes listed in them,
+        and the cells alone (the largest int64 each without lists)."""
+        if not self.ok:
+            most = np.full(low.shape[1], np.iinfo(np.int64).max)
+            return most, most
+        j0, j1 = self.grid._index(low, -EPS), self.grid._index(high, EPS) + 1
+        cells = np.prod(j1 - j0, axis=0)
+        return _range_sums(self.prefix, j0, j1) + cells, cells
 
-    def listed(self, low: np.ndarray, high: np.ndarray, cells: bool = False) -> np.ndarray:
-        """(M,) the boxes listed in the cells each query box spans (a box once a cell; with
-        ``cells``, and the cells; the largest int64 without lists)."""
+    def listed(self, low: np.ndarray, high: np.ndarray) -> np.ndarray:
+        """(M,) the boxes listed in the cells each query box spans (a box once a cell; the
+        largest int64 without lists)."""
         if not self.ok:
             return np.full(low.shape[1], np.iinfo(np.int64).max)
         j0, j1 = self.grid._index(low, -EPS), self.grid._index(high, EPS) + 1
-        count = _range_sums(self.prefix, j0, j1)
-        return count + np.prod(j1 - j0, axis=0) if cells else count
+        return _range_sums(self.prefix, j0, j1)
 
     def overlaps(self, low: np.ndarray, high: np.ndarray, cost: np.ndarray):
         """Yield (query, box) of each query box and the boxes listed in its cells it

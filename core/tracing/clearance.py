@@ -145,7 +145,7 @@ PIECES = 16
 """The broad phase takes a chord in up to PIECES pieces, each about a cell of its grid or
 twice the chord's reach long (a long slanting chord's own box holds many bounds far from
 it)."""
-LEVELS = (1 / 64, 1 / 16, 1 / 4, 1.0)
+LEVELS = (1 / 32, 1 / 16, 1 / 8, 1 / 4, 1 / 2, 1.0)
 """With the broad phase, chords look for the bounds within these shares of their margin in
 turn: a chord with two bounds nearer (as seen) than any beyond the share can be is done
 (its nearest and the nearest of the others are among them); the others look farther. In
@@ -234,7 +234,7 @@ class ClearanceBoxes:
             last = level == len(levels) - 1
             starting = np.flatnonzero(first == level)  # none of them pending
             pending = np.sort(np.concatenate([pending, starting])) if pending.size else starting
-            chord, box = self._candidates(a, b, scale * margin, pending)
+            chord, box = self._candidates(a, b, bend, scale * margin, pending)
             resolved = np.zeros(len(rows), bool)
             for part in _chunks(chord, PAIRS):
                 q, k = chord[part], box[part]
@@ -266,24 +266,31 @@ class ClearanceBoxes:
         low, high = (np.minimum(a, b) - wide).T, (np.maximum(a, b) + wide).T
         return np.where(self.broad.lists.listed(low, high) <= FEW_NEAR, last, 0)
 
-    def _candidates(self, a: np.ndarray, b: np.ndarray, reach: np.ndarray, pending: np.ndarray):
-        """(chord, bound) pairs, by chord, of the chords ``pending`` that may come within
-        ``reach`` (M,) of a bound: each with every bound ``apart``, and with those the
-        broad phase finds overlapping its box widened by its reach."""
+    def _candidates(self, a, b, bend, reach: np.ndarray, pending: np.ndarray):
+        """(chord, bound) pairs, by chord, of the chords ``pending`` whose paths (bent by
+        ``bend``: ClearanceBoxes.record) may come within ``reach`` (M,) of a bound: each
+        with every bound ``apart``, and with those the broad phase finds overlapping the
+        boxes of its path's pieces widened by its reach (and by how far a piece of the cubic
+        can stray from its chord: its second derivative is at most 4 (|P| + |R|), so a
+        piece of 1/n of it strays at most (|P| + |R|) / (2 n^2))."""
         chord = pending.repeat(self.apart.size)
         box = np.tile(self.apart, pending.size)
         if self.broad is not None and pending.size:
             a, b, wide = a[pending], b[pending], reach[pending]
-            length = np.linalg.norm(b - a, axis=1)
+            n = np.zeros(pending.size) if bend is None else _bow(bend[0], bend[1])[pending]
+            length = np.linalg.norm(b - a, axis=1) + 2.0 * n
             size = np.maximum(2.0 * wide, float(self.broad.cells.size.min()))
             pieces = np.clip(np.ceil(length / size), 1, PIECES).astype(np.int64)
             owner = np.arange(pending.size).repeat(pieces)
             t = np.arange(owner.size) - (np.cumsum(pieces) - pieces).repeat(pieces)
             t0, t1 = (x / pieces[owner] for x in (t, t + 1))
-            d = b - a
-            ends = [a[owner] + u[:, None] * d[owner] for u in (t0, t1)]
-            low = np.minimum(*ends) - wide[owner, None]
-            high = np.maximum(*ends) + wide[owner, None]
+            path = _Path(a[owner], b[owner], None if bend is None else (
+                np.zeros(owner.size), np.ones(owner.size),
+                *(x[pending][owner] for x in bend)))  # fmt: skip
+            ends = [path.at(u[:, None])[:, 0] for u in (t0, t1)]
+            stray = 27.0 / 8.0 * n / pieces * (1.0 / pieces)  # (|P| + |R|) / (2 n^2)
+            wide = (wide + stray)[owner, None]
+            low, high = np.minimum(*ends) - wide, np.maximum(*ends) + wide
             near, boxed = self.broad.pairs(low.T, high.T, owner)
             chord = np.concatenate([chord, pending[near]])
             box = np.concatenate([box, self.boxed[boxed]])
@@ -328,26 +335,30 @@ def _chunks(chord: np.ndarray, most: int):
         start = stop
 
 
+def _bow(P: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """(M,) how far a cubic a + U (b - a) + U (1 - U) ((1 - U) P - U R) strays from its
+    chord at most: 4/27 (|P| + |R|)."""
+    return 4.0 / 27.0 * (np.linalg.norm(P, axis=1) + np.linalg.norm(R, axis=1))
+
+
 class _Beyond:
     """How near, as seen from the eye, the paths of chords a -> b (M, 3) (bent: ``bend``,
-    ClearanceBoxes.record) can come to a bound that lies beyond a reach of their chord."""
+    ClearanceBoxes.record) can come to a bound that lies beyond a reach of the path."""
 
     def __init__(self, a: np.ndarray, b: np.ndarray, eye: np.ndarray, bend) -> None:
-        """The paths' farthest point from the eye and their stray from the chord: a cubic's
-        bow U (1 - U) ((1 - U) P - U R) is at most 4/27 (|P| + |R|), and its slack."""
-        self.stray = np.zeros(len(a))
+        """The paths' farthest point from the eye (a cubic strays from its chord by its
+        bow at most) and their slack."""
+        self.slack, bow = np.zeros(len(a)), np.zeros(len(a))
         if bend is not None:
-            P, R, slack = bend
-            self.stray = 4.0 / 27.0 * (np.linalg.norm(P, axis=1) + np.linalg.norm(R, axis=1))
-            self.stray += slack
+            bow, self.slack = _bow(bend[0], bend[1]), bend[2]
         far = np.maximum(np.linalg.norm(a - eye, axis=1), np.linalg.norm(b - eye, axis=1))
-        self.far = far + self.stray
+        self.far = far + bow
 
     def least(self, reach: np.ndarray) -> np.ndarray:
-        """(M,) the least angle a bound beyond ``reach`` (M,) of each chord can be seen at
-        from its path (0 where the path strays that far)."""
+        """(M,) the least angle a bound beyond ``reach`` (M,) of each path can be seen at
+        from it, its gaps less its slack (0 where the slack is that large)."""
         with np.errstate(divide="ignore", invalid="ignore"):
-            angle = np.maximum(reach - self.stray, 0.0) / self.far
+            angle = np.maximum(reach - self.slack, 0.0) / self.far
         return np.nan_to_num(angle, nan=0.0, posinf=0.0)
 
 
