@@ -128,5 +128,44 @@ def settle(ctx: TileContext, nodes: Nodes) -> tuple[np.ndarray, np.ndarray]:
     like &= nodes.kinks[jj, ii] == nodes.kinks[cj, ci]
     captured = nodes.ending[jj, ii] == ENDING["captured"]
     like &= (nodes.clearance[jj, ii] >= clear_of(ctx, estimate)) | captured
+    side, side_estimate = by_side(ctx, nodes, jj, ii)
+    estimate = np.where(like, estimate, side_estimate)
+    like |= side
     judge(ctx, nodes, jj[like], ii[like], estimate[like])
     return jj[~like], ii[~like]
+
+
+def by_side(
+    ctx: TileContext, nodes: Nodes, jj: np.ndarray, ii: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(M,) which pending nodes (jj, ii) whose cell an object's silhouette crosses are
+    judged by the anchors on their side of it, and (M,) their estimate: all four anchors
+    judged and sound (no flip, no near miss, a finite error), at least two ending as the
+    node does (the same object, the same kinks), the others differing only by an object
+    hit (never captured against escaped: the shadow's edge, where errors grow without
+    bound), and the node and those two keeping clear of the geometry by clear_of their
+    largest error (a node on an object is then tested against its own edge by judge's
+    near_edge)."""
+    ny, nx = nodes.traced.shape
+    cj, ci = jj - jj % ANCHOR, ii - ii % ANCHOR
+    ending, kinks, hit = nodes.ending[jj, ii], nodes.kinks[jj, ii], ENDING["hit"]
+    sound, count = np.ones(jj.size, dtype=bool), np.zeros(jj.size, dtype=np.int64)
+    estimate, least = np.zeros(jj.size), np.full(jj.size, np.inf)
+    for dj in (0, ANCHOR):
+        for di in (0, ANCHOR):
+            aj, ai = np.minimum(cj + dj, ny - 1), np.minimum(ci + di, nx - 1)
+            error = nodes.integration[aj, ai]
+            sound &= (aj == cj + dj) & (ai == ci + di) & nodes.traced[aj, ai]
+            sound &= ~nodes.pending[aj, ai] & ~nodes.flipped[aj, ai] & ~nodes.near[aj, ai]
+            sound &= np.isfinite(error) & (error < FLIP) & (nodes.kinks[aj, ai] == kinks)
+            same = (nodes.ending[aj, ai] == ending) & (
+                nodes.object_id[aj, ai] == nodes.object_id[jj, ii]
+            )
+            sound &= same | (nodes.ending[aj, ai] == hit) | (ending == hit)
+            count += same
+            estimate = np.where(same, np.maximum(estimate, error), estimate)
+            least = np.where(same, np.minimum(least, nodes.clearance[aj, ai]), least)
+    need = clear_of(ctx, estimate)
+    side = sound & (count >= 2) & (ending != ENDING["captured"])
+    side &= (nodes.clearance[jj, ii] >= need) & (least >= need)
+    return side, estimate
