@@ -115,11 +115,12 @@ class BVHIntersector:
         self.names = list(names)
         self.bounds = (self.vertices.min(axis=0), self.vertices.max(axis=0))
         self.part_bounds = part_bounds(self.vertices[self.triangles], self.tri_object)
+        """(lo, hi, object id) of the objects (core.tracing.segments: clearances)."""
         self._parts = None
+        """Beyond FEW_PARTS, the part boxes indexed to be tested at once (_near_parts)."""
         if len(self.part_bounds) > FEW_PARTS:
             lo, hi = (np.array([box[k] for box in self.part_bounds]) for k in (0, 1))
             self._parts = ManyBoxes(lo, hi)
-        """(lo, hi, object id) of the objects (core.tracing.segments: clearances)."""
         tri = self.vertices[self.triangles]
         e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
         normal = np.cross(e1, e2)

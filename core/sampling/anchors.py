@@ -128,9 +128,9 @@ def settle(ctx: TileContext, nodes: Nodes) -> tuple[np.ndarray, np.ndarray]:
     like &= nodes.kinks[jj, ii] == nodes.kinks[cj, ci]
     captured = nodes.ending[jj, ii] == ENDING["captured"]
     like &= (nodes.clearance[jj, ii] >= clear_of(ctx, estimate)) | captured
-    side, side_estimate = by_side(ctx, nodes, jj, ii)
-    estimate = np.where(like, estimate, side_estimate)
-    like |= side
+    rest = np.flatnonzero(~like)  # those their whole cell cannot judge
+    side, estimate[rest] = by_side(ctx, nodes, jj[rest], ii[rest])
+    like[rest[side]] = True
     judge(ctx, nodes, jj[like], ii[like], estimate[like])
     return jj[~like], ii[~like]
 
