@@ -4,14 +4,15 @@
         [--workers 1,2,4,8,16,32] [--measure] [--csv PATH]
 
 For each worker count N, the Kerr board (benchmarks/frame.py's scene and camera) is tiled
-as core.render tiles it for N workers, and every tile is traced once in this process, one
-after another (core.render inline with that tiling), its time taken; the rest of the
-render's time is its serial part. The pool is then simulated: N workers each take the next
-tile as they come free, in the order core.render hands them out (this code: costliest
-first, ``render.costliest_first``) and in the former order (top to bottom). Printed per N:
-the tiles, the longest tile's share, the work (the sum of the tiles: each tile pays its
-quadtree rounds' per-step overhead, so more tiles cost more), and the speedup and
-efficiency against the one-worker render (its own tiling: the fastest on one core).
+as core.render tiles it for N workers, and every chunk (a tile, or with one worker a group
+of tiles rendered together in shared rounds: ``render.tile_groups``) is traced once in
+this process, one after another (core.render inline with that tiling), its time taken;
+the rest of the render's time is its serial part (the 1-worker row always runs: it is the
+reference). The pool is then simulated: N workers each take the next chunk as they come
+free, in the order core.render hands them out (costliest first) and top to bottom.
+Printed per N: the tiles and chunks, the longest chunk's share, the work (the sum of the
+chunks: each pays its quadtree rounds' per-step overhead, so more tiles cost more), and
+the speedup and efficiency against the one-worker render (its own tiling).
 Issue 47's target: >= 80 % of linear at 16 workers at 1080p. ``--measure`` also times
 core.render at every N up to the machine's cores.
 """
@@ -31,19 +32,22 @@ RENDER = sys.modules["core.render"]
 SCENE = None
 
 
-def tile_times(camera, workers: int, options: dict) -> tuple[list, list, float]:
-    """(tiles in row order, each one's seconds, the serial seconds): core.render inline
-    with the tiling of ``workers`` workers."""
+def chunk_times(camera, workers: int, options: dict) -> tuple[list, list, float]:
+    """(each chunk's tiles, in the order they are handed out; each chunk's seconds; the
+    serial seconds): core.render inline with the tiling and grouping of ``workers``
+    workers."""
     spans: dict[int, float] = {}
+    members: dict[int, list] = {}
     saved = RENDER.workers_module.choose, RENDER._tile_work
 
-    def timed_work(sampler, tile_list):
-        work = saved[1](sampler, tile_list)
+    def timed_work(sampler, tile_list, groups):
+        work = saved[1](sampler, tile_list, groups)
 
         def timed(span, cancel):
             begin = time.perf_counter()
             out = work(span, cancel)
             spans[span[0]] = time.perf_counter() - begin
+            members[span[0]] = [tile_list[k] for k in groups[span[0]]]
             return out
 
         return timed
@@ -56,13 +60,12 @@ def tile_times(camera, workers: int, options: dict) -> tuple[list, list, float]:
         total = time.perf_counter() - start
     finally:
         RENDER.workers_module.choose, RENDER._tile_work = saved
-    tiles = RENDER._tiles_for(camera, workers)
-    times = [spans[k] for k in range(len(tiles))]
-    return tiles, times, total - sum(times)
+    times = [spans[k] for k in range(len(spans))]
+    return [members[k] for k in range(len(spans))], times, total - sum(times)
 
 
 def simulate(times: list[float], order: list[int], workers: int, serial: float) -> float:
-    """Wall time of ``workers`` taking the tiles in ``order`` as they come free."""
+    """Wall time of ``workers`` taking the chunks in ``order`` as they come free."""
     free = [0.0] * workers
     for k in order:
         i = min(range(workers), key=free.__getitem__)
@@ -70,11 +73,10 @@ def simulate(times: list[float], order: list[int], workers: int, serial: float) 
     return serial + max(free)
 
 
-def hand_out_order(camera, tiles) -> list[int]:
-    """The order this code hands the tiles out: costliest first."""
-    middles = [((t.x0 + t.x1) / 2, (t.y0 + t.y1) / 2) for t in tiles]
-    ranks = RENDER.expected_cost_rank(camera, SCENE.center, middles)
-    return RENDER.costliest_first(list(range(len(tiles))), ranks)
+def top_to_bottom(chunks: list) -> list[int]:
+    """The chunks in the order of their first tile from the top (the order before
+    issue 47 handed them out)."""
+    return sorted(range(len(chunks)), key=lambda k: min((t.y0, t.x0) for t in chunks[k]))
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -90,29 +92,31 @@ def main(argv: list[str] | None = None) -> None:
     width, height = (int(v) for v in args.size.split("x"))
     SCENE = frame.kerr_board_scene()
     camera = frame.camera(width, height)
-    counts = [int(v) for v in args.workers.split(",")]
+    counts = sorted({1} | {int(v) for v in args.workers.split(",")})  # one: the reference
     rows = []
     print(f"Kerr board {width}x{height}; speedup and efficiency against one worker's render")
-    print(f"{'quality':8s} {'N':>3s} {'tiles':>6s} {'longest':>8s} {'serial s':>9s} "
-          f"{'work s':>8s} {'former':>16s} {'costliest first':>16s}")  # fmt: skip
+    print(f"{'quality':8s} {'N':>3s} {'tiles':>6s} {'chunks':>6s} {'longest':>8s} "
+          f"{'serial s':>9s} {'work s':>8s} {'top down':>16s} "
+          f"{'costliest first':>16s}")  # fmt: skip
     for quality in args.quality.split(","):
         options = QUALITY[quality]
         one = None
         for n in counts:
-            tiles, times, serial = tile_times(camera, n, options)
+            chunks, times, serial = chunk_times(camera, n, options)
             one = one or serial + sum(times)
-            row = {"quality": quality, "workers": n, "tiles": len(tiles), "serial_s": serial,
-                   "work_s": sum(times), "longest_share": max(times) / sum(times)}  # fmt: skip
-            for name, order in (("former", list(range(len(tiles)))),
-                                ("costliest_first", hand_out_order(camera, tiles))):  # fmt: skip
+            row = {"quality": quality, "workers": n, "tiles": sum(len(c) for c in chunks),
+                   "chunks": len(chunks), "serial_s": serial, "work_s": sum(times),
+                   "longest_share": max(times) / sum(times)}  # fmt: skip
+            for name, order in (("top_down", top_to_bottom(chunks)),
+                                ("costliest_first", list(range(len(chunks))))):  # fmt: skip
                 speedup = one / simulate(times, order, n, serial)
                 row[f"{name}_speedup"], row[f"{name}_efficiency"] = speedup, speedup / n
             rows.append(row)
             cells = [f"{row[f'{k}_speedup']:5.2f}x {row[f'{k}_efficiency']:6.1%}"
-                     for k in ("former", "costliest_first")]  # fmt: skip
-            print(f"{quality:8s} {n:3d} {len(tiles):6d} {row['longest_share']:8.1%} "
-                  f"{serial:9.2f} {sum(times):8.1f} {cells[0]:>16s} {cells[1]:>16s}",
-                  flush=True)  # fmt: skip
+                     for k in ("top_down", "costliest_first")]  # fmt: skip
+            print(f"{quality:8s} {n:3d} {row['tiles']:6d} {len(chunks):6d} "
+                  f"{row['longest_share']:8.1%} {serial:9.2f} {sum(times):8.1f} "
+                  f"{cells[0]:>16s} {cells[1]:>16s}", flush=True)  # fmt: skip
         if args.measure:
             for n in counts:
                 if n > core.workers.available_cores():

@@ -32,7 +32,7 @@ import numpy as np
 
 from ..backend import array_module
 from ..motion import Motion
-from . import starts
+from . import shared_rounds, starts
 from .clearance import ClearanceBoxes
 from .differentials import magnification
 from .escape import far_field, straight
@@ -125,6 +125,10 @@ class Tracer(TracerState):
             raise ValueError(f"step: one for all rays or one per ray ({n}), got {np.shape(step)}")
         if tangents is not None:
             self.check_tangents()
+        shared = shared_rounds.joined()
+        if shared is not None:  # a member of shared rounds: traced with the others' calls
+            return shared.trace(self, origins, directions, step=step, cancel=cancel,
+                                tangents=tangents, clearance=clearance)  # fmt: skip
         out, static_tangents = start_results(self, origins, directions, tangents)
         directions = out.direction.copy()  # the static observer's
         if not self.curved:
