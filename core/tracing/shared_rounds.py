@@ -27,7 +27,6 @@ import numpy as np
 
 if TYPE_CHECKING:
     from .segments import RayResults
-    from .tracer import Tracer
 
 _member = threading.local()  # .rounds: the SharedRounds this thread's traces join
 
@@ -41,7 +40,7 @@ def joined() -> SharedRounds | None:
 class _Call:
     """One member's ``Tracer.trace`` call, waiting for its rows of a shared batch."""
 
-    tracer: Tracer
+    tracer: Any  # a core.tracing.Tracer (it asks ``joined``: not imported here)
     origins: np.ndarray
     directions: np.ndarray
     options: dict[str, Any]
@@ -91,7 +90,7 @@ class SharedRounds:
         return results
 
     def trace(
-        self, tracer: Tracer, origins: np.ndarray, directions: np.ndarray, **options: Any
+        self, tracer: Any, origins: np.ndarray, directions: np.ndarray, **options: Any
     ) -> RayResults:
         """``tracer.trace(origins, directions, **options)`` (step, cancel, tangents,
         clearance), traced in a batch with every other member's waiting call."""
