@@ -383,18 +383,21 @@ def _span_work(
 
 
 def _tile_work(sampler: TileSampler, tile_list: list[Tile], groups: list[list[int]]):
-    """A chunk (k, k + 1): group k's tiles, adaptively sampled together (their rounds
-    traced as shared batches: core.tracing.shared_rounds) -> [(tile, its part), ...]."""
+    """A chunk (k, k + 1): group k's tiles, adaptively sampled together -> [(tile, its
+    part), ...]. The tiles a process renders at once (a group's, and those of a pool of
+    threads) trace their rounds as shared batches (core.tracing.shared_rounds)."""
+
+    shared = SharedRounds()  # a process's threads (a group's, or a thread pool's) share it
 
     def work(span, cancel):
         if cancel():
             return None
         members = [tile_list[k] for k in groups[span[0]]]
         if len(members) == 1:
-            parts = [sampler.render_tile(members[0], cancel)]
+            with shared.member():
+                parts = [sampler.render_tile(members[0], cancel)]
         else:
-            renders = [partial(sampler.render_tile, tile, cancel) for tile in members]
-            parts = SharedRounds().run(renders)
+            parts = shared.run([partial(sampler.render_tile, tile, cancel) for tile in members])
         return None if cancel() else list(zip(members, parts, strict=True))
 
     return work

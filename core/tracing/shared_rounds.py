@@ -19,7 +19,8 @@ Offers ``SharedRounds`` (``run``: calls on threads, their traces shared) and ``j
 from __future__ import annotations
 
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
@@ -63,12 +64,21 @@ class SharedRounds:
         self._live = 0
         self._waiting: list[_Call] = []
 
+    def __getstate__(self) -> dict:
+        """Pickled (a cluster's job, core.cluster) without members: a fresh one there."""
+        return {}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__init__()  # type: ignore[misc]
+
     def run(self, calls: Sequence[Callable[[], Any]]) -> list[Any]:
-        """Each of ``calls`` on a thread of its own, their traces shared; their results in
-        order (the first exception any raised is raised once all have ended)."""
+        """Each of ``calls`` on a thread of its own, their traces shared (with those of
+        any other member); their results in order (the first exception any raised is
+        raised once all have ended)."""
         results: list[Any] = [None] * len(calls)
         errors: list[BaseException] = []
-        self._live = len(calls)
+        with self._lock:
+            self._live += len(calls)  # all joined before any traces
 
         def member(k: int) -> None:
             _member.rounds = self
@@ -88,6 +98,19 @@ class SharedRounds:
         if errors:
             raise errors[0]
         return results
+
+    @contextmanager
+    def member(self) -> Iterator[None]:
+        """The calling thread a member while the block runs (a worker thread's tile: the
+        tiles of core.workers' threads share their rounds)."""
+        with self._lock:
+            self._live += 1
+        before, _member.rounds = joined(), self
+        try:
+            yield
+        finally:
+            _member.rounds = before
+            self._leave()
 
     def trace(
         self, tracer: Any, origins: np.ndarray, directions: np.ndarray, **options: Any

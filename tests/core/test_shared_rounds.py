@@ -184,3 +184,32 @@ def test_one_worker_groups_its_tiles_within_the_memory_bound_and_many_take_them_
     groups = render_module.tile_groups(tiles, ranks, 1)
     assert groups == [[1, 3, 5], [0, 6, 4], [2]]
     assert render_module.tile_groups(tiles, ranks, 4) == [[1], [3], [5], [0], [6], [4], [2]]
+
+
+def test_a_pool_of_threads_shares_its_tiles_rounds_and_draws_the_same_image(
+    monkeypatch, tiles_refined, rounds_free
+):
+    """With parallel="threads" the tiles the pool's threads render at once trace their
+    rounds in shared batches (SharedRounds.member): some batches hold two tiles' calls,
+    and the image and passes equal those of the same tiles rendered one by one inline, to
+    the last bit."""
+    scene, camera = _board_scene(), _camera(96, 64)
+    passes = ("error_px", "steps", "ending", "direction")
+    shared_calls = []
+    together = shared_rounds._trace_together
+
+    def counted(calls):
+        shared_calls.append(len(calls))
+        together(calls)
+
+    monkeypatch.setattr(shared_rounds, "_trace_together", counted)
+    threads = core.render(scene, camera, tolerance_px=0.5, passes=passes, workers=2,
+                          parallel="threads")  # fmt: skip
+    assert threads.summary["parallel"] == "2 threads" and max(shared_calls) >= 2
+    monkeypatch.setattr(render_module, "tile_groups",
+                        lambda tiles, ranks, workers: [[k] for k in range(len(tiles))])  # fmt: skip
+    monkeypatch.setattr(render_module.workers_module, "choose", lambda *a, **k: ("inline", 2))
+    inline = core.render(scene, camera, tolerance_px=0.5, passes=passes)  # the same tiles
+    np.testing.assert_array_equal(threads.rgba, inline.rgba)
+    for name in passes:
+        np.testing.assert_array_equal(threads.passes[name], inline.passes[name], err_msg=name)
