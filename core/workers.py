@@ -2,7 +2,9 @@
 
 Threads share one GIL. A chunk's tracing is thousands of numpy operations of a few
 microseconds each on 16384-ray arrays, with Python in between, so two threads mostly
-take turns (1.0-1.3x on two cores, docs/architecture.md "Parallel chunks"). Processes
+take turns (1.0-1.3x on two cores, docs/architecture.md "Parallel chunks"); the tiles
+of an adaptive render that threads render at once trace their rounds as shared batches
+instead (core.tracing.shared_rounds: 5-30 % less time on two threads). Processes
 do not share a GIL: forked workers inherit the tracer as it is (no pickling of models,
 textures or Blender's BVH trees), trace the chunks they are handed and send the results
 back through a pipe (1.6-2.0x on two cores).
