@@ -6,13 +6,17 @@ between host and device implicitly: ``np.asarray(device_array)`` (``__array__`` 
 a numpy array (of any shape) mixed into a device operation, a numpy array as an index or
 as the value set into a device array. Python and numpy scalars mix freely, and a device
 array's size-1 values read as Python numbers (``float(a)``, ``bool(a)``, ``int(a)``), as
-CuPy's do (a sync). ``DEVICE`` is a ``core.backend.Device`` over it: ``core.render(...,
+CuPy's do (a sync: ``host_reads`` counts them). Functions that CuPy answers with a 0-d
+array (``array_equal``, ``array_equiv``, ``allclose``) answer with one here too, so an
+``if`` on them is the sync it is on a GPU. ``DEVICE`` is a ``core.backend.Device`` over it: ``core.render(...,
 device=DEVICE)`` runs the core as it would run on CuPy, so a stray host array or
 conversion fails in CI, not on a user's GPU.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 import numpy as np
@@ -75,7 +79,10 @@ class DeviceArray(np.lib.mixins.NDArrayOperatorsMixin):
 
     def __array_function__(self, func, types, args, kwargs):
         where = f"np.{func.__name__}"
-        return _wrap(func(*_unwrap(args, where), **_unwrap(kwargs, where)))
+        result = func(*_unwrap(args, where), **_unwrap(kwargs, where))
+        if func.__name__ in _ANSWERED_ON_DEVICE:
+            return DeviceArray(np.asarray(result))
+        return _wrap(result)
 
     def __array_namespace__(self, api_version=None):
         return XP
@@ -100,6 +107,7 @@ class DeviceArray(np.lib.mixins.NDArrayOperatorsMixin):
         self.data[_unwrap(key, "an index")] = _unwrap(value, "a value set")
 
     def _scalar(self):
+        _HOST_READS[0] += 1
         if self.data.size != 1:
             raise TypeError(f"only size-1 arrays read as Python scalars, not {self.data.shape}")
         return self.data.reshape(()).item()
@@ -152,10 +160,41 @@ class DeviceArray(np.lib.mixins.NDArrayOperatorsMixin):
         raise AttributeError(f"DeviceArray has no attribute {name!r}")
 
     def tolist(self):
+        _HOST_READS[0] += 1
         return self.data.tolist()
 
     def item(self, *args):
+        _HOST_READS[0] += 1
         return self.data.item(*args)
+
+
+_ANSWERED_ON_DEVICE = frozenset({"array_equal", "array_equiv", "allclose"})
+"""numpy functions whose answer (a Python bool) CuPy gives as a 0-d device array."""
+_HOST_READS = [0]
+"""Device values read as Python values (syncs) so far, counted by ``host_reads``."""
+
+
+class HostReads:
+    """The syncs of a ``host_reads`` block: ``count`` (so far, or in all once it ended)."""
+
+    def __init__(self) -> None:
+        self.start, self.end = _HOST_READS[0], None
+
+    @property
+    def count(self) -> int:
+        """Device values read back as Python values inside the block."""
+        return (_HOST_READS[0] if self.end is None else self.end) - self.start
+
+
+@contextmanager
+def host_reads() -> Iterator[HostReads]:
+    """Count the device values read back as Python values (each a sync on a GPU: bool(a),
+    float(a), int(a), a.item(), a.tolist()) inside the block (``HostReads.count``)."""
+    reads = HostReads()
+    try:
+        yield reads
+    finally:
+        reads.end = _HOST_READS[0]
 
 
 _METHODS = frozenset(
@@ -210,4 +249,4 @@ def is_device(value: Any) -> bool:
     return isinstance(value, DeviceArray)
 
 
-__all__ = ["DEVICE", "XP", "DeviceArray", "HostTransferError", "is_device"]
+__all__ = ["DEVICE", "XP", "DeviceArray", "HostTransferError", "host_reads", "is_device"]

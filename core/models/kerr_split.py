@@ -54,7 +54,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from .. import dual
-from ..backend import asarray, is_array
+from ..backend import array_module, asarray, is_array
 from ..charts import KerrBLChart
 from ..dual import DualRows
 from ..integrators.splitting import SplitSystem
@@ -334,7 +334,9 @@ class SqrtSplit(SplitSystem):
 
     def _sines(self, Q: Any):
         """(sin theta, cos theta) of the rows Q: as the last drift on Q left them (its turn
-        computes them: rho and down, to rounding), else computed (for Duals: None)."""
+        computes them: rho and down, to rounding), else computed (for Duals: None). On a
+        device, ray by ray: whether the kept theta still holds is not read back to the host
+        (a sync in every flow, and no step a CUDA graph could capture)."""
         if isinstance(Q, DualRows):
             theta = Q.value[2]
         elif is_array(Q):
@@ -342,8 +344,14 @@ class SqrtSplit(SplitSystem):
         else:
             return None  # rows of Duals (tests): the plain code takes its own
         kept = self._kept
-        if kept is not None and kept[0] is Q and np.array_equal(kept[1], theta):
-            return kept[2]
+        if kept is not None and kept[0] is Q:
+            if isinstance(theta, np.ndarray):
+                if np.array_equal(kept[1], theta):
+                    return kept[2]
+            else:
+                same, (sin, cos) = kept[1] == theta, kept[2]
+                xp = array_module(theta)
+                return xp.where(same, sin, np.sin(theta)), xp.where(same, cos, np.cos(theta))
         sines = np.sin(theta), np.cos(theta)
         self._kept = (Q, theta.copy(), sines)
         return sines

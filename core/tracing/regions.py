@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from ..backend import placed
 from .steps import FAR_FIELD_CONSTANT, FAR_FIELD_SHARE
 
 
@@ -96,9 +97,10 @@ class BoxRegion(Region):
         return float(np.linalg.norm(self.hi - self.lo)) / 20.0
 
     def entry(self, X: np.ndarray, D: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        inside = np.all((X >= self.lo) & (X <= self.hi), axis=1)
+        lo, hi = placed(self.lo, X), placed(self.hi, X)
+        inside = np.all((X >= lo) & (X <= hi), axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
-            ta, tb = (self.lo - X) / D, (self.hi - X) / D
+            ta, tb = (lo - X) / D, (hi - X) / D
         t0 = np.nanmax(np.fmin(ta, tb), axis=1)
         t1 = np.nanmin(np.fmax(ta, tb), axis=1)
         enters = ~inside & (t1 >= t0) & (t0 > 0)
@@ -106,13 +108,15 @@ class BoxRegion(Region):
 
     def left_soa(self, X: np.ndarray, X_prev: np.ndarray) -> np.ndarray:
         """Outside the box."""
-        return ~np.all((X >= self.lo[:, None]) & (X <= self.hi[:, None]), axis=0)
+        lo, hi = placed(self.lo, X), placed(self.hi, X)
+        return ~np.all((X >= lo[:, None]) & (X <= hi[:, None]), axis=0)
 
     def exit_time(self, X: np.ndarray, V: np.ndarray) -> np.ndarray:
         """Where the line leaves the slabs' intersection: the nearest far face (from a point
         past a face, a negative t back to it)."""
+        lo, hi = placed(self.lo, X), placed(self.hi, X)
         with np.errstate(divide="ignore", invalid="ignore"):
-            ta, tb = (self.lo[:, None] - X) / V, (self.hi[:, None] - X) / V
+            ta, tb = (lo[:, None] - X) / V, (hi[:, None] - X) / V
         far = np.where(V == 0.0, np.inf, np.fmax(ta, tb))
         t = np.min(far, axis=0)
         return np.where(np.isfinite(t), t, np.nan)

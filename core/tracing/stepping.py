@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..backend import array_module
+from ..backend import array_module, placed
 from ..integrators import Method, PoincareTransformed
 from ..integrators._common import take
 
@@ -216,7 +216,7 @@ class Stepper:
 def _dips(f0: np.ndarray, d0: np.ndarray, f1: np.ndarray, d1: np.ndarray) -> np.ndarray:
     """(M,) whether the cubic Hermite through a step's kink values f0, f1 (k, M) with slopes
     d0, d1 along the step changes sign inside it, its ends on one side: a dip across."""
-    u = DIP_POINTS[:, None, None]
+    u = placed(DIP_POINTS, f0)[:, None, None]
     h00, h10 = (1 + 2 * u) * (1 - u) ** 2, u * (1 - u) ** 2
     h01, h11 = u * u * (3 - 2 * u), u * u * (u - 1)
     cubic = h00 * f0 + h10 * d0 + h01 * f1 + h11 * d1  # (points, k, M)

@@ -19,7 +19,8 @@ from core import hamiltonians as hm
 from core.integrators import METHODS
 from core.models.registry import MODELS
 from core.tolerances import TRACE_SHARE
-from tests.device_double import DEVICE, XP, DeviceArray, HostTransferError
+from core.integrators.splitting import Splitting
+from tests.device_double import DEVICE, XP, DeviceArray, HostTransferError, host_reads
 
 WIDTH, HEIGHT = 16, 12
 OLD_NUMPY = int(np.__version__.split(".")[0]) < 2
@@ -141,6 +142,42 @@ def test_every_model_renders_on_the_device_as_on_the_cpu(name):
     _same(*_both(scene, _camera()))
 
 
+@pytest.mark.parametrize("name", ["SCHWARZSCHILD", "KERR", "MEDIUM"])
+def test_a_splittings_step_reads_nothing_back_from_the_device(name, monkeypatch):
+    """A step of an explicit splitting on the device (each model whose default method is
+    one: its split's kicks and drifts) reads no device value back to the host: a GPU runs
+    it without waiting between its flows, and a CUDA graph can capture it. Counted over
+    every step of a render (host_reads); before, Kerr's split compared each flow's theta
+    with the one its sines were kept for on the host: 20 syncs a step."""
+    model = _model(name)
+    scene = core.Scene(model=model, objects=_objects(), background="procedural")
+    steps, reads, step = [0], [0], Splitting.step
+
+    def counted(self, *args, **kwargs):
+        with host_reads() as inside:
+            out = step(self, *args, **kwargs)
+        steps[0] += 1
+        reads[0] += inside.count
+        return out
+
+    monkeypatch.setattr(Splitting, "step", counted)
+    core.render(scene, _camera(width=8, height=6), workers=1, device=DEVICE, tolerance=1e-5)
+    assert steps[0] > 10
+    assert reads[0] == 0
+
+
+def test_the_double_answers_on_the_device_where_cupy_does_and_counts_host_reads():
+    """array_equal is a 0-d device array (as CuPy's), and reading it, or any size-1 value,
+    as a Python value is counted as a read back to the host."""
+    a = XP.asarray([1.0, 2.0])
+    with host_reads() as reads:
+        same = np.array_equal(a, a + 0.0)
+        assert isinstance(same, DeviceArray) and same.shape == ()
+        assert reads.count == 0
+        assert bool(same) and float(a[1]) == 2.0 and a.sum().item() == 3.0
+    assert reads.count == 3
+
+
 @pytest.mark.parametrize("method", ["blanes_moan_s6", "gauss4", "rk4"])
 def test_other_methods_render_on_the_device_as_on_the_cpu(method):
     """An explicit splitting, the implicit Gauss method and a Runge-Kutta method."""
@@ -178,6 +215,21 @@ def test_a_disk_a_volume_and_a_texture_sky_render_on_the_device_as_on_the_cpu():
     scene = core.Scene(model=model, disk=core.AccretionDisk(r_out=8.0), volumes=[volume],
                        background=sky)  # fmt: skip
     _same(*_both(scene, _camera((0, -25, 4), 12, 9)))
+
+
+def test_a_lens_in_a_box_with_a_kink_renders_on_the_device_as_on_the_cpu():
+    """A graded-index lens in a box (the box region: entry, leaving, exit times) whose
+    index has a kink inside it (Luneburg's lens inside r = 1, n = 1 beyond: the kink
+    tests' cubic through each step): before, the box's corners and the cubic's sample
+    points were host arrays mixed into device operations."""
+    r2 = "(x*x + y*y + z*z)"
+    index = f"sqrt(2 - ({r2} + 1 - abs({r2} - 1))/2)"  # r^2 clipped at 1: n = 1 beyond
+    model = hm.medium(index, bounds=((-1.5,) * 3, (1.5,) * 3))
+    ball = core.Sphere((0.45, 0.3, -0.3), 0.2, core.checker(8, 4, (1.0, 0.5, 0.2)))
+    scene = core.Scene(model=model, objects=[ball], background="procedural")
+    camera = core.Camera.perspective(position=(0, -6, 0.45), look_at=(0, 0, 0), up=(0, 0, 1),
+                                     fov_deg=40, width=12, height=9)  # fmt: skip
+    _same(*_both(scene, camera))
 
 
 @pytest.mark.parametrize("observer", ["orbit", "infall"])
