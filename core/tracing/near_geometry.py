@@ -117,6 +117,9 @@ def near_paths(
         near[rows[~array_module(near).asarray(meets)]] = False
     c = np.flatnonzero(near)
     X0, X1 = X_prev[:, c], X[:, c]
+    if c.size == 0:  # none: no velocities to evaluate (a model's gradient, ~100 calls)
+        h = step_ends.h if np.ndim(step_ends.h) == 0 else step_ends.h[c]
+        return NearPaths(c, X0, X1, X0.copy(), X1.copy(), h, X0[0].copy(), X0[0].copy())
     V0, V1, h = step_ends.velocities(c)
     allowed = CHORD_SHARE * tracer.options.tolerance * np.linalg.norm(X0 - camera[:, c], axis=0)
     allowed = allowed * allowance_scale(tracer, h0[c])
