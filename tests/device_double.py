@@ -8,9 +8,9 @@ as the value set into a device array. Python and numpy scalars mix freely, and a
 array's size-1 values read as Python numbers (``float(a)``, ``bool(a)``, ``int(a)``), as
 CuPy's do (a sync: ``host_reads`` counts them). Functions that CuPy answers with a 0-d
 array (``array_equal``, ``array_equiv``, ``allclose``) answer with one here too, so an
-``if`` on them is the sync it is on a GPU. ``DEVICE`` is a ``core.backend.Device`` over it: ``core.render(...,
-device=DEVICE)`` runs the core as it would run on CuPy, so a stray host array or
-conversion fails in CI, not on a user's GPU.
+``if`` on them is the sync it is on a GPU. ``DEVICE`` is a ``core.backend.Device`` over
+it: ``core.render(..., device=DEVICE)`` runs the core as it would run on CuPy, so a stray
+host array or conversion fails in CI, not on a user's GPU.
 """
 
 from __future__ import annotations

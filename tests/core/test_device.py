@@ -17,9 +17,9 @@ import core
 from core import backend
 from core import hamiltonians as hm
 from core.integrators import METHODS
+from core.integrators.splitting import Splitting
 from core.models.registry import MODELS
 from core.tolerances import TRACE_SHARE
-from core.integrators.splitting import Splitting
 from tests.device_double import DEVICE, XP, DeviceArray, HostTransferError, host_reads
 
 WIDTH, HEIGHT = 16, 12
