@@ -1,11 +1,14 @@
 """The same frames on the CPU (all cores) and on a GPU (issue 47): times and per-pixel agreement.
 
-    PYTHONPATH=. python3 benchmarks/gpu.py [--size 1920x1080] [--scenes board,board_final,disk]
+    PYTHONPATH=. python3 benchmarks/gpu.py [--size 1920x1080]
+        [--scenes board,board_final,disk,lens]
         [--device cuda] [--workers N] [--warmup 64x36] [--csv PATH]
 
 Scenes (benchmarks/frame.py's Kerr board and camera): ``board`` (Preview: tolerance_px 1),
 ``board_final`` (Final: tolerance_px 0.25; the CPU with 16 samples, the GPU one ray per
-pixel), ``disk`` (the board with an accretion disk, Preview). Each is rendered once by
+pixel), ``disk`` (the board with an accretion disk, Preview), ``lens`` (a graded-index lens in
+a box, benchmarks/honesty.py's luneburg_matched: a medium, its box region and the kink at
+the lens's edge; no target). Each is rendered once by
 core.render on the CPU (``--workers``, default every core; the adaptive sampler) and on
 ``--device`` after a warm-up render at ``--warmup`` size (CuPy compiles its kernels at the
 first call). Printed per scene: both times, the GPU's speed-up, rays, and the agreement of
@@ -29,24 +32,28 @@ import time
 import numpy as np
 
 import core
-from benchmarks import frame
+from benchmarks import frame, honesty
 
 PASSES = ("error", "error_px", "steps", "ending", "direction")
-SCENES = {  # name -> (tolerance_px, CPU samples, disk)
-    "board": (1.0, 1, False),
-    "board_final": (0.25, 16, False),
-    "disk": (1.0, 1, True),
+SCENES = {  # name -> (tolerance_px, CPU samples)
+    "board": (1.0, 1),
+    "board_final": (0.25, 16),
+    "disk": (1.0, 1),
+    "lens": (1.0, 1),
 }
 TARGETS = {"board": 0.5, "board_final": 1.5, "disk": 0.5}
 """Issue 47's GPU times (seconds, H100/H200, after a warm-up)."""
 
 
-def scene_of(name: str) -> core.Scene:
-    """The Kerr board, with a disk for ``disk``."""
+def scene_of(name: str, width: int, height: int) -> tuple[core.Scene, core.Camera]:
+    """(scene, camera): the Kerr board and frame.py's camera, with a disk for ``disk``;
+    honesty.py's luneburg_matched for ``lens``."""
+    if name == "lens":
+        return honesty.luneburg_matched(width, height)
     scene = frame.kerr_board_scene()
-    if SCENES[name][2]:
+    if name == "disk":
         scene = dataclasses.replace(scene, disk=core.AccretionDisk(r_out=10.0))
-    return scene
+    return scene, frame.camera(width, height)
 
 
 def device_of(name: str):
@@ -92,24 +99,24 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     width, height = (int(x) for x in args.size.split("x"))
     device = device_of(args.device)
-    camera = frame.camera(width, height)
     rows = []
     print(f"{args.size}, CPU: {args.workers or os.cpu_count()} workers, GPU: {args.device}")
     print("| scene | CPU s | GPU s | speed-up | target | CPU rays | GPU rays | ending same "
           "| within tol | max px |")  # fmt: skip
     print("|---|---|---|---|---|---|---|---|---|---|")
     for name in args.scenes.split(","):
-        px, samples, _ = SCENES[name]
-        scene = scene_of(name)
+        px, samples = SCENES[name]
+        scene, camera = scene_of(name, width, height)
         cpu_s, cpu = timed(scene, camera, tolerance_px=px, samples=samples, workers=args.workers)
-        warm = frame.camera(*(int(x) for x in args.warmup.split("x")))
+        _, warm = scene_of(name, *(int(x) for x in args.warmup.split("x")))
         timed(scene, warm, tolerance_px=px, device=device)
         gpu_s, gpu = timed(scene, camera, tolerance_px=px, device=device)
         same, within, most = agreement(cpu, gpu, px)
-        row = [name, cpu_s, gpu_s, cpu_s / gpu_s, TARGETS[name], cpu.summary["rays"],
+        row = [name, cpu_s, gpu_s, cpu_s / gpu_s, TARGETS.get(name), cpu.summary["rays"],
                gpu.summary["rays"], same, within, most]  # fmt: skip
         rows.append(row)
-        print(f"| {name} | {cpu_s:.2f} | {gpu_s:.3f} | {cpu_s / gpu_s:.1f}x | <= {TARGETS[name]} "
+        target = f"<= {TARGETS[name]}" if name in TARGETS else "–"
+        print(f"| {name} | {cpu_s:.2f} | {gpu_s:.3f} | {cpu_s / gpu_s:.1f}x | {target} "
               f"| {row[5]} | {row[6]} | {100 * same:.2f} % | {100 * within:.2f} % "
               f"| {most:.2f} |")  # fmt: skip
     if args.csv:
