@@ -289,10 +289,13 @@ class SqrtSplit(SplitSystem):
         self.dim = 4
         self.c0 = C0 * model.mass**2
         self._kept: tuple | None = None  # (rows, theta, its sines): _sines
+        self.energy_varies: bool | None = None  # along any tangent (gauge_tangents)
 
     def subset(self, keep) -> SqrtSplit:
         """The split for the rays keep (per-ray H0)."""
-        return SqrtSplit(self.model, self.H0 if self.H0.ndim == 0 else self.H0[keep])
+        split = SqrtSplit(self.model, self.H0 if self.H0.ndim == 0 else self.H0[keep])
+        split.energy_varies = self.energy_varies  # a subset's rays vary no more
+        return split
 
     def gauge_tangents(self, Q: np.ndarray, P: np.ndarray, dQ: np.ndarray, dP: np.ndarray) -> None:
         """Take out of the tangents their part along (0, p): Λ is homogeneous of degree 1
@@ -305,6 +308,7 @@ class SqrtSplit(SplitSystem):
         scale[~scalable] = 0.0
         dP -= scale[:, None, :] * P
         dP[:, 0][scalable] = 0.0
+        self.energy_varies = bool(dP[:, 0].any())  # read once here, not in every flow
 
     def _root_T(self, Q: np.ndarray, P: np.ndarray, sines=None):
         """sqrt(T + c), dT/dtheta and E (``sines`` as ``kinetic``'s)."""
@@ -362,6 +366,14 @@ class SqrtSplit(SplitSystem):
             theta = Q.value[2] if isinstance(Q, DualRows) else Q[2]
             self._kept = (Q, theta.copy(), sines)
 
+    def _energy_varies(self, dp_t: Any) -> bool:
+        """Whether E varies along any tangent dp_t (k, N) (dE = -dp_t): read from the rows
+        on the host; on a device, what gauge_tangents found for the batch (a read in every
+        flow would be a sync), else the rows'."""
+        if isinstance(dp_t, np.ndarray) or self.energy_varies is None:
+            return bool(dp_t.any())
+        return self.energy_varies
+
     def _drift_tangents(self, Q: DualRows, P: Any, t, sines) -> tuple[np.ndarray, np.ndarray]:
         """The drift and its tangent map, written out: R = sqrt(T + c0 E^2) with T = (p_s^2
         + |J|^2) / 2, the turn c = t / R with dc = -c dR / R, R dR = p_s dp_s + |J| d|J|
@@ -377,7 +389,7 @@ class SqrtSplit(SplitSystem):
             rate = -0.5 * c / (root * root)  # dc = rate (R dR) 2 / 2
             dc = (rate * p_s) * dp[:, 1]
             dc += (rate * start.size) * start.along  # |J| d|J|
-            if dp[:, 0].any():  # dE = -dp_t
+            if self._energy_varies(dp[:, 0]):  # dE = -dp_t
                 dc -= (rate * 2.0 * self.c0 * E) * dp[:, 0]
         dq[:, 1] += p_s * dc
         dq[:, 1] += c * dp[:, 1]
@@ -408,7 +420,7 @@ class SqrtSplit(SplitSystem):
         The same numbers as the generic rows (core.dual) to rounding."""
         q, p, dq, dp = Q.value, P.value, Q.tangent, P.tangent
         ds, d_theta, dp_t, dL = dq[:, 1], dq[:, 2], dp[:, 0], dp[:, 3]  # (k, N) each
-        energy = bool(dp_t.any())  # dE = -dp_t
+        energy = self._energy_varies(dp_t)  # dE = -dp_t
         V, (V_s, V_t, V_E, V_L), H = self.model.curvature(
             q, p, self.H0, self._sines(Q), energy=energy
         )

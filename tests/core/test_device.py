@@ -142,13 +142,19 @@ def test_every_model_renders_on_the_device_as_on_the_cpu(name):
     _same(*_both(scene, _camera()))
 
 
-@pytest.mark.parametrize("name", ["SCHWARZSCHILD", "KERR", "MEDIUM"])
-def test_a_splittings_step_reads_nothing_back_from_the_device(name, monkeypatch):
+@pytest.mark.parametrize(
+    "name, differentials",
+    [("SCHWARZSCHILD", False), ("KERR", False), ("MEDIUM", False), ("SCHWARZSCHILD", True),
+     ("KERR", True)],
+)  # fmt: skip
+def test_a_splittings_step_reads_nothing_back_from_the_device(name, differentials, monkeypatch):
     """A step of an explicit splitting on the device (each model whose default method is
-    one: its split's kicks and drifts) reads no device value back to the host: a GPU runs
-    it without waiting between its flows, and a CUDA graph can capture it. Counted over
-    every step of a render (host_reads); before, Kerr's split compared each flow's theta
-    with the one its sines were kept for on the host: 20 syncs a step."""
+    one: its split's kicks and drifts; with ray differentials, their tangent maps too)
+    reads no device value back to the host: a GPU runs it without waiting between its
+    flows, and a CUDA graph can capture it. Counted over every step of a render
+    (host_reads); before, Kerr's split compared each flow's theta with the one its sines
+    were kept for on the host (20 syncs a step), and its tangent maps asked in every flow
+    whether E varies along a tangent (read once per batch now, by gauge_tangents)."""
     model = _model(name)
     scene = core.Scene(model=model, objects=_objects(), background="procedural")
     steps, reads, step = [0], [0], Splitting.step
@@ -161,7 +167,10 @@ def test_a_splittings_step_reads_nothing_back_from_the_device(name, monkeypatch)
         return out
 
     monkeypatch.setattr(Splitting, "step", counted)
-    core.render(scene, _camera(width=8, height=6), workers=1, device=DEVICE, tolerance=1e-5)
+    passes = (*core.render.__kwdefaults__["passes"], "magnification")
+    options = dict(passes=passes) if differentials else {}
+    camera = _camera(width=8, height=6)
+    core.render(scene, camera, workers=1, device=DEVICE, tolerance=1e-5, **options)
     assert steps[0] > 10
     assert reads[0] == 0
 
@@ -239,9 +248,11 @@ def test_a_moving_camera_renders_on_the_device_as_on_the_cpu(observer):
     _same(*_both(scene, _camera((0, -16, 0), 12, 9), observer=observer))
 
 
-def test_ray_differentials_render_on_the_device_as_on_the_cpu():
-    """The magnification pass: tangents carried through the steps (DualRows) on the device."""
-    scene = core.Scene(model=hm.schwarzschild(rg=1.0), objects=_objects())
+@pytest.mark.parametrize("name", ["SCHWARZSCHILD", "KERR"])
+def test_ray_differentials_render_on_the_device_as_on_the_cpu(name):
+    """The magnification pass: tangents carried through the steps (DualRows) on the device
+    (Kerr's: its split's own tangent maps, E's terms as gauge_tangents found them)."""
+    scene = core.Scene(model=_model(name), objects=_objects())
     passes = (*core.render.__kwdefaults__["passes"], "magnification")
     _same(*_both(scene, _camera(), passes=passes))
 
