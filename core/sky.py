@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -155,48 +156,75 @@ _STAR_LAYERS = (
 )
 
 
+_WIDEST_SIGMA = 1.51
+"""A star's sigma over its layer's (``_star_layer``): 1 + sqrt(bright / scale) / 2, at most
+1 + sqrt(1.02) / 2 < 1.51."""
+
+
 def star_color(temperature: Any) -> np.ndarray:
     """Approximate linear RGB (N, 3) of a black body of the given temperature(s) in K."""
     lt = np.log(np.asarray(temperature, dtype=np.float64))
     return np.stack([np.interp(lt, np.log(_TEMPS), _TEMP_RGB[:, c]) for c in range(3)], -1)
 
 
-def _cube_cells(d: np.ndarray, cells: int) -> tuple[np.ndarray, ...]:
-    """Equal-angle cube map: face (N,), face axes (N,), cell indices and in-face coords."""
-    ad = np.abs(d)
-    axis = np.argmax(ad, axis=1)
-    rows = np.arange(d.shape[0])
-    major = d[rows, axis]
-    s = d[rows, (axis + 1) % 3] / np.abs(major)
-    t = d[rows, (axis + 2) % 3] / np.abs(major)
-    a = np.arctan(np.stack([s, t], axis=1)) * (4 / np.pi)  # in [-1, 1]
-    ij = np.clip(np.floor((a + 1) * 0.5 * cells), 0, cells - 1).astype(np.int64)
-    face = axis * 2 + (major < 0)
-    return face, axis, np.sign(major), ij
+@dataclass(frozen=True)
+class _CubePlaces:
+    """Directions' places on an equal-angle cube map, whatever its cells: each one's face
+    (N,), the face's axis (N,) and sign (N,), its in-face coordinates ``a`` (N, 2) in
+    [-1, 1], and the columns (N, 3) of the face's axis and its two in-face axes."""
+
+    face: np.ndarray
+    sign: np.ndarray
+    a: np.ndarray
+    columns: np.ndarray
+
+    @classmethod
+    def of(cls, d: np.ndarray) -> _CubePlaces:
+        """The places of unit directions ``d`` (N, 3)."""
+        axis = np.argmax(np.abs(d), axis=1)
+        columns = np.stack([axis, (axis + 1) % 3, (axis + 2) % 3], axis=1)
+        rows = np.arange(d.shape[0])
+        major = d[rows, axis]
+        s = d[rows, columns[:, 1]] / np.abs(major)
+        t = d[rows, columns[:, 2]] / np.abs(major)
+        a = np.arctan(np.stack([s, t], axis=1)) * (4 / np.pi)  # in [-1, 1]
+        return cls(axis * 2 + (major < 0), np.sign(major), a, columns)
+
+    def cells(self, cells: int) -> np.ndarray:
+        """Each direction's cell (N, 2) on a map of ``cells`` a face's side."""
+        return np.clip(np.floor((self.a + 1) * 0.5 * cells), 0, cells - 1).astype(np.int64)
 
 
-def _star_layer(d: np.ndarray, layer: int, size: float) -> np.ndarray:
-    """Radiance (N, 3) of one layer of hashed stars, each inside its own cube-map cell."""
+def _star_layer(d: np.ndarray, layer: int, size: float, places: _CubePlaces) -> np.ndarray:
+    """Radiance (N, 3) of one layer of hashed stars, each inside its own cube-map cell
+    (``places``: d's on the map): a star's light reaches 3 sigma, so only the directions
+    within 3 of its widest sigma look up more (its brightness, size and colour) than
+    where it lies."""
     cells, prob, scale, expo, sigma_deg = _STAR_LAYERS[layer]
-    face, axis, sign, ij = _cube_cells(d, cells)
-    key = _key(face, ij[:, 0], ij[:, 1], np.full(face.shape, layer))
+    ij = places.cells(cells)
+    key = _key(places.face, ij[:, 0], ij[:, 1], np.full(places.face.shape, layer))
     jitter = 0.2 + 0.6 * np.stack([_uniform(key, 1), _uniform(key, 2)], axis=1)
-    a = -1 + (ij + jitter) * (2.0 / cells)
-    st = np.tan(a * (np.pi / 4))
+    st = np.tan((-1 + (ij + jitter) * (2.0 / cells)) * (np.pi / 4))
     star = np.zeros_like(d)
     rows = np.arange(d.shape[0])
-    star[rows, axis] = sign
-    star[rows, (axis + 1) % 3] = st[:, 0]
-    star[rows, (axis + 2) % 3] = st[:, 1]
+    star[rows, places.columns[:, 0]] = places.sign
+    star[rows, places.columns[:, 1]] = st[:, 0]
+    star[rows, places.columns[:, 2]] = st[:, 1]
     star /= np.linalg.norm(star, axis=1, keepdims=True)
+    apart2 = np.sum((d - star) ** 2, axis=1)
+    widest = np.radians(sigma_deg * size) * _WIDEST_SIGMA
+    near = np.flatnonzero(~(apart2 >= 9.0 * widest**2))  # NaN kept: it shows as NaN
+    key = key[near]
     u = _uniform(key, 3)
     bright = scale * (0.02 + _uniform(key, 4) ** expo) * (_uniform(key, 5) < prob)
     sigma = np.radians(sigma_deg * size) * (1 + 0.5 * np.sqrt(bright / scale))
-    r2 = np.sum((d - star) ** 2, axis=1) / sigma**2
+    r2 = apart2[near] / sigma**2
     window = np.clip(1.0 - r2 / 9.0, 0.0, 1.0) ** 2  # smooth cut-off at 3 sigma
     profile = np.exp(-0.5 * r2) * window
     temp = np.exp(np.log(2500.0) + (np.log(20000.0) - np.log(2500.0)) * u**1.6)
-    return star_color(temp) * (bright * profile)[:, None]
+    out = np.zeros_like(d)
+    out[near] = star_color(temp) * (bright * profile)[:, None]
+    return out
 
 
 # -- galaxy band, background, grid ------------------------------------------------------------
@@ -267,8 +295,9 @@ def procedural_sky(
     if galaxy:
         rgb = rgb + _galaxy(d)
     if stars:
+        places = _CubePlaces.of(d)
         for layer in range(len(_STAR_LAYERS)):
-            rgb = rgb + _star_layer(d, layer, star_size)
+            rgb = rgb + _star_layer(d, layer, star_size, places)
     if grid:
         rgb = rgb + _grid(d)
     return rgb.reshape(shape)

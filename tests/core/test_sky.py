@@ -6,6 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import core.sky as sky_module
 from core.camera import Camera
 from core.sky import (
     Background,
@@ -88,6 +89,22 @@ def test_procedural_sky_is_deterministic_and_chunkable():
     assert np.array_equal(a, b) and np.allclose(a, procedural_sky(d * 3.0), rtol=1e-9)
     assert a.shape == d.shape and np.all(np.isfinite(a)) and np.all(a >= 0)
     assert a.max() > 50 * np.median(a)  # point-like stars on a dark background
+
+
+def test_stars_looked_up_only_near_their_centres_lose_no_light(monkeypatch):
+    """_star_layer works out a star's brightness and colour only for the directions
+    within 3 of its widest sigma: with every direction counted near, the sky is the same
+    to the last bit (also a sky of wide stars, sigma 30x; a NaN direction stays NaN)."""
+    cam = Camera.perspective((0, 0, 0), (1, 0.2, 0.3), (0, 0, 1), 8, 160, 120)
+    _, d = cam.rays()
+    d[7] = (np.inf, 0.0, 0.0)  # NaN once normalised
+    for size in (1.0, 30.0):
+        cut = procedural_sky(d, star_size=size, galaxy=False)
+        monkeypatch.setattr(sky_module, "_WIDEST_SIGMA", 1e6)
+        every = procedural_sky(d, star_size=size, galaxy=False)
+        monkeypatch.undo()
+        assert np.array_equal(cut, every, equal_nan=True)
+        assert np.count_nonzero(cut[:, 0] > 1e-3) > 10  # stars in view
 
 
 def test_procedural_sky_parts():
