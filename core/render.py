@@ -77,11 +77,20 @@ with the error pass's companion)."""
 _CAMERA_CHUNK = 1 << 16
 """Pixels per chunk of a pass computed from camera rays alone (doppler): memory bounded."""
 TILES_PER_WORKER = 2
-"""Tiles per worker (core.render's bands, _tiles_for): the work of a frame is rarely even
-over its rows (the hole, the photon ring), and a worker with a second tile to take
-evens it out; each tile costs a few batches' per-step overhead ..."""
+"""Tiles per worker, one worker's (its tiles share their rounds: tile_groups) or from
+BALANCE_FROM workers: the work of a frame is rarely even over its rows (the hole, the
+photon ring), and a worker with a second tile to take evens it out; each tile costs a few
+batches' per-step overhead ..."""
+BALANCE_FROM = 8
+"""... which outweighs the imbalance below this many workers: two to seven take one tile
+each. Measured (docs/performance.md, stop 62): two workers, every scene of
+benchmarks/honesty.py at 640 x 360, 3-35 % faster with one band each, none slower (nor a
+hole at the top or in a corner of the frame); the Kerr board's tiles simulated
+(benchmarks/scaling.py): 640 x 360 at 2, 3, 4 workers 66, 48, 50 % -> 82, 66, 58 % of
+linear, 1080p at 3 and 4 workers 80 -> 95 % and 84 -> 83 %, at 8 67 -> 51 % (so two tiles
+from 8 on)."""
 TILE_ROUNDS = 6
-"""... so a worker gets a second tile only where each keeps at least the pixels of
+"""... and a worker gets a second tile only where each keeps at least the pixels of
 TILE_ROUNDS rounds (core.sampling.quadtree.ROUND_RAYS each: its refine's, retraces and
 centres) at the ~0.5 rays a pixel most scenes trace (benchmarks/honesty.py at 160 x
 120)."""
@@ -494,9 +503,10 @@ def costliest_first(chunks: list, ranks: Sequence[int]) -> list:
 
 
 def _tiles_for(camera, workers: int) -> list[Tile]:
-    """The image's tiles: TILES_PER_WORKER per worker (one where a tile would be under
-    TILE_ROUNDS' pixels), at most MAX_TILE_PIXELS each: bands of whole rows (the width
-    split only past MAX_TILE_PIXELS), of equal height, or as many near-square tiles of
+    """The image's tiles: TILES_PER_WORKER per worker with one worker or from BALANCE_FROM
+    workers, else one (and one where a tile would be under TILE_ROUNDS' pixels), at most
+    MAX_TILE_PIXELS each: bands of whole rows (the width split only past
+    MAX_TILE_PIXELS), of equal height, or as many near-square tiles of
     whole coarsest blocks where their lattices hold fewer nodes (many workers: a thin band
     traces two or three lattice rows for its one block row; 1080p at 16 workers: 34-row
     bands, 32 tiles' work 42.8 s, squares of 256 x 288 28.9 s). A band's lattice may run
@@ -509,7 +519,8 @@ def _tiles_for(camera, workers: int) -> list[Tile]:
     most = sampling_module.tiling.MAX_TILE_PIXELS
     cols = w if w * (2 * stride - 1) <= most else stride * max(2, most // (2 * stride**2)) - 1
     least = max(1, 2 * TILE_ROUNDS * sampling_module.quadtree.ROUND_RAYS)  # pixels a tile
-    per_worker = min(TILES_PER_WORKER, max(1, w * h // (workers * least)))
+    wanted = TILES_PER_WORKER if workers == 1 or workers >= BALANCE_FROM else 1
+    per_worker = min(wanted, max(1, w * h // (workers * least)))
     bands = max(per_worker * workers, math.ceil(h * cols / most))
     bands = min(bands, math.ceil(h / (stride - 1)))  # bands of at least STRIDE - 1 rows
     band = (cols, math.ceil(h / bands))

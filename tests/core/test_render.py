@@ -1,6 +1,7 @@
 """The core renderer against independent references (straight casts, exact deflection)."""
 
 import importlib
+import math
 from types import SimpleNamespace
 
 import numpy as np
@@ -306,6 +307,19 @@ def test_the_pass_table_says_which_passes_are_interpolated():
     assert np.all(out.passes["error"][between][seen] > 0)
     assert np.all(out.passes["error"][between][~seen] == 0)  # the shadow's inside: black
     assert np.all(np.isfinite(out.passes["direction"][between][seen]))
+
+
+@pytest.mark.parametrize(("workers", "count"), [(1, 2), (2, 2), (3, 3), (7, 7), (8, 16), (16, 16)])
+def test_two_to_seven_workers_take_one_band_each_one_and_many_two(workers, count):
+    """render._tiles_for at 960 x 540 (under MAX_TILE_PIXELS): one worker's two tiles
+    share their rounds; two to seven workers take a band each (a second tile's own rounds
+    cost more than the imbalance it evens out: BALANCE_FROM); from eight, two each, where
+    each keeps TILE_ROUNDS' pixels (16 workers: one; near-square tiles: up to 10 % more)."""
+    render_module = importlib.import_module("core.render")
+    chosen = render_module._tiles_for(SimpleNamespace(width=960, height=540), workers)
+    assert count <= len(chosen) <= math.ceil(1.1 * count)
+    if len(chosen) < render_module.SQUARES_FROM:
+        assert all(t.x1 - t.x0 == 960 for t in chosen)  # bands
 
 
 @pytest.mark.parametrize("workers", [1, 2, 4, 8, 16])
