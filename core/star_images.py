@@ -19,6 +19,8 @@ the image's pixels, times their solid angles, sum to its flux).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -119,19 +121,35 @@ def draw_stars(
     if h < 2 or w < 2 or stars.magnitudes.size == 0:
         return 0
     index = SkyIndex(stars.directions)
-    drawn = 0
+    splat = partial(_splat, rgba, stars=stars, camera=camera, motion=motion,
+                    pixel_filter=pixel_filter, filter_size=filter_size)  # fmt: skip
+    drawn, pending = 0, []
     for r0 in range(0, h + 1, BAND_ROWS):
         r1 = min(r0 + BAND_ROWS, h + 1)  # cells r0..r1-1 between padded rows r0..r1
         d, clear, light = _padded_rows(seen, sky, transmittance, r0, r1 + 1)
         found = _images_in_band(d, clear, light, index, r0)
-        if found is None:
-            continue
-        xy, dimming, star = found
-        mu = image_magnification(tracer, camera, xy)
-        there = np.isfinite(mu)  # the image point's own ray sees the sky
-        xy, dimming, star, mu = xy[there], dimming[there], star[there], mu[there]
-        _splat(rgba, xy, mu, dimming, stars, star, camera, motion, pixel_filter, filter_size)
-        drawn += star.size
+        if found is not None:
+            pending.append(found)
+        if sum(p[0].shape[0] for p in pending) >= TRACE_CHUNK or r1 > h:
+            drawn += _draw_found(pending, tracer, camera, splat)
+            pending = []
+    return drawn
+
+
+def _draw_found(found: list, tracer: Any, camera: Any, splat: Callable) -> int:
+    """Splat the images ``found`` (bands' (image points, dimming, star numbers), in the
+    order of their bands) whose own rays see the sky, their magnifications traced in one
+    batch (a batch's rounds cost the same whatever its rays: a band at a time paid them per
+    band) -> the number drawn."""
+    if not found:
+        return 0
+    mu = image_magnification(tracer, camera, np.concatenate([xy for xy, _, _ in found]))
+    drawn, start = 0, 0
+    for xy, dimming, star in found:
+        band_mu, start = mu[start : start + xy.shape[0]], start + xy.shape[0]
+        there = np.isfinite(band_mu)  # the image point's own ray sees the sky
+        splat(xy[there], band_mu[there], dimming[there], star=star[there])
+        drawn += int(np.count_nonzero(there))
     return drawn
 
 

@@ -2,6 +2,7 @@
 puts it with the exact lens's flux, flux conserved, no flicker when the camera moves a tenth
 of a pixel, a moving camera's aberration and g², catalogues read and refused by name."""
 
+import importlib
 import math
 import warnings
 
@@ -71,6 +72,36 @@ def test_each_image_has_the_exact_lens_flux(method):
                 assert _window(image, point) == pytest.approx(field.flux[0] * mu, rel=0.01)
                 expected.append(field.flux[0] * mu)
     assert image.sum() == pytest.approx(sum(expected), rel=0.01)
+
+
+def test_the_images_of_every_band_share_one_magnification_batch(monkeypatch):
+    """draw_stars finds the images band by band (BAND_ROWS) but traces their
+    magnifications together, up to TRACE_CHUNK at once (each batch pays its rounds'
+    per-step cost whatever its rays): one batch for a frame of many bands, and the image
+    the same to the last bit as with a batch a band."""
+    star_images = importlib.import_module("core.star_images")
+    camera = core.Camera.perspective((0, -30, 0), (0, 0, 0), (0, 0, 1), 80, 96, 160)
+    field = core.StarField.random(400, seed=5, diffuse=(0, 0, 0))
+    scene = core.Scene(model=hm.schwarzschild(1.0), background=field)
+    batches = []
+    traced, draw_found = star_images.image_magnification, star_images._draw_found
+
+    def counted(tracer, cam, xy):
+        batches.append(xy.shape[0])
+        return traced(tracer, cam, xy)
+
+    def band_by_band(found, *args):
+        return sum(draw_found([band], *args) for band in found)
+
+    monkeypatch.setattr(star_images, "image_magnification", counted)
+    together = core.render(scene, camera, tolerance_px=1, workers=1)
+    assert len(batches) == 1 and batches[0] >= together.summary["star_images"] > 20
+    assert camera.height > 4 * star_images.BAND_ROWS  # several bands
+    batches.clear()
+    monkeypatch.setattr(star_images, "_draw_found", band_by_band)
+    apart = core.render(scene, camera, tolerance_px=1, workers=1)
+    assert len(batches) > 4 and apart.summary["star_images"] == together.summary["star_images"]
+    assert np.array_equal(together.rgba, apart.rgba)
 
 
 def _blobs(image):
