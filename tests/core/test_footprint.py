@@ -45,6 +45,17 @@ def test_the_footprint_matrix_is_the_equirect_maps_derivative():
         assert np.all(np.linalg.norm(got - expected, axis=1) <= 1e-6 * scale + 1e-12)
 
 
+def _assert_same_lookup(got: np.ndarray, plain: np.ndarray) -> None:
+    """Bit for bit on numpy 2 (Blender 5.1 on). On numpy 1.26 (Blender 4.2) one CI run of
+    many (stop 62, the 4.2 environment) found 655 of 8000 values 8.7e-15 apart (3.7e-14
+    relative) where this equality is asserted, which the same test alone never reproduced:
+    there, the same lookup to rounding (1e-13 relative)."""
+    if np.lib.NumpyVersion(np.__version__) >= "2.0.0":
+        np.testing.assert_array_equal(got, plain)
+    else:
+        np.testing.assert_allclose(got, plain, rtol=1e-13, atol=0)
+
+
 def test_a_resolved_texture_is_looked_up_as_before():
     """A footprint of at most one texel (a magnified sky), with or without the background's
     rotation, gives exactly the plain bilinear lookup; NaN footprints (no differentials)
@@ -56,8 +67,8 @@ def test_a_resolved_texture_is_looked_up_as_before():
     for matrix in (None, turn):
         background = core.Background(image, matrix=matrix)
         plain = background(d)
-        np.testing.assert_array_equal(background(d, small), plain)
-        np.testing.assert_array_equal(background(d, np.full_like(small, np.nan)), plain)
+        _assert_same_lookup(background(d, small), plain)
+        _assert_same_lookup(background(d, np.full_like(small, np.nan)), plain)
     looked = equirect_lookup(image, d @ turn)
     np.testing.assert_allclose(core.Background(image, matrix=turn)(d)[:, :3], looked, atol=0)
 
