@@ -1,10 +1,11 @@
 """Tracing lattice nodes, their companions at the anchors.
 
 Offers ``trace_nodes`` (trace and judge a tile's untraced nodes; with ``defer`` only the
-anchors run a companion at once), ``settle`` (judge the deferred nodes by their anchors'
-errors, or name those that need a companion of their own), ``from_anchors``, ``spare`` and
-``clear_of`` (what the anchors say of a node), ``anchors`` and ``ANCHOR``. Needs a
-TileContext (tracing points), the lattice and core.sampling.judging.
+roots run a companion at once), ``settle`` (judge the deferred nodes by the errors at
+their cell's corners, or name those that need a companion of their own), ``from_anchors``,
+``spare``, ``cell_sides`` and ``clear_of`` (what a cell's corners say of a node),
+``anchors``, ``roots``, ``ANCHOR`` and ``ROOT``. Needs a TileContext (tracing points), the
+lattice and core.sampling.judging.
 """
 
 from __future__ import annotations
@@ -18,16 +19,56 @@ from .judging import NEAR_MISS, judge, record
 from .lattice import DENSE_MARGIN, Nodes, node_margin
 
 ANCHOR = 4
-"""With the error pass, only the nodes at multiples of ANCHOR (the anchors) get their
-companion as they are traced; the others take the largest error of the anchors at their
-cell's corners where those end as they do (settle), or a companion of their
-own then. The nodes of blocks of 8 and up are all anchors: what is spared is the
-companions of the finest rounds, most of a tile's rays."""
+"""With the error pass, a node not at multiples of ANCHOR takes the largest error of the
+anchors (the nodes at multiples of ANCHOR) at its ANCHOR cell's corners where those end as
+it does and agree (settle), or a companion of its own then ..."""
+ROOT = 16
+"""... and an anchor the largest error of the roots (the nodes at multiples of ROOT, which
+alone get their companion as they are traced) at its ROOT cell's corners, in the same way.
+The nodes of blocks of 8 and up are all anchors: where a tile's image is smooth they are
+most of its rays (benchmarks/honesty.py near_tangent at 640 x 360, 1 px: 7179 of 22 930
+rays, each with its companion when the anchors were the roots)."""
 
 
-def anchors(jj: np.ndarray, ii: np.ndarray) -> np.ndarray:
-    """(M,) bool: which nodes (jj, ii) are anchors (ANCHOR)."""
-    return (jj % ANCHOR == 0) & (ii % ANCHOR == 0)
+def anchors(shape: tuple[int, int], jj: np.ndarray, ii: np.ndarray) -> np.ndarray:
+    """(M,) bool: which nodes (jj, ii) of a lattice of ``shape`` are anchors: at multiples
+    of ANCHOR or on its last row or column (the corners of its cells cut short there)."""
+    return _on(shape, jj, ii, ANCHOR)
+
+
+def roots(shape: tuple[int, int], jj: np.ndarray, ii: np.ndarray) -> np.ndarray:
+    """(M,) bool: which nodes (jj, ii) of a lattice of ``shape`` are roots (at multiples
+    of ROOT or on its last row or column): their companion runs as they are traced."""
+    return _on(shape, jj, ii, ROOT)
+
+
+def _on(shape: tuple[int, int], jj: np.ndarray, ii: np.ndarray, side: int) -> np.ndarray:
+    """(M,) bool: nodes (jj, ii) at multiples of ``side`` or on the lattice's last row or
+    column, in both directions."""
+    return ((jj % side == 0) | (jj == shape[0] - 1)) & ((ii % side == 0) | (ii == shape[1] - 1))
+
+
+def corners(
+    shape: tuple[int, int], jj: np.ndarray, ii: np.ndarray, side: np.ndarray | int
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The four corners (aj, ai) of the nodes (jj, ii)'s cells of ``side`` (one or (M,)),
+    the first its top left; a cell past the lattice's last row or column is cut short
+    there."""
+    cj, ci = jj - jj % side, ii - ii % side
+    far_j, far_i = np.minimum(cj + side, shape[0] - 1), np.minimum(ci + side, shape[1] - 1)
+    return [(cj, ci), (cj, far_i), (far_j, ci), (far_j, far_i)]
+
+
+def cell_sides(nodes: Nodes, jj: np.ndarray, ii: np.ndarray) -> np.ndarray:
+    """(M,) the side of the cell whose corners judge the nodes (jj, ii): ROOT for anchors,
+    ANCHOR for the others where all four of their ANCHOR cell's corners are traced, ROOT
+    where not (a pixel centre traced late inside a block of 8 or more, whose anchors
+    inside were never traced)."""
+    shape = nodes.traced.shape
+    traced = np.ones(jj.size, dtype=bool)
+    for aj, ai in corners(shape, jj, ii, ANCHOR):
+        traced &= nodes.traced[aj, ai]
+    return np.where(anchors(shape, jj, ii) | ~traced, ROOT, ANCHOR)
 
 
 def trace_nodes(
@@ -42,7 +83,7 @@ def trace_nodes(
 ) -> None:
     """Trace the untraced nodes among (jj, ii) (flat index arrays) and store them
     (``dense``: no block will interpolate them; TileContext.trace_points). ``defer``: only the
-    anchors (``anchors``) get a companion now, the others' error waits for settle."""
+    roots (``roots``) get a companion now, the others' error waits for settle."""
     flat = np.unique(jj * nodes.traced.shape[1] + ii)
     jj, ii = np.divmod(flat, nodes.traced.shape[1])
     todo = ~nodes.traced[jj, ii]
@@ -62,34 +103,41 @@ def trace_nodes(
 
 
 def from_anchors(
-    ctx: TileContext, nodes: Nodes, jj: np.ndarray, ii: np.ndarray
+    ctx: TileContext, nodes: Nodes, jj: np.ndarray, ii: np.ndarray, side: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray], np.ndarray]:
-    """What the anchors at the corners of the nodes (jj, ii)'s ANCHOR cells say of
-    their errors -> (agree, estimate, like, judged): ``agree`` where all four are traced,
-    judged, finite, no flip or near miss, end alike (escaped, captured, on one object,
-    across the same kinks: the error is smooth across the cell) and keep clear of the
-    geometry by more than a companion's error could move a ray (clear_of) unless
-    captured; ``estimate`` their largest error (0 if captured); ``like``: the corner
-    whose ending the node must share (its (j, i)); ``judged``: all four are."""
-    ny, nx = nodes.traced.shape
-    cj, ci = jj - jj % ANCHOR, ii - ii % ANCHOR
+    """What the nodes at the corners of the nodes (jj, ii)'s cells (of ``side``, (M,):
+    cell_sides; ``corners``) say of their errors -> (agree, estimate, like, judged):
+    ``agree`` where all four are traced, judged, finite, no flip or near miss, end alike
+    (escaped, captured, on one object, across the same kinks: the error is smooth across
+    the cell) and keep clear of the geometry by more than a companion's error could move
+    a ray (clear_of) unless captured; ``estimate`` the largest error of their first runs
+    (Nodes.first: a node is judged at its own run's step, a retraced corner's later
+    runs are finer; 0 if captured);
+    ``like``: the corner whose ending the node must share (its (j, i)); ``judged``: all
+    four are."""
+    four = corners(nodes.traced.shape, jj, ii, side)
+    cj, ci = four[0]
     judged, estimate = np.ones(jj.size, dtype=bool), np.zeros(jj.size)
     agree, least = np.ones(jj.size, dtype=bool), np.full(jj.size, np.inf)
-    for dj in (0, ANCHOR):
-        for di in (0, ANCHOR):
-            aj, ai = np.minimum(cj + dj, ny - 1), np.minimum(ci + di, nx - 1)
-            judged &= (aj == cj + dj) & (ai == ci + di) & nodes.traced[aj, ai]
-            judged &= ~nodes.pending[aj, ai]
-            agree &= ~nodes.flipped[aj, ai] & ~nodes.near[aj, ai]
-            agree &= np.isfinite(nodes.integration[aj, ai]) & (nodes.integration[aj, ai] < FLIP)
-            agree &= nodes.ending[aj, ai] == nodes.ending[cj, ci]
-            agree &= nodes.object_id[aj, ai] == nodes.object_id[cj, ci]
-            agree &= nodes.kinks[aj, ai] == nodes.kinks[cj, ci]
-            estimate = np.maximum(estimate, nodes.integration[aj, ai])
-            least = np.minimum(least, nodes.clearance[aj, ai])
+    lowest = np.full(jj.size, np.inf)
+    for aj, ai in four:
+        lowest = np.minimum(lowest, nodes.first[aj, ai])
+        judged &= nodes.traced[aj, ai] & ~nodes.pending[aj, ai]
+        agree &= ~nodes.flipped[aj, ai] & ~nodes.near[aj, ai]
+        agree &= np.isfinite(nodes.first[aj, ai]) & (nodes.first[aj, ai] < FLIP)
+        agree &= nodes.ending[aj, ai] == nodes.ending[cj, ci]
+        agree &= nodes.object_id[aj, ai] == nodes.object_id[cj, ci]
+        agree &= nodes.kinks[aj, ai] == nodes.kinks[cj, ci]
+        estimate = np.maximum(estimate, nodes.first[aj, ai])
+        least = np.minimum(least, nodes.clearance[aj, ai])
     captured = nodes.ending[cj, ci] == ENDING["captured"]
     estimate = np.where(captured, 0.0, estimate)
     agree &= judged & ((least >= clear_of(ctx, estimate)) | captured)
+    import os
+
+    ratio = float(os.environ.get("RATIO", "inf"))
+    with np.errstate(invalid="ignore"):
+        agree &= (side < ROOT) | captured | (estimate <= ratio * lowest)
     return agree, estimate, (cj, ci), judged
 
 
@@ -106,66 +154,87 @@ def clear_of(ctx: TileContext, estimate: np.ndarray) -> np.ndarray:
 
 def spare(ctx: TileContext, nodes: Nodes, jj: np.ndarray, ii: np.ndarray) -> np.ndarray:
     """(M,) bool: the nodes (jj, ii), not traced yet, whose companion is spared for now
-    (trace_nodes' ``defer``): not anchors, and their anchors agree (from_anchors) or
-    are not all judged yet (traced in this round: settle will know)."""
-    agree, _, _, judged = from_anchors(ctx, nodes, jj, ii)
-    return ~anchors(jj, ii) & (agree | ~judged)
+    (trace_nodes' ``defer``): not roots, and their cell's corners (an anchor's ROOT cell,
+    another node's ANCHOR cell) agree (from_anchors) or are not all judged yet (traced in
+    this round, or judged by settle: settle will know)."""
+    shape = nodes.traced.shape
+    side = np.where(anchors(shape, jj, ii), ROOT, ANCHOR)
+    agree, _, _, judged = from_anchors(ctx, nodes, jj, ii, side)
+    return ~roots(shape, jj, ii) & (agree | ~judged)
 
 
 def settle(ctx: TileContext, nodes: Nodes) -> tuple[np.ndarray, np.ndarray]:
-    """Judge the pending nodes (traced without their companion: spare) by their
-    anchors' largest error where they end as their anchors do and keep as clear of
-    the geometry (from_anchors; captured as they are: the shadow's inside has no
-    error, and a camera at 3 rg in a disk's plane sees it through rays of clearance
-    0) -> (jj, ii) the others: their companions run with the first retraces."""
+    """Judge the pending nodes (traced without their companion: spare) by the largest
+    error at their cell's corners (cell_sides) where they end as those do and keep as
+    clear of the geometry (from_anchors; captured as they are: the shadow's inside has
+    no error, and a camera at 3 rg in a disk's plane sees it through rays of clearance
+    0): the anchors first, by the roots, then the other nodes by the anchors -> (jj, ii)
+    those that need a companion of their own (retrace.retrace_batch). The nodes whose
+    cell has an anchor still pending stay pending: settle judges them once it is
+    (retrace.companions)."""
     jj, ii = np.nonzero(nodes.pending)
     if jj.size == 0:
         return jj, ii
-    agree, estimate, (cj, ci), _ = from_anchors(ctx, nodes, jj, ii)
-    nodes.pending[:] = False
+    side = cell_sides(nodes, jj, ii)
+    left = []
+    for first in (True, False):  # the cells of ROOT first: their corners are judged
+        rows = np.flatnonzero((side == ROOT) == first)
+        like, judged = _by_cell(ctx, nodes, jj[rows], ii[rows], side[rows])
+        left.append(rows[~like & (judged | first)])
+    rest = np.concatenate(left)
+    return jj[rest], ii[rest]
+
+
+def _by_cell(
+    ctx: TileContext, nodes: Nodes, jj: np.ndarray, ii: np.ndarray, side: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(M,) bool: which pending nodes (jj, ii) settle judged by their cell of ``side``
+    (no longer pending): those ending as its corners do (from_anchors), else by the
+    corners on their side of a silhouette (by_side); and (M,) whose corners were all
+    judged."""
+    agree, estimate, (cj, ci), judged = from_anchors(ctx, nodes, jj, ii, side)
     like = (nodes.ending[jj, ii] == nodes.ending[cj, ci]) & agree
     like &= nodes.object_id[jj, ii] == nodes.object_id[cj, ci]
     like &= nodes.kinks[jj, ii] == nodes.kinks[cj, ci]
     captured = nodes.ending[jj, ii] == ENDING["captured"]
     like &= (nodes.clearance[jj, ii] >= clear_of(ctx, estimate)) | captured
-    rest = np.flatnonzero(~like)  # those their whole cell cannot judge
-    side, estimate[rest] = by_side(ctx, nodes, jj[rest], ii[rest])
-    like[rest[side]] = True
+    rough = (side >= ROOT) & (nodes.ending[jj, ii] == ENDING["hit"])  # ROOT_HITS
+    like &= ~rough
+    rest = np.flatnonzero(~like & ~rough)  # those their whole cell cannot judge
+    beside, estimate[rest] = by_side(ctx, nodes, jj[rest], ii[rest], side[rest])
+    like[rest[beside]] = True
     judge(ctx, nodes, jj[like], ii[like], estimate[like])
-    return jj[~like], ii[~like]
+    nodes.pending[jj[like], ii[like]] = False
+    return like, judged
 
 
 def by_side(
-    ctx: TileContext, nodes: Nodes, jj: np.ndarray, ii: np.ndarray
+    ctx: TileContext, nodes: Nodes, jj: np.ndarray, ii: np.ndarray, side: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(M,) which pending nodes (jj, ii) whose cell an object's silhouette crosses are
-    judged by the anchors on their side of it, and (M,) their estimate: all four anchors
-    judged and sound (no flip, no near miss, a finite error), at least two ending as the
-    node does (the same object, the same kinks), the others differing only by an object
-    hit (never captured against escaped: the shadow's edge, where errors grow without
-    bound), and the node and those two keeping clear of the geometry by clear_of their
-    largest error (a node on an object is then tested against its own edge by judge's
-    near_edge)."""
-    ny, nx = nodes.traced.shape
-    cj, ci = jj - jj % ANCHOR, ii - ii % ANCHOR
+    """(M,) which pending nodes (jj, ii) whose cell (of ``side``, (M,)) an object's
+    silhouette crosses are judged by the corners on their side of it, and (M,) their
+    estimate: all four corners judged and sound (no flip, no near miss, a finite error),
+    at least two ending as the node does (the same object, the same kinks), the others
+    differing only by an object hit (never captured against escaped: the shadow's edge,
+    where errors grow without bound), and the node and those two keeping clear of the
+    geometry by clear_of their largest error (a node on an object is then tested against
+    its own edge by judge's near_edge)."""
     ending, kinks, hit = nodes.ending[jj, ii], nodes.kinks[jj, ii], ENDING["hit"]
     sound, count = np.ones(jj.size, dtype=bool), np.zeros(jj.size, dtype=np.int64)
     estimate, least = np.zeros(jj.size), np.full(jj.size, np.inf)
-    for dj in (0, ANCHOR):
-        for di in (0, ANCHOR):
-            aj, ai = np.minimum(cj + dj, ny - 1), np.minimum(ci + di, nx - 1)
-            error = nodes.integration[aj, ai]
-            sound &= (aj == cj + dj) & (ai == ci + di) & nodes.traced[aj, ai]
-            sound &= ~nodes.pending[aj, ai] & ~nodes.flipped[aj, ai] & ~nodes.near[aj, ai]
-            sound &= np.isfinite(error) & (error < FLIP) & (nodes.kinks[aj, ai] == kinks)
-            same = (nodes.ending[aj, ai] == ending) & (
-                nodes.object_id[aj, ai] == nodes.object_id[jj, ii]
-            )
-            sound &= same | (nodes.ending[aj, ai] == hit) | (ending == hit)
-            count += same
-            estimate = np.where(same, np.maximum(estimate, error), estimate)
-            least = np.where(same, np.minimum(least, nodes.clearance[aj, ai]), least)
+    for aj, ai in corners(nodes.traced.shape, jj, ii, side):
+        error = nodes.first[aj, ai]
+        sound &= nodes.traced[aj, ai]
+        sound &= ~nodes.pending[aj, ai] & ~nodes.flipped[aj, ai] & ~nodes.near[aj, ai]
+        sound &= np.isfinite(error) & (error < FLIP) & (nodes.kinks[aj, ai] == kinks)
+        same = (nodes.ending[aj, ai] == ending) & (
+            nodes.object_id[aj, ai] == nodes.object_id[jj, ii]
+        )
+        sound &= same | (nodes.ending[aj, ai] == hit) | (ending == hit)
+        count += same
+        estimate = np.where(same, np.maximum(estimate, error), estimate)
+        least = np.where(same, np.minimum(least, nodes.clearance[aj, ai]), least)
     need = clear_of(ctx, estimate)
-    side = sound & (count >= 2) & (ending != ENDING["captured"])
-    side &= (nodes.clearance[jj, ii] >= need) & (least >= need)
-    return side, estimate
+    beside = sound & (count >= 2) & (ending != ENDING["captured"])
+    beside &= (nodes.clearance[jj, ii] >= need) & (least >= need)
+    return beside, estimate

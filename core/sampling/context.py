@@ -81,7 +81,7 @@ class TileContext:
         xy: np.ndarray,
         cancel: Cancel,
         companion: bool | np.ndarray = True,
-        step: float | None = None,
+        step: float | np.ndarray | None = None,
         node: bool = True,
         margin: np.ndarray | float = 1.0,
     ) -> tuple[RayResults, np.ndarray, np.ndarray | None]:
@@ -98,14 +98,14 @@ class TileContext:
         n = xy.shape[0]
         share = np.broadcast_to(np.asarray(margin, np.float64), (n,))
         self.rays += n if step is None else 0
-        step = step or self.step
+        step = self.step if step is None else step
         seen = self.camera.direction_tangents(xy) if self.with_tangents and node else None
         if not self.with_error or companion is False:
             tracer = self.tracer if node else self._colour_tracer  # a sample's colour alone
             rays = tracer.trace(origins, directions, step=step, cancel=cancel, tangents=seen,
                                 clearance=share if node else None)  # fmt: skip
             return rays, seen_direction(rays, origins), None
-        assert step is not None
+        assert isinstance(step, float)  # a first run's (retraces run one a ray, alone)
         some = np.flatnonzero(np.broadcast_to(companion, (n,)))
         if seen is None:  # one batch: the companion shares the main run's per-step overhead
             both = self.tracer.trace(

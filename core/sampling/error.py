@@ -96,14 +96,19 @@ def seen_apart(
 
 
 def richardson(
-    apart: np.ndarray, ending_fine: np.ndarray, alike: np.ndarray, order: int
+    apart: np.ndarray,
+    ending_fine: np.ndarray,
+    alike: np.ndarray,
+    order: int,
+    ratio: np.ndarray | float = COMPANION_RATIO,
 ) -> np.ndarray:
     """richardson_error from how far apart the two runs' ends are (radians, ``seen_apart``)
-    and whether they end ``alike``. A hit point's error is taken to fall at most at
-    HIT_ORDER, whatever the method's order."""
+    and whether they end ``alike``, the coarse run's step ``ratio`` x the fine one's. A
+    hit point's error is taken to fall at most at HIT_ORDER, whatever the method's
+    order."""
     orders = np.where(ending_fine == ENDING["hit"], min(order, HIT_ORDER), order)
     with np.errstate(all="ignore"):
-        err = apart / (COMPANION_RATIO**orders - 1.0)
+        err = apart / (ratio**orders - 1.0)
     err = np.where(ending_fine == ENDING["captured"], 0.0, err)
     err = np.where(alike, err, FLIP)  # an ending flip, captured or not
     bad = (ending_fine == ENDING["failed"]) | (ending_fine == ENDING["max_steps"])

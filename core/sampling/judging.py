@@ -43,7 +43,7 @@ def store(
     """Record traced rays at the nodes (jj, ii) and judge them; ``error`` is the
     integration's."""
     record(ctx, nodes, jj, ii, rays, seen)
-    judge(ctx, nodes, jj, ii, error)
+    judge(ctx, nodes, jj, ii, error, first=False)
 
 
 def record(
@@ -80,14 +80,23 @@ def record(
 
 
 def judge(
-    ctx: TileContext, nodes: Nodes, jj: np.ndarray, ii: np.ndarray, error: np.ndarray | None
+    ctx: TileContext,
+    nodes: Nodes,
+    jj: np.ndarray,
+    ii: np.ndarray,
+    error: np.ndarray | None,
+    first: bool = True,
 ) -> None:
     """The recorded nodes (jj, ii)'s errors from their integration's (``error``, None:
-    0): flips, near misses (traced again), near edges, the far field."""
+    0): flips, near misses (traced again), near edges, the far field. ``first``: their
+    first run's (at the tile's step), which nodes settled by them take (anchors.settle),
+    not a retrace's."""
     err = np.zeros(jj.size) if error is None else error
     nodes.flipped[jj, ii] |= err >= FLIP  # once two runs ended apart, it stays a flip
     err = np.where(nodes.flipped[jj, ii], np.maximum(err, FLIP), err)
     nodes.integration[jj, ii] = err  # a flip is traced again (RETRACE), as a near miss
+    if first:
+        nodes.first[jj, ii] = err
     near_miss = nodes.clearance[jj, ii] < NEAR_MISS * err  # it may have hit something
     nodes.near[jj, ii] = near_miss  # traced again (retrace.retrace); a near edge is not: its
     # retrace, agreeing, would report it clear of the edge whatever the truth

@@ -57,6 +57,8 @@ class Nodes:
         self.plain = np.zeros(shape, dtype=bool)  # ended without volume light
         self.clearance = np.zeros(shape)  # radians from geometry (RayResults.clearance)
         self.integration = np.zeros(shape)  # the integration's error estimate (radians)
+        self.first = np.zeros(shape)  # ... of its first run, at the tile's step (settle's)
+        self.halvings = np.zeros(shape, dtype=np.int64)  # its run's step: the first's / 2^this
         self.object_id = np.full(shape, -1, dtype=np.int32)
         self.kinks = np.zeros(shape, dtype=np.int64)  # the model's kinks its ray crossed
         self.tangent = np.zeros(shape + (3,))  # the hitting chords' directions

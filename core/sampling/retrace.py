@@ -1,9 +1,10 @@
 """Retraces: rays whose error exceeds the budget, or that nearly missed, traced again.
 
 Offers ``retrace`` (a tile's nodes over their error budget, and its near misses, traced
-again at half the step, up to ``RETRACE`` times, with the companions ``settle`` left over)
-and ``retrace_batch`` (one such round's rays), and ``RETRACE`` and ``LOOSE_SHARE``. Needs a
-TileContext (tracing points, companions), the lattice and core.sampling.judging.
+again at half the step, up to ``RETRACE`` times, with the companions ``settle`` left over),
+``retrace_batch`` (one such round's rays) and ``companions`` (those left over alone), and
+``RETRACE`` and ``LOOSE_SHARE``. Needs a TileContext (tracing points, companions), the
+lattice and core.sampling.judging.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..tracing import RayResults
+from .anchors import settle
 from .context import Cancel, TileContext
 from .error import COMPANION_RATIO, richardson, seen_apart, seen_direction
 from .judging import judge, store
@@ -32,12 +34,7 @@ point_stars and disk_high_spin at 0.05 px: 88 % and 87 % within 3x -> 100 %). At
 Kerr board took 1.4x as long (1080p Preview), at 0.3 1.02x."""
 
 
-def retrace(
-    ctx: TileContext,
-    nodes: Nodes,
-    cancel: Cancel,
-    unsure: tuple[np.ndarray, np.ndarray] | None = None,
-) -> None:
+def retrace(ctx: TileContext, nodes: Nodes, cancel: Cancel) -> None:
     """Trace the nodes whose integration error exceeds ``budget`` again at half the
     step, their previous run the companion, up to RETRACE times (all of a tile's at
     once: each run costs a batch's per-step overhead), and the near misses
@@ -51,49 +48,81 @@ def retrace(
     truth (thin_front: quiet flips). A flip whose retrace ended as its last run did is
     not traced again: it keeps its flip's error whatever later runs find, and further
     halvings, agreeing too, only cost (the Kerr board's ~1800 flips per 1080p tile, at
-    the shadow's edge, took all RETRACE rounds: 10 % of its time). The ``unsure``
-    nodes (jj, ii) (anchors.settle) have their companions in the first round's batch: they
-    are judged by them and join the later rounds."""
-    step = ctx.step
+    the shadow's edge, took all RETRACE rounds: 10 % of its time). The pending nodes
+    that settle cannot judge have their companions in a round's batch: they are judged
+    by them and join the later rounds, and the nodes that waited on them are settled
+    then (companions: those still pending after the last round)."""
     settled = np.zeros_like(nodes.traced)  # flips whose retrace ended as before
-    unsure = (np.zeros(0, int), np.zeros(0, int)) if unsure is None else unsure
-    for _ in range(RETRACE if ctx.with_error else 0):
+    unsure = settle(ctx, nodes)
+    for k in range(1, RETRACE + 1 if ctx.with_error else 1):
         err = nodes.integration
         budget = np.where(nodes.loose, LOOSE_SHARE * ctx.budget, ctx.budget)
         again = ((np.isfinite(err) & (err > budget)) | nodes.near) & ~settled
-        nodes.loose[:] = False  # a later round's step is not half the first run's
-        jj, ii = np.nonzero(nodes.traced & again)
-        if (jj.size == 0 and unsure[0].size == 0) or (cancel is not None and cancel()):
+        jj, ii = np.nonzero(nodes.traced & again & ~nodes.pending)
+        if cancel is not None and cancel():
             return
-        assert step is not None  # an error pass: the scene is curved
-        step /= COMPANION_RATIO
+        if jj.size == 0 and unsure[0].size == 0:
+            break
+        step = np.full(jj.size, ctx.first_step / COMPANION_RATIO**k)
         xy = ctx.image_xy(jj, ii)
         rays = retrace_batch(ctx, nodes, xy, step, unsure, cancel)
-        unsure = (np.zeros(0, int), np.zeros(0, int))
-        if rays is None:
-            continue
-        seen = seen_direction(rays, ctx.camera.rays_at(xy)[0])
-        assert ctx.tracer.order is not None  # a companion run: the scene is curved
-        origins, _ = ctx.camera.rays_at(xy)
-        apart = seen_apart(
-            seen, rays.position, nodes.direction[jj, ii], nodes.position[jj, ii],
-            rays.ending, origins,
-        )  # fmt: skip
-        alike = (rays.ending == nodes.ending[jj, ii]) & (rays.object_id == nodes.object_id[jj, ii])
-        error = richardson(apart, rays.ending, alike, ctx.tracer.order)
-        settled[jj, ii] = alike & nodes.flipped[jj, ii]
-        store(ctx, nodes, jj, ii, rays, seen, error)
+        if rays is not None:
+            _store_retraces(ctx, nodes, (jj, ii), xy, rays, settled, k)
+        unsure = settle(ctx, nodes)  # those that waited on this batch's companions
+    companions(ctx, nodes, cancel)
+
+
+def _store_retraces(
+    ctx: TileContext,
+    nodes: Nodes,
+    where: tuple[np.ndarray, np.ndarray],
+    xy: np.ndarray,
+    rays: RayResults,
+    settled: np.ndarray,
+    halvings: int,
+) -> None:
+    """Store the retraces ``rays`` of the nodes ``where`` (jj, ii; image points xy) at
+    the first run's step halved ``halvings`` times, their error against the nodes' last
+    run (Richardson at the two runs' ratio: a node settled late, whose first run is its
+    last, is retraced at the round's step too); a flip that ended as before is marked
+    ``settled``."""
+    jj, ii = where
+    origins, _ = ctx.camera.rays_at(xy)
+    seen = seen_direction(rays, origins)
+    assert ctx.tracer.order is not None  # a companion run: the scene is curved
+    apart = seen_apart(
+        seen, rays.position, nodes.direction[jj, ii], nodes.position[jj, ii],
+        rays.ending, origins,
+    )  # fmt: skip
+    alike = (rays.ending == nodes.ending[jj, ii]) & (rays.object_id == nodes.object_id[jj, ii])
+    ratio = COMPANION_RATIO ** (halvings - nodes.halvings[jj, ii])
+    error = richardson(apart, rays.ending, alike, ctx.tracer.order, ratio)
+    settled[jj, ii] = alike & nodes.flipped[jj, ii]
+    store(ctx, nodes, jj, ii, rays, seen, error)
+    nodes.halvings[jj, ii] = halvings
+    nodes.loose[jj, ii] = False  # its last run's step is not half the first run's
+
+
+def companions(ctx: TileContext, nodes: Nodes, cancel: Cancel) -> None:
+    """Judge every pending node (anchors.settle) by its cell, or by a companion of its
+    own run in a batch of companions alone, again while some wait on those (a node
+    whose cell's anchor had none)."""
+    while nodes.pending.any() and not (cancel is not None and cancel()):
+        unsure = settle(ctx, nodes)
+        if unsure[0].size == 0:  # nothing they wait on will be judged: their own
+            unsure = np.nonzero(nodes.pending)
+        retrace_batch(ctx, nodes, np.zeros((0, 2)), np.zeros(0), unsure, cancel)
 
 
 def retrace_batch(
     ctx: TileContext,
     nodes: Nodes,
     xy: np.ndarray,
-    step: float,
+    step: np.ndarray,
     unsure: tuple[np.ndarray, np.ndarray],
     cancel: Cancel,
 ) -> RayResults | None:
-    """The retraces of the points xy at ``step`` (returned; None if none), in one
+    """The retraces of the points xy at ``step`` (each its own; returned, None if none), in one
     batch with the companions of the ``unsure`` nodes (jj, ii) where there are no
     differentials (a retrace carries them), which are judged by them."""
     uj, ui = unsure
@@ -111,9 +140,10 @@ def retrace_batch(
         points = np.concatenate([xy, ctx.image_xy(uj, ui)])
     origins, directions = ctx.camera.rays_at(points)
     counts = [points.shape[0] - uj.size, uj.size]
+    coarse = np.full(uj.size, COMPANION_RATIO * ctx.first_step)
     traced = ctx.tracer.trace(
         origins, directions, cancel=cancel,
-        step=np.repeat([step, COMPANION_RATIO * ctx.first_step], counts),
+        step=coarse if ctx.with_tangents else np.concatenate([step, coarse]),
         clearance=np.repeat([margin, 0.0], counts),
     )  # fmt: skip
     if not ctx.with_tangents:
@@ -122,6 +152,7 @@ def retrace_batch(
         rest = origins[origins.shape[0] - uj.size :]
         error = ctx.companion_error(node_rays(nodes, uj, ui, rest), traced, rest, ctx.first_step)
         judge(ctx, nodes, uj, ui, error)
+        nodes.pending[uj, ui] = False
         nodes.loose[uj, ui] = ctx.bound_applies(ctx.step)
     return rays
 

@@ -15,13 +15,13 @@ import numpy as np
 
 from ..passes import BY_NAME, STORED
 from . import lattice, quadtree
-from .anchors import settle, trace_nodes
+from .anchors import trace_nodes
 from .context import Cancel, TileContext
 from .footprints import filter_sky, filter_surfaces
 from .interpolation import Points, evaluate
 from .lattice import Blocks, Nodes
 from .quadtree import refine
-from .retrace import retrace
+from .retrace import companions, retrace
 from .shaky import shaky
 from .supersample import contrast, supersample
 from .tiling import Tile, TileResult
@@ -53,7 +53,7 @@ class TileSampler(TileContext):
                         defer=True)  # fmt: skip
         else:
             refine(self, nodes, blocks, s, (h + 1, w + 1), origin, cancel)
-        retrace(self, nodes, cancel, settle(self, nodes))
+        retrace(self, nodes, cancel)
         if cancel is not None and cancel():
             return None
         return self._pixels(tile, nodes, blocks, origin, cancel)
@@ -112,10 +112,12 @@ class TileSampler(TileContext):
         cancel: Cancel,
     ) -> None:
         """In place: the pixel centres ``rows`` (of the lattice points jj, ii) traced, and
-        ``centre``'s values there replaced by their rays'."""
+        ``centre``'s values there replaced by their rays'. Their companions run where
+        their cell's corners cannot judge them (anchors.settle), in a batch of their own."""
         if rows.size == 0:
             return
-        trace_nodes(self, nodes, jj[rows], ii[rows], self.origin, cancel)
+        trace_nodes(self, nodes, jj[rows], ii[rows], self.origin, cancel, defer=True)
+        companions(self, nodes, cancel)
         again = evaluate(self, nodes, blocks, jj[rows] * 1.0, ii[rows] * 1.0)
         for name, values in centre.values.items():
             values[rows] = again.values[name]

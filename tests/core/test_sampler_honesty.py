@@ -598,7 +598,7 @@ def test_nodes_beside_a_silhouette_take_their_sides_anchors_error(monkeypatch):
     scene, cam = _honesty().disk_high_spin(96, 54)
     run = core.render(scene, cam, tolerance_px=1.0, passes=PASSES)
     with monkeypatch.context() as patch:
-        patch.setattr(anchors, "by_side", lambda ctx, nodes, jj, ii: (
+        patch.setattr(anchors, "by_side", lambda ctx, nodes, jj, ii, side: (
             np.zeros(jj.size, bool), np.zeros(jj.size)))  # fmt: skip
         whole = core.render(scene, cam, tolerance_px=1.0, passes=PASSES)
     assert run.summary["companion_rays"] < 0.9 * whole.summary["companion_rays"]
