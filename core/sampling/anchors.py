@@ -24,10 +24,12 @@ anchors (the nodes at multiples of ANCHOR) at its ANCHOR cell's corners where th
 it does and agree (settle), or a companion of its own then ..."""
 ROOT = 16
 """... and an anchor the largest error of the roots (the nodes at multiples of ROOT, which
-alone get their companion as they are traced) at its ROOT cell's corners, in the same way.
-The nodes of blocks of 8 and up are all anchors: where a tile's image is smooth they are
-most of its rays (benchmarks/honesty.py near_tangent at 640 x 360, 1 px: 7179 of 22 930
-rays, each with its companion when the anchors were the roots)."""
+alone get their companion as they are traced) at its ROOT cell's corners, in the same way,
+unless it hits a surface (a hit point's error varies from ray to ray more than a cell of
+ROOT shows: _by_cell). The nodes of blocks of 8 and up are all anchors: where a tile's
+image is smooth they are most of its rays (benchmarks/honesty.py near_tangent at 640 x
+360, 1 px: 7179 of 22 930 rays, each with its companion when the anchors were the
+roots)."""
 
 
 def anchors(shape: tuple[int, int], jj: np.ndarray, ii: np.ndarray) -> np.ndarray:
@@ -190,15 +192,17 @@ def _by_cell(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(M,) bool: which pending nodes (jj, ii) settle judged by their cell of ``side``
     (no longer pending): those ending as its corners do (from_anchors), else by the
-    corners on their side of a silhouette (by_side); and (M,) whose corners were all
-    judged."""
+    corners on their side of a silhouette (by_side), but never a hit by a cell of ROOT;
+    and (M,) whose corners were all judged."""
     agree, estimate, (cj, ci), judged = from_anchors(ctx, nodes, jj, ii, side)
     like = (nodes.ending[jj, ii] == nodes.ending[cj, ci]) & agree
     like &= nodes.object_id[jj, ii] == nodes.object_id[cj, ci]
     like &= nodes.kinks[jj, ii] == nodes.kinks[cj, ci]
     captured = nodes.ending[jj, ii] == ENDING["captured"]
     like &= (nodes.clearance[jj, ii] >= clear_of(ctx, estimate)) | captured
-    rough = (side >= ROOT) & (nodes.ending[jj, ii] == ENDING["hit"])  # ROOT_HITS
+    # where each crossing falls in its step: benchmarks/honesty.py schwarzschild's board
+    # at the rule's largest step, roots 0.001 px, the anchors between them 0.005
+    rough = (side >= ROOT) & (nodes.ending[jj, ii] == ENDING["hit"])
     like &= ~rough
     rest = np.flatnonzero(~like & ~rough)  # those their whole cell cannot judge
     beside, estimate[rest] = by_side(ctx, nodes, jj[rest], ii[rest], side[rest])
