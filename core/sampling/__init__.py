@@ -55,8 +55,9 @@ where none shows it. Other pixels keep their centre's colour.
 Cost (issue 48): a round of tracing is counted as ROUND_RAYS rays (its per-step overhead);
 the coarse levels are traced in one first round where that pays (quadtree.first_lattice), a
 tile's refused blocks at once where refining them would not (quadtree.dense_pays), and the
-error pass's companions run at the anchors (ANCHOR) and where the anchors cannot speak for a
-node (anchors.settle).
+error pass's companions run at the roots (ROOT) and where a node's cell's corners (the
+roots for an anchor, ANCHOR, the anchors for the others) cannot speak for it
+(anchors.settle).
 
 The package's modules, one subject each (each one's docstring states what it offers and
 needs); the steps of a tile are functions of a ``TileContext`` (the sampler's settings and
@@ -68,7 +69,7 @@ the tile's state), which ``TileSampler`` is:
 - ``lattice``: a tile's nodes, its accepted blocks, the clearance margins nodes record.
 - ``context``: TileContext: settings, the tile's origin and ray counts, tracing points.
 - ``judging``: recording traced nodes; their errors: flips, near misses, near edges.
-- ``anchors``: tracing nodes, their companions at the anchors (and ``settle``).
+- ``anchors``: tracing nodes, their companions at the roots (and ``settle``).
 - ``retrace``: rays over their error budget, and near misses, traced again.
 - ``disk``: the opaque accretion disk's interpolation (radius, g, azimuth).
 - ``acceptance``: which blocks are interpolated: their deviations, clearance, kinks.
@@ -82,7 +83,7 @@ the tile's state), which ``TileSampler`` is:
 Constants live in the module that reads them; they are re-exported here to be read, but a
 test that changes one patches its module: ``lattice.STRIDE``, ``quadtree.ROUND_RAYS`` (both
 read by core.render from there too), ``supersample.SAMPLE_POINTS``, ``shaky.COLOUR_STEP``,
-``anchors.ANCHOR``.
+``anchors.ANCHOR``, ``anchors.ROOT``.
 """
 
 from __future__ import annotations
@@ -96,7 +97,7 @@ from .acceptance import (
 )
 from .acceptance import _edge_deviations as _edge_deviations
 from .acceptance import _worst as _worst
-from .anchors import ANCHOR
+from .anchors import ANCHOR, ROOT
 from .context import TileContext
 from .error import (
     COMPANION_RATIO,
@@ -122,10 +123,10 @@ from .filters import (
     stratified_points,
 )
 from .interpolation import INTERPOLATE_POINTS, REACH
-from .judging import EDGE_REACH, EDGE_STRETCH, NEAR_MISS
+from .judging import EDGE_REACH, EDGE_STRETCH, LOOSE_SHARE, NEAR_MISS
 from .lattice import DENSE_MARGIN, MARGIN_BLOCKS, STRIDE
 from .quadtree import FINEST, ROUND_RAYS
-from .retrace import LOOSE_SHARE, RETRACE
+from .retrace import RETRACE
 from .sampler import TileSampler
 from .shaky import COLOUR_STEP, neighbour_change
 from .supersample import AA_CONTRAST, FIRST_SAMPLES, SAMPLE_POINTS
@@ -137,6 +138,7 @@ _neighbour_change = neighbour_change
 __all__ = [
     "AA_CONTRAST",
     "ANCHOR",
+    "ROOT",
     "BLACKMAN_HARRIS",
     "CLEARANCE",
     "COLOUR_STEP",

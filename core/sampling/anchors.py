@@ -15,7 +15,7 @@ import numpy as np
 from ..tracing import ENDING
 from .context import Cancel, TileContext
 from .error import COMPANION_RATIO, FLIP
-from .judging import NEAR_MISS, judge, record
+from .judging import NEAR_MISS, budgets, judge, record
 from .lattice import DENSE_MARGIN, Nodes, node_margin
 
 ANCHOR = 4
@@ -192,8 +192,10 @@ def _by_cell(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(M,) bool: which pending nodes (jj, ii) settle judged by their cell of ``side``
     (no longer pending): those ending as its corners do (from_anchors), else by the
-    corners on their side of a silhouette (by_side), but never a hit by a cell of ROOT;
-    and (M,) whose corners were all judged."""
+    corners on their side of a silhouette (by_side), but never a hit by a cell of ROOT,
+    nor a node whose cell's error would send it to a retrace where some of its corners'
+    would not (budgets: its own companion, half a ray, may spare it one, a ray at half
+    the step); and (M,) whose corners were all judged."""
     agree, estimate, (cj, ci), judged = from_anchors(ctx, nodes, jj, ii, side)
     like = (nodes.ending[jj, ii] == nodes.ending[cj, ci]) & agree
     like &= nodes.object_id[jj, ii] == nodes.object_id[cj, ci]
@@ -207,6 +209,10 @@ def _by_cell(
     rest = np.flatnonzero(~like & ~rough)  # those their whole cell cannot judge
     beside, estimate[rest] = by_side(ctx, nodes, jj[rest], ii[rest], side[rest])
     like[rest[beside]] = True
+    limit = budgets(ctx, nodes, jj, ii)  # over it, its own companion may spare a retrace
+    fours = corners(nodes.traced.shape, jj, ii, side)
+    lowest = np.min([nodes.first[aj, ai] for aj, ai in fours], axis=0, initial=np.inf)
+    like &= (estimate <= limit) | (lowest > limit)
     judge(ctx, nodes, jj[like], ii[like], estimate[like])
     nodes.pending[jj[like], ii[like]] = False
     return like, judged

@@ -3,8 +3,8 @@
 Offers ``retrace`` (a tile's nodes over their error budget, and its near misses, traced
 again at half the step, up to ``RETRACE`` times, with the companions ``settle`` left over),
 ``retrace_batch`` (one such round's rays) and ``companions`` (those left over alone), and
-``RETRACE`` and ``LOOSE_SHARE``. Needs a TileContext (tracing points, companions), the
-lattice and core.sampling.judging.
+``RETRACE``. Needs a TileContext (tracing points, companions), the lattice,
+core.sampling.anchors (settle) and core.sampling.judging (its budgets).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from ..tracing import RayResults
 from .anchors import settle
 from .context import Cancel, TileContext
 from .error import COMPANION_RATIO, richardson, seen_apart, seen_direction
-from .judging import judge, store
+from .judging import budgets, judge, store
 from .lattice import Nodes, dense_margin, node_rays
 
 RETRACE = 3
@@ -23,15 +23,6 @@ RETRACE = 3
 again at half the step, up to RETRACE times: rays magnified near the photon ring (whose
 forward error the step rule, made for the initial direction's, does not bound) still meet
 the tolerance, at the cost of those rays only."""
-LOOSE_SHARE = 0.3
-"""A traced ray whose companion ran past the rule's largest step (Richardson outside its
-asymptotic range; TileContext._bound) and whose estimate exceeds LOOSE_SHARE x the retrace
-budget is traced again at half the step, its first run the companion (RETRACE's first
-round): escaped rays of Schwarzschild and Kerr at the cap had errors at 2 h 40-50x those
-at h, read as ~3x the truth, so an estimate above 0.3 of the tolerance may stand for a
-truth above a tenth of it, where the error pass promises 3x (benchmarks/honesty.py
-point_stars and disk_high_spin at 0.05 px: 88 % and 87 % within 3x -> 100 %). At 0.1 the
-Kerr board took 1.4x as long (1080p Preview), at 0.3 1.02x."""
 
 
 def retrace(ctx: TileContext, nodes: Nodes, cancel: Cancel) -> None:
@@ -56,8 +47,7 @@ def retrace(ctx: TileContext, nodes: Nodes, cancel: Cancel) -> None:
     unsure = settle(ctx, nodes)
     for k in range(1, RETRACE + 1 if ctx.with_error else 1):
         err = nodes.integration
-        budget = np.where(nodes.loose, LOOSE_SHARE * ctx.budget, ctx.budget)
-        again = ((np.isfinite(err) & (err > budget)) | nodes.near) & ~settled
+        again = ((np.isfinite(err) & (err > budgets(ctx, nodes))) | nodes.near) & ~settled
         jj, ii = np.nonzero(nodes.traced & again & ~nodes.pending)
         if cancel is not None and cancel():
             return
