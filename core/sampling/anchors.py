@@ -15,7 +15,7 @@ import numpy as np
 from ..tracing import ENDING
 from .context import Cancel, TileContext
 from .error import COMPANION_RATIO, FLIP
-from .judging import NEAR_MISS, budgets, judge, record
+from .judging import LOOSE_SHARE, NEAR_MISS, judge, record
 from .lattice import DENSE_MARGIN, Nodes, node_margin
 
 ANCHOR = 4
@@ -61,16 +61,16 @@ def corners(
     return [(cj, ci), (cj, far_i), (far_j, ci), (far_j, far_i)]
 
 
-def cell_sides(nodes: Nodes, jj: np.ndarray, ii: np.ndarray) -> np.ndarray:
-    """(M,) the side of the cell whose corners judge the nodes (jj, ii): ROOT for anchors,
-    ANCHOR for the others where all four of their ANCHOR cell's corners are traced, ROOT
-    where not (a pixel centre traced late inside a block of 8 or more, whose anchors
-    inside were never traced)."""
-    shape = nodes.traced.shape
-    traced = np.ones(jj.size, dtype=bool)
+def cell_sides(traced: np.ndarray, jj: np.ndarray, ii: np.ndarray) -> np.ndarray:
+    """(M,) the side of the cell whose corners judge the nodes (jj, ii) of a lattice whose
+    nodes ``traced`` (or about to be): ROOT for anchors, ANCHOR for the others where all
+    four of their ANCHOR cell's corners are, ROOT where not (a pixel centre traced late
+    inside a block of 8 or more, whose anchors inside were never traced)."""
+    shape = traced.shape
+    inside = np.ones(jj.size, dtype=bool)
     for aj, ai in corners(shape, jj, ii, ANCHOR):
-        traced &= nodes.traced[aj, ai]
-    return np.where(anchors(shape, jj, ii) | ~traced, ROOT, ANCHOR)
+        inside &= traced[aj, ai]
+    return np.where(anchors(shape, jj, ii) | ~inside, ROOT, ANCHOR)
 
 
 def trace_nodes(
@@ -158,11 +158,35 @@ def spare(ctx: TileContext, nodes: Nodes, jj: np.ndarray, ii: np.ndarray) -> np.
     """(M,) bool: the nodes (jj, ii), not traced yet, whose companion is spared for now
     (trace_nodes' ``defer``): not roots, and their cell's corners (an anchor's ROOT cell,
     another node's ANCHOR cell) agree (from_anchors) or are not all judged yet (traced in
-    this round, or judged by settle: settle will know)."""
-    shape = nodes.traced.shape
-    side = np.where(anchors(shape, jj, ii), ROOT, ANCHOR)
-    agree, _, _, judged = from_anchors(ctx, nodes, jj, ii, side)
-    return ~roots(shape, jj, ii) & (agree | ~judged)
+    this round, or judged by settle: settle will know), unless what settle asks of them
+    already fails there: a cell of ROOT whose corners hit, a cell's error that would
+    send them to a retrace where some of its corners' would not (_by_cell)."""
+    traced = nodes.traced.copy()
+    traced[jj, ii] = True  # this round's
+    side = cell_sides(traced, jj, ii)
+    agree, estimate, (cj, ci), judged = from_anchors(ctx, nodes, jj, ii, side)
+    hits = (side >= ROOT) & (nodes.ending[cj, ci] == ENDING["hit"])
+    loose = np.full(jj.size, ctx.bound_applies(ctx.step))  # as trace_nodes records it
+    agree &= ~hits & ~_straddles(ctx, nodes, (jj, ii, side), estimate, loose)
+    return ~roots(traced.shape, jj, ii) & (agree | ~judged)
+
+
+def _straddles(
+    ctx: TileContext,
+    nodes: Nodes,
+    cells: tuple[np.ndarray, np.ndarray, np.ndarray],
+    estimate: np.ndarray,
+    loose: np.ndarray,
+) -> np.ndarray:
+    """(M,) bool: nodes (jj, ii) whose cell (of side, ``cells``) has an ``estimate`` over
+    the error that sends a node to a retrace (judging.budgets; ``loose``: Nodes.loose of
+    them) where some of its corners' first runs are not: its own companion (half a ray)
+    may spare it a retrace (a ray at half the step)."""
+    jj, ii, side = cells
+    limit = np.where(loose, LOOSE_SHARE * ctx.budget, ctx.budget)
+    fours = corners(nodes.traced.shape, jj, ii, side)
+    lowest = np.min([nodes.first[aj, ai] for aj, ai in fours], axis=0, initial=np.inf)
+    return (estimate > limit) & (lowest <= limit)
 
 
 def settle(ctx: TileContext, nodes: Nodes) -> tuple[np.ndarray, np.ndarray]:
@@ -173,11 +197,11 @@ def settle(ctx: TileContext, nodes: Nodes) -> tuple[np.ndarray, np.ndarray]:
     0): the anchors first, by the roots, then the other nodes by the anchors -> (jj, ii)
     those that need a companion of their own (retrace.retrace_batch). The nodes whose
     cell has an anchor still pending stay pending: settle judges them once it is
-    (retrace.companions)."""
+    (retrace.retrace, retrace.companions)."""
     jj, ii = np.nonzero(nodes.pending)
     if jj.size == 0:
         return jj, ii
-    side = cell_sides(nodes, jj, ii)
+    side = cell_sides(nodes.traced, jj, ii)
     left = []
     for first in (True, False):  # the cells of ROOT first: their corners are judged
         rows = np.flatnonzero((side == ROOT) == first)
@@ -209,10 +233,7 @@ def _by_cell(
     rest = np.flatnonzero(~like & ~rough)  # those their whole cell cannot judge
     beside, estimate[rest] = by_side(ctx, nodes, jj[rest], ii[rest], side[rest])
     like[rest[beside]] = True
-    limit = budgets(ctx, nodes, jj, ii)  # over it, its own companion may spare a retrace
-    fours = corners(nodes.traced.shape, jj, ii, side)
-    lowest = np.min([nodes.first[aj, ai] for aj, ai in fours], axis=0, initial=np.inf)
-    like &= (estimate <= limit) | (lowest > limit)
+    like &= ~_straddles(ctx, nodes, (jj, ii, side), estimate, nodes.loose[jj, ii])
     judge(ctx, nodes, jj[like], ii[like], estimate[like])
     nodes.pending[jj[like], ii[like]] = False
     return like, judged
