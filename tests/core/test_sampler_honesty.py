@@ -622,7 +622,7 @@ def test_anchors_and_late_centres_judged_by_their_cells_keep_the_estimate_honest
     colour test's) its cell's, where those agree, instead of a companion of its own.
     benchmarks/honesty.py near_tangent (Kerr a/M = 0.9 from 5 rg, a checker board and a
     sphere) at 160 x 90, every tile refined, 1 px: fewer companions than a ray's half
-    (0.50 a ray measured; 0.68 with a companion at every anchor and late centre), and
+    (0.51 a ray measured; 0.68 with a companion at every anchor and late centre), and
     against dopri5 no pixel of measurable error (11 348) estimated below a third of its
     truth (the least 0.92 of it, measured). A late centre that took its cell's corners'
     errors after their retraces (finer runs than its own) read 0.07 of its truth on
