@@ -40,11 +40,17 @@ def retrace(ctx: TileContext, nodes: Nodes, cancel: Cancel) -> None:
     not traced again: it keeps its flip's error whatever later runs find, and further
     halvings, agreeing too, only cost (the Kerr board's ~1800 flips per 1080p tile, at
     the shadow's edge, took all RETRACE rounds: 10 % of its time). The pending nodes
-    that settle cannot judge have their companions in a round's batch: they are judged
-    by them and join the later rounds, and the nodes that waited on them are settled
-    then (companions: those still pending after the last round)."""
+    that settle cannot judge have their companions in the first round's batch: they are
+    judged by them and join the later rounds; where other nodes wait on some of them (an
+    anchor's), those run first, in a batch of companions alone (a round at twice the
+    step), and the nodes that waited are settled then (a node settled after the first
+    round is retraced at a later round's step: 3 rounds of up to 198 steps on
+    benchmarks/honesty.py point_stars at 640 x 360, against 2 with this batch)."""
     settled = np.zeros_like(nodes.traced)  # flips whose retrace ended as before
     unsure = settle(ctx, nodes)
+    if np.count_nonzero(nodes.pending) > unsure[0].size:  # some wait on these: theirs first
+        retrace_batch(ctx, nodes, np.zeros((0, 2)), np.zeros(0), unsure, cancel)
+        unsure = settle(ctx, nodes)
     for k in range(1, RETRACE + 1 if ctx.with_error else 1):
         err = nodes.integration
         again = ((np.isfinite(err) & (err > budgets(ctx, nodes))) | nodes.near) & ~settled
@@ -58,7 +64,7 @@ def retrace(ctx: TileContext, nodes: Nodes, cancel: Cancel) -> None:
         rays = retrace_batch(ctx, nodes, xy, step, unsure, cancel)
         if rays is not None:
             _store_retraces(ctx, nodes, (jj, ii), xy, rays, settled, k)
-        unsure = settle(ctx, nodes)  # those that waited on this batch's companions
+        unsure = (np.zeros(0, int), np.zeros(0, int))
     companions(ctx, nodes, cancel)
 
 
