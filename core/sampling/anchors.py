@@ -15,7 +15,7 @@ import numpy as np
 from ..tracing import ENDING
 from .context import Cancel, TileContext
 from .error import COMPANION_RATIO, FLIP
-from .judging import LOOSE_SHARE, NEAR_MISS, judge, record
+from .judging import NEAR_MISS, budgets, judge, record
 from .lattice import DENSE_MARGIN, Nodes, node_margin
 
 ANCHOR = 4
@@ -106,15 +106,17 @@ def trace_nodes(
 
 def from_anchors(
     ctx: TileContext, nodes: Nodes, jj: np.ndarray, ii: np.ndarray, side: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray], np.ndarray]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray], np.ndarray]:
     """What the nodes at the corners of the nodes (jj, ii)'s cells (of ``side``, (M,):
-    cell_sides; ``corners``) say of their errors -> (agree, estimate, like, judged):
+    cell_sides; ``corners``) say of their errors -> (agree, estimate, lowest, like,
+    judged):
     ``agree`` where all four are traced, judged, finite, no flip or near miss, end alike
     (escaped, captured, on one object, across the same kinks: the error is smooth across
     the cell) and keep clear of the geometry by more than a companion's error could move
     a ray (clear_of) unless captured; ``estimate`` the largest error of their first runs
     (Nodes.first: a node is judged at its own run's step, a retraced corner's later
-    runs are finer; 0 if captured);
+    runs are finer; 0 if captured), ``lowest`` the least of them (a cell of ROOT whose
+    root read no error at all, its two runs alike to the last bit, speaks for no node);
     ``like``: the corner whose ending the node must share (its (j, i)); ``judged``: all
     four are."""
     four = corners(nodes.traced.shape, jj, ii, side)
@@ -135,12 +137,8 @@ def from_anchors(
     captured = nodes.ending[cj, ci] == ENDING["captured"]
     estimate = np.where(captured, 0.0, estimate)
     agree &= judged & ((least >= clear_of(ctx, estimate)) | captured)
-    import os
-
-    ratio = float(os.environ.get("RATIO", "inf"))
-    with np.errstate(invalid="ignore"):
-        agree &= (side < ROOT) | captured | (estimate <= ratio * lowest)
-    return agree, estimate, (cj, ci), judged
+    agree &= (side < ROOT) | captured | (lowest > 0)
+    return agree, estimate, lowest, (cj, ci), judged
 
 
 def clear_of(ctx: TileContext, estimate: np.ndarray) -> np.ndarray:
@@ -164,28 +162,28 @@ def spare(ctx: TileContext, nodes: Nodes, jj: np.ndarray, ii: np.ndarray) -> np.
     traced = nodes.traced.copy()
     traced[jj, ii] = True  # this round's
     side = cell_sides(traced, jj, ii)
-    agree, estimate, (cj, ci), judged = from_anchors(ctx, nodes, jj, ii, side)
-    hits = (side >= ROOT) & (nodes.ending[cj, ci] == ENDING["hit"])
+    agree, estimate, lowest, (cj, ci), judged = from_anchors(ctx, nodes, jj, ii, side)
     loose = np.full(jj.size, ctx.bound_applies(ctx.step))  # as trace_nodes records it
-    agree &= ~hits & ~_straddles(ctx, nodes, (jj, ii, side), estimate, loose)
+    agree &= ~_rough(side, nodes.ending[cj, ci]) & ~_straddles(ctx, estimate, lowest, loose)
     return ~roots(traced.shape, jj, ii) & (agree | ~judged)
 
 
+def _rough(side: np.ndarray, ending: np.ndarray) -> np.ndarray:
+    """(M,) bool: nodes a cell of ``side`` cannot judge however its corners agree: a hit
+    (``ending``) under a cell of ROOT (a hit point's error follows where its crossing
+    falls in its step: benchmarks/honesty.py schwarzschild's board at the rule's largest
+    step, roots 0.001 px, the anchors between them 0.005)."""
+    return (side >= ROOT) & (ending == ENDING["hit"])
+
+
 def _straddles(
-    ctx: TileContext,
-    nodes: Nodes,
-    cells: tuple[np.ndarray, np.ndarray, np.ndarray],
-    estimate: np.ndarray,
-    loose: np.ndarray,
+    ctx: TileContext, estimate: np.ndarray, lowest: np.ndarray, loose: np.ndarray
 ) -> np.ndarray:
-    """(M,) bool: nodes (jj, ii) whose cell (of side, ``cells``) has an ``estimate`` over
-    the error that sends a node to a retrace (judging.budgets; ``loose``: Nodes.loose of
-    them) where some of its corners' first runs are not: its own companion (half a ray)
-    may spare it a retrace (a ray at half the step)."""
-    jj, ii, side = cells
-    limit = np.where(loose, LOOSE_SHARE * ctx.budget, ctx.budget)
-    fours = corners(nodes.traced.shape, jj, ii, side)
-    lowest = np.min([nodes.first[aj, ai] for aj, ai in fours], axis=0, initial=np.inf)
+    """(M,) bool: nodes whose cell's ``estimate`` is over the error that sends a node to
+    a retrace (judging.budgets; ``loose``: Nodes.loose of them) where its ``lowest``
+    corner's is not: its own companion (half a ray) may spare it a retrace (a ray at half
+    the step)."""
+    limit = budgets(ctx, loose)
     return (estimate > limit) & (lowest <= limit)
 
 
@@ -220,20 +218,18 @@ def _by_cell(
     nor a node whose cell's error would send it to a retrace where some of its corners'
     would not (budgets: its own companion, half a ray, may spare it one, a ray at half
     the step); and (M,) whose corners were all judged."""
-    agree, estimate, (cj, ci), judged = from_anchors(ctx, nodes, jj, ii, side)
+    agree, estimate, lowest, (cj, ci), judged = from_anchors(ctx, nodes, jj, ii, side)
     like = (nodes.ending[jj, ii] == nodes.ending[cj, ci]) & agree
     like &= nodes.object_id[jj, ii] == nodes.object_id[cj, ci]
     like &= nodes.kinks[jj, ii] == nodes.kinks[cj, ci]
     captured = nodes.ending[jj, ii] == ENDING["captured"]
     like &= (nodes.clearance[jj, ii] >= clear_of(ctx, estimate)) | captured
-    # where each crossing falls in its step: benchmarks/honesty.py schwarzschild's board
-    # at the rule's largest step, roots 0.001 px, the anchors between them 0.005
-    rough = (side >= ROOT) & (nodes.ending[jj, ii] == ENDING["hit"])
+    rough = _rough(side, nodes.ending[jj, ii])
     like &= ~rough
     rest = np.flatnonzero(~like & ~rough)  # those their whole cell cannot judge
     beside, estimate[rest] = by_side(ctx, nodes, jj[rest], ii[rest], side[rest])
     like[rest[beside]] = True
-    like &= ~_straddles(ctx, nodes, (jj, ii, side), estimate, nodes.loose[jj, ii])
+    like &= ~_straddles(ctx, estimate, lowest, nodes.loose[jj, ii])
     judge(ctx, nodes, jj[like], ii[like], estimate[like])
     nodes.pending[jj[like], ii[like]] = False
     return like, judged

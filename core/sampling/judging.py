@@ -43,13 +43,10 @@ point_stars and disk_high_spin at 0.05 px: 88 % and 87 % within 3x -> 100 %). At
 Kerr board took 1.4x as long (1080p Preview), at 0.3 1.02x."""
 
 
-def budgets(
-    ctx: TileContext, nodes: Nodes, jj: np.ndarray | None = None, ii: np.ndarray | None = None
-) -> np.ndarray:
-    """The errors above which the nodes (jj, ii) (all of them: None) are traced again
-    (retrace.retrace): the retrace budget, LOOSE_SHARE of it where their companion ran
-    past the rule's range (Nodes.loose)."""
-    loose = nodes.loose if jj is None or ii is None else nodes.loose[jj, ii]
+def budgets(ctx: TileContext, loose: np.ndarray) -> np.ndarray:
+    """The errors above which nodes are traced again (retrace.retrace): the retrace
+    budget, LOOSE_SHARE of it where their companion ran past the rule's range (``loose``:
+    their Nodes.loose)."""
     return np.where(loose, LOOSE_SHARE * ctx.budget, ctx.budget)
 
 

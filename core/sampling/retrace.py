@@ -53,7 +53,7 @@ def retrace(ctx: TileContext, nodes: Nodes, cancel: Cancel) -> None:
         unsure = settle(ctx, nodes)
     for k in range(1, RETRACE + 1 if ctx.with_error else 1):
         err = nodes.integration
-        again = ((np.isfinite(err) & (err > budgets(ctx, nodes))) | nodes.near) & ~settled
+        again = ((np.isfinite(err) & (err > budgets(ctx, nodes.loose))) | nodes.near) & ~settled
         jj, ii = np.nonzero(nodes.traced & again & ~nodes.pending)
         if cancel is not None and cancel():
             return
